@@ -1,0 +1,42 @@
+#!/usr/bin/env bash
+# Installs every Debian bookworm package that softid's build, tests and benchmarks need.
+# Idempotent: when everything is present it returns in about a second without touching apt.
+# Used by the README commands, by .ci/run and by deploy/Dockerfile (build stage).
+set -euo pipefail
+
+packages=(
+  # toolchain
+  build-essential cmake ninja-build pkg-config git ca-certificates
+  # numerics: Eigen, CHOLMOD (SuiteSparse) with OpenBLAS, Ceres Solver
+  libeigen3-dev libsuitesparse-dev libopenblas0-pthread libceres-dev
+  # geometry: Embree (BVH ray casting, closest-point queries), assimp (OBJ/PLY/STL input)
+  libembree-dev libassimp-dev
+  # images: 16-bit PNG depth frames and plots
+  libopencv-core-dev libopencv-imgcodecs-dev libopencv-imgproc-dev
+  # service: gRPC, Protobuf, SQLite
+  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libsqlite3-dev
+  # utilities
+  libspdlog-dev libfmt-dev nlohmann-json3-dev libcli11-dev
+  # tests and benchmarks
+  libgtest-dev libgmock-dev libbenchmark-dev
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ "${#missing[@]}" -eq 0 ]; then
+  echo "install-deps: all ${#packages[@]} packages present"
+  exit 0
+fi
+
+echo "install-deps: installing ${#missing[@]} packages: ${missing[*]}"
+sudo_cmd=()
+if [ "$(id -u)" -ne 0 ]; then sudo_cmd=(sudo); fi
+export DEBIAN_FRONTEND=noninteractive
+"${sudo_cmd[@]}" apt-get update -qq
+"${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+echo "install-deps: done"
