@@ -24,6 +24,6 @@ namespace softid::internal {
 #define SOFTID_ASSERT(cond) SOFTID_DEMAND(cond)
 #endif
 
-#define SOFTID_THROW_UNLESS(cond, message)                                                \
-  ((cond) ? (void)0                                                                       \
+#define SOFTID_THROW_UNLESS(cond, message) \
+  ((cond) ? (void)0                        \
           : ::softid::internal::ThrowInvalidArgument(#cond, (message), __FILE__, __LINE__))

@@ -30,12 +30,16 @@ class [[nodiscard]] Status {
   static Status InvalidArgument(std::string message) {
     return {StatusCode::kInvalidArgument, std::move(message)};
   }
-  static Status NotFound(std::string message) { return {StatusCode::kNotFound, std::move(message)}; }
+  static Status NotFound(std::string message) {
+    return {StatusCode::kNotFound, std::move(message)};
+  }
   static Status IoError(std::string message) { return {StatusCode::kIoError, std::move(message)}; }
   static Status FailedPrecondition(std::string message) {
     return {StatusCode::kFailedPrecondition, std::move(message)};
   }
-  static Status Internal(std::string message) { return {StatusCode::kInternal, std::move(message)}; }
+  static Status Internal(std::string message) {
+    return {StatusCode::kInternal, std::move(message)};
+  }
 
   bool ok() const { return code_ == StatusCode::kOk; }
   StatusCode code() const { return code_; }
@@ -55,7 +59,7 @@ class [[nodiscard]] Status {
 template <typename T>
 class [[nodiscard]] Result {
  public:
-  Result(T value) : storage_(std::move(value)) {}  // NOLINT: implicit by design
+  Result(T value) : storage_(std::move(value)) {}         // NOLINT: implicit by design
   Result(Status status) : storage_(std::move(status)) {}  // NOLINT: implicit by design
 
   bool ok() const { return std::holds_alternative<T>(storage_); }
@@ -79,17 +83,17 @@ class [[nodiscard]] Result {
 }  // namespace softid
 
 // Returns early from the enclosing function when `expr` (a Status) is not OK.
-#define SOFTID_RETURN_IF_ERROR(expr)               \
-  do {                                             \
-    ::softid::Status softid_status_ = (expr);      \
+#define SOFTID_RETURN_IF_ERROR(expr)                 \
+  do {                                               \
+    ::softid::Status softid_status_ = (expr);        \
     if (!softid_status_.ok()) return softid_status_; \
   } while (false)
 
 #define SOFTID_CONCAT_INNER(a, b) a##b
 #define SOFTID_CONCAT(a, b) SOFTID_CONCAT_INNER(a, b)
 // Declares `lhs` from a Result<T> expression, or returns its Status from the enclosing function.
-#define SOFTID_ASSIGN_OR_RETURN(lhs, expr)                              \
-  auto SOFTID_CONCAT(softid_result_, __LINE__) = (expr);                \
-  if (!SOFTID_CONCAT(softid_result_, __LINE__).ok())                    \
-    return SOFTID_CONCAT(softid_result_, __LINE__).status();            \
+#define SOFTID_ASSIGN_OR_RETURN(lhs, expr)                   \
+  auto SOFTID_CONCAT(softid_result_, __LINE__) = (expr);     \
+  if (!SOFTID_CONCAT(softid_result_, __LINE__).ok())         \
+    return SOFTID_CONCAT(softid_result_, __LINE__).status(); \
   lhs = std::move(SOFTID_CONCAT(softid_result_, __LINE__)).value()

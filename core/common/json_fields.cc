@@ -1,0 +1,55 @@
+#include "core/common/json_fields.h"
+
+#include <cmath>
+
+namespace softid::json {
+
+std::string Brief(const nlohmann::json& value) {
+  std::string text = value.dump();
+  constexpr size_t kMaxLength = 80;
+  if (text.size() > kMaxLength) text = text.substr(0, kMaxLength - 3) + "...";
+  return text;
+}
+
+Status Invalid(const std::string& field, const nlohmann::json& value,
+               const std::string& requirement) {
+  return Status::InvalidArgument(field + " = " + Brief(value) + ": " + requirement);
+}
+
+Result<double> ToFiniteNumber(const nlohmann::json& value, const std::string& field) {
+  if (!value.is_number()) return Invalid(field, value, "must be a finite number");
+  const double x = value.get<double>();
+  if (!std::isfinite(x)) return Invalid(field, value, "must be a finite number");
+  return x;
+}
+
+Result<Eigen::Vector3d> ToVector3(const nlohmann::json& value, const std::string& field) {
+  const char* requirement = "must be an array of 3 finite numbers";
+  if (!value.is_array() || value.size() != 3) return Invalid(field, value, requirement);
+  Eigen::Vector3d v;
+  for (int i = 0; i < 3; ++i) {
+    if (!value[i].is_number() || !std::isfinite(value[i].get<double>())) {
+      return Invalid(field, value, requirement);
+    }
+    v[i] = value[i].get<double>();
+  }
+  return v;
+}
+
+Result<std::string> ToString(const nlohmann::json& value, const std::string& field) {
+  if (!value.is_string()) return Invalid(field, value, "must be a string");
+  return value.get<std::string>();
+}
+
+Result<int> ToInteger(const nlohmann::json& value, const std::string& field) {
+  if (!value.is_number_integer()) return Invalid(field, value, "must be an integer");
+  const auto x = value.get<long long>();
+  if (x < -2147483647LL || x > 2147483647LL) return Invalid(field, value, "is out of range");
+  return static_cast<int>(x);
+}
+
+nlohmann::json FromVector3(const Eigen::Vector3d& v) {
+  return {v.x(), v.y(), v.z()};
+}
+
+}  // namespace softid::json
