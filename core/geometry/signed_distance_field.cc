@@ -1,0 +1,124 @@
+#include "core/geometry/signed_distance_field.h"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <string>
+#include <thread>
+
+#include "core/geometry/mesh_distance.h"
+#include "core/geometry/winding_number.h"
+
+namespace softid::geometry {
+namespace {
+
+constexpr long long kMaxNodes = 1LL << 27;
+constexpr int kNodesPerTask = 512;
+constexpr double kCoarseDecisionMargin = 0.1;
+
+std::string Field(const char* name) {
+  return std::string("SignedDistanceOptions.") + name;
+}
+
+}  // namespace
+
+Status SignedDistanceOptions::Validate() const {
+  if (cells_along_longest_side < 2) {
+    return Status::InvalidArgument(Field("cells_along_longest_side") + " = " +
+                                   std::to_string(cells_along_longest_side) + ": must be >= 2");
+  }
+  if (!(cell_size >= 0.0) || !std::isfinite(cell_size)) {
+    return Status::InvalidArgument(Field("cell_size") + " = " + std::to_string(cell_size) +
+                                   ": must be finite and >= 0 (0 = use cells_along_longest_side)");
+  }
+  if (padding_cells < 1) {
+    return Status::InvalidArgument(Field("padding_cells") + " = " + std::to_string(padding_cells) +
+                                   ": must be >= 1");
+  }
+  if (num_threads < 0) {
+    return Status::InvalidArgument(Field("num_threads") + " = " + std::to_string(num_threads) +
+                                   ": must be >= 0 (0 = hardware concurrency)");
+  }
+  return Status::Ok();
+}
+
+double SignedDistanceField::Interpolate(const Eigen::Vector3d& p) const {
+  Eigen::Vector3d local;
+  const int cell = grid.LocateCell(p, &local);
+  local = local.cwiseMax(0.0).cwiseMin(1.0);
+  const std::array<double, 8> w = TrilinearWeights(local);
+  const std::array<int, 8> nodes = grid.CellNodes(cell);
+  double value = 0.0;
+  for (int c = 0; c < 8; ++c) value += w[c] * phi[nodes[c]];
+  return value;
+}
+
+Result<SignedDistanceField> ComputeSignedDistanceField(const TriangleMesh& mesh,
+                                                       const SignedDistanceOptions& options) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  SOFTID_RETURN_IF_ERROR(ValidateTriangleMesh(mesh));
+
+  const Eigen::AlignedBox3d bounds = mesh.Bounds();
+  const Eigen::Vector3d extent = bounds.sizes();
+  double h = options.cell_size;
+  if (h <= 0.0) {
+    h = extent.maxCoeff() / options.cells_along_longest_side;
+    if (!(h > 0.0)) {
+      return Status::InvalidArgument(
+          "mesh: bounds have zero extent; set SignedDistanceOptions.cell_size");
+    }
+  }
+  SignedDistanceField field;
+  long long num_nodes = 1;
+  for (int a = 0; a < 3; ++a) {
+    // A tolerance keeps exact multiples of h (extent = 20 h) from gaining a cell by rounding.
+    const double cells =
+        std::max(0.0, std::ceil(extent[a] / h - 1e-9)) + 2.0 * options.padding_cells;
+    if (cells + 1 > static_cast<double>(kMaxNodes)) {
+      num_nodes = kMaxNodes + 1;
+      break;
+    }
+    field.grid.num_cells[a] = static_cast<int>(cells);
+    num_nodes *= field.grid.num_cells[a] + 1;
+  }
+  if (num_nodes > kMaxNodes) {
+    return Status::InvalidArgument("SignedDistanceOptions: cell_size h = " + std::to_string(h) +
+                                   " m gives more than 2^27 grid nodes for mesh extent " +
+                                   std::to_string(extent.maxCoeff()) + " m");
+  }
+  field.grid.cell_size = h;
+  field.grid.origin = bounds.center() - 0.5 * h * field.grid.num_cells.cast<double>();
+
+  SOFTID_ASSIGN_OR_RETURN(const MeshDistance distance, MeshDistance::Create(mesh));
+  const WindingNumber winding(mesh);
+
+  const int n = field.grid.NumNodes();
+  field.phi.assign(n, 0.0);
+  std::atomic<int> next_task{0};
+  auto work = [&]() {
+    while (true) {
+      const int begin = next_task.fetch_add(kNodesPerTask);
+      if (begin >= n) return;
+      const int end = std::min(n, begin + kNodesPerTask);
+      for (int node = begin; node < end; ++node) {
+        const Eigen::Vector3d p = field.grid.NodePosition(node);
+        const double d = distance.Distance(p);
+        // The coarse winding number (error < 1e-2) decides unless it is near 1/2.
+        double w = std::abs(winding.Evaluate(p, WindingNumber::kCoarseFarFactor));
+        if (std::abs(w - 0.5) < kCoarseDecisionMargin) w = std::abs(winding(p));
+        field.phi[node] = w >= 0.5 ? -d : d;
+      }
+    }
+  };
+  int threads = options.num_threads > 0 ? options.num_threads
+                                        : static_cast<int>(std::thread::hardware_concurrency());
+  threads = std::clamp(threads, 1, std::max(1, n / kNodesPerTask));
+  std::vector<std::thread> workers;
+  workers.reserve(threads - 1);
+  for (int t = 1; t < threads; ++t) workers.emplace_back(work);
+  work();
+  for (std::thread& worker : workers) worker.join();
+  return field;
+}
+
+}  // namespace softid::geometry

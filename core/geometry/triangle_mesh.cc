@@ -1,0 +1,253 @@
+#include "core/geometry/triangle_mesh.h"
+
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include <algorithm>
+#include <array>
+#include <assimp/Importer.hpp>
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+#include <string>
+#include <system_error>
+#include <unordered_map>
+#include <utility>
+
+#include "core/common/check.h"
+
+namespace softid::geometry {
+namespace {
+
+// Exact-position key for merging duplicate vertices (-0 and +0 compare equal).
+struct PositionKey {
+  std::array<std::uint32_t, 3> bits;
+  bool operator==(const PositionKey&) const = default;
+};
+
+PositionKey MakeKey(const aiVector3D& v) {
+  PositionKey key;
+  const float c[3] = {v.x + 0.0f, v.y + 0.0f, v.z + 0.0f};
+  for (int a = 0; a < 3; ++a) key.bits[a] = std::bit_cast<std::uint32_t>(c[a]);
+  return key;
+}
+
+struct PositionKeyHash {
+  std::size_t operator()(const PositionKey& k) const {
+    std::uint64_t h = 1469598103934665603ull;
+    for (std::uint32_t b : k.bits) h = (h ^ b) * 1099511628211ull;
+    return static_cast<std::size_t>(h ^ (h >> 29));
+  }
+};
+
+std::string Quoted(const std::filesystem::path& path) {
+  return path.string();
+}
+
+struct FileCloser {
+  void operator()(std::FILE* f) const {
+    if (f != nullptr) std::fclose(f);
+  }
+};
+using FilePtr = std::unique_ptr<std::FILE, FileCloser>;
+
+Result<FilePtr> OpenForWriting(const std::filesystem::path& path) {
+  FilePtr file(std::fopen(path.string().c_str(), "wb"));
+  if (file == nullptr) {
+    return Status::IoError(Quoted(path) + ": cannot open for writing: " + std::strerror(errno));
+  }
+  return file;
+}
+
+Status CloseChecked(FilePtr file, const std::filesystem::path& path) {
+  const bool write_error = std::ferror(file.get()) != 0;
+  const bool close_error = std::fclose(file.release()) != 0;
+  if (write_error || close_error) return Status::IoError(Quoted(path) + ": write failed");
+  return Status::Ok();
+}
+
+double TriangleArea(const TriangleMesh& mesh, const Eigen::Vector3i& t) {
+  const Eigen::Vector3d& a = mesh.vertices[t[0]];
+  return 0.5 * (mesh.vertices[t[1]] - a).cross(mesh.vertices[t[2]] - a).norm();
+}
+
+}  // namespace
+
+Eigen::AlignedBox3d TriangleMesh::Bounds() const {
+  Eigen::AlignedBox3d box;  // empty
+  for (const Eigen::Vector3d& v : vertices) box.extend(v);
+  return box;
+}
+
+Result<TriangleMesh> ReadTriangleMesh(const std::filesystem::path& path) {
+  std::error_code ec;
+  if (!std::filesystem::exists(path, ec)) {
+    return Status::NotFound(Quoted(path) + ": mesh file does not exist");
+  }
+  if (!std::filesystem::is_regular_file(path, ec)) {
+    return Status::InvalidArgument(Quoted(path) + ": not a regular file");
+  }
+  if (std::filesystem::file_size(path, ec) == 0) {
+    return Status::InvalidArgument(Quoted(path) + ": file is empty");
+  }
+
+  Assimp::Importer importer;
+  const aiScene* scene =
+      importer.ReadFile(path.string(), aiProcess_Triangulate | aiProcess_PreTransformVertices);
+  if (scene == nullptr) {
+    return Status::InvalidArgument(Quoted(path) +
+                                   ": cannot read mesh: " + importer.GetErrorString());
+  }
+
+  TriangleMesh mesh;
+  std::unordered_map<PositionKey, int, PositionKeyHash> index_of;
+  std::vector<int> remap;
+  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+    const aiMesh* in = scene->mMeshes[m];
+    remap.assign(in->mNumVertices, -1);
+    for (unsigned f = 0; f < in->mNumFaces; ++f) {
+      const aiFace& face = in->mFaces[f];
+      if (face.mNumIndices != 3) continue;  // points and lines
+      Eigen::Vector3i tri;
+      for (int c = 0; c < 3; ++c) {
+        const unsigned vi = face.mIndices[c];
+        if (vi >= in->mNumVertices) {
+          return Status::InvalidArgument(Quoted(path) + ": face " + std::to_string(f) +
+                                         " references vertex " + std::to_string(vi) + " of " +
+                                         std::to_string(in->mNumVertices));
+        }
+        if (remap[vi] < 0) {
+          const aiVector3D& v = in->mVertices[vi];
+          if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z)) {
+            return Status::InvalidArgument(Quoted(path) + ": vertex " + std::to_string(vi) +
+                                           " has non-finite coordinates");
+          }
+          const auto [it, inserted] =
+              index_of.try_emplace(MakeKey(v), static_cast<int>(mesh.vertices.size()));
+          if (inserted) mesh.vertices.emplace_back(v.x, v.y, v.z);
+          remap[vi] = it->second;
+        }
+        tri[c] = remap[vi];
+      }
+      if (tri[0] == tri[1] || tri[1] == tri[2] || tri[2] == tri[0]) continue;  // collapsed
+      mesh.triangles.push_back(tri);
+    }
+  }
+  if (mesh.triangles.empty()) {
+    return Status::InvalidArgument(Quoted(path) + ": mesh has no triangles");
+  }
+  return mesh;
+}
+
+Status WriteTriangleMeshObj(const std::filesystem::path& path, const TriangleMesh& mesh) {
+  SOFTID_ASSIGN_OR_RETURN(FilePtr file, OpenForWriting(path));
+  std::fprintf(file.get(), "# softid triangle mesh [m]\n");
+  for (const Eigen::Vector3d& v : mesh.vertices) {
+    std::fprintf(file.get(), "v %.9g %.9g %.9g\n", v.x(), v.y(), v.z());
+  }
+  for (const Eigen::Vector3i& t : mesh.triangles) {
+    std::fprintf(file.get(), "f %d %d %d\n", t[0] + 1, t[1] + 1, t[2] + 1);
+  }
+  return CloseChecked(std::move(file), path);
+}
+
+Status WriteTriangleMeshPly(const std::filesystem::path& path, const TriangleMesh& mesh) {
+  static_assert(std::endian::native == std::endian::little, "PLY writer assumes little endian");
+  SOFTID_ASSIGN_OR_RETURN(FilePtr file, OpenForWriting(path));
+  std::fprintf(file.get(),
+               "ply\nformat binary_little_endian 1.0\ncomment softid triangle mesh [m]\n"
+               "element vertex %zu\nproperty double x\nproperty double y\nproperty double z\n"
+               "element face %zu\nproperty list uchar int vertex_indices\nend_header\n",
+               mesh.vertices.size(), mesh.triangles.size());
+  for (const Eigen::Vector3d& v : mesh.vertices) {
+    const double xyz[3] = {v.x(), v.y(), v.z()};
+    std::fwrite(xyz, sizeof(double), 3, file.get());
+  }
+  for (const Eigen::Vector3i& t : mesh.triangles) {
+    unsigned char record[1 + 3 * sizeof(std::int32_t)];
+    record[0] = 3;
+    const std::int32_t idx[3] = {t[0], t[1], t[2]};
+    std::memcpy(record + 1, idx, sizeof(idx));
+    std::fwrite(record, sizeof(record), 1, file.get());
+  }
+  return CloseChecked(std::move(file), path);
+}
+
+double SignedVolume(const TriangleMesh& mesh) {
+  if (mesh.vertices.empty()) return 0.0;
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& v : mesh.vertices) centroid += v;
+  centroid /= static_cast<double>(mesh.vertices.size());
+  double six_volume = 0.0;
+  for (const Eigen::Vector3i& t : mesh.triangles) {
+    const Eigen::Vector3d a = mesh.vertices[t[0]] - centroid;
+    const Eigen::Vector3d b = mesh.vertices[t[1]] - centroid;
+    const Eigen::Vector3d c = mesh.vertices[t[2]] - centroid;
+    six_volume += a.dot(b.cross(c));
+  }
+  return six_volume / 6.0;
+}
+
+double SurfaceArea(const TriangleMesh& mesh) {
+  double area = 0.0;
+  for (const Eigen::Vector3i& t : mesh.triangles) area += TriangleArea(mesh, t);
+  return area;
+}
+
+std::vector<double> VertexAreas(const TriangleMesh& mesh) {
+  std::vector<double> areas(mesh.vertices.size(), 0.0);
+  for (const Eigen::Vector3i& t : mesh.triangles) {
+    const double third = TriangleArea(mesh, t) / 3.0;
+    for (int c = 0; c < 3; ++c) areas[t[c]] += third;
+  }
+  return areas;
+}
+
+TriangleMesh SubdivideToEdgeLength(const TriangleMesh& mesh, double max_edge_length) {
+  SOFTID_THROW_UNLESS(max_edge_length > 0.0 && std::isfinite(max_edge_length),
+                      "SubdivideToEdgeLength: max_edge_length = " +
+                          std::to_string(max_edge_length) + ": must be positive and finite");
+  const double max_sq = max_edge_length * max_edge_length;
+  TriangleMesh current = mesh;
+  while (true) {
+    bool too_long = false;
+    for (const Eigen::Vector3i& t : current.triangles) {
+      for (int c = 0; c < 3 && !too_long; ++c) {
+        too_long =
+            (current.vertices[t[c]] - current.vertices[t[(c + 1) % 3]]).squaredNorm() > max_sq;
+      }
+      if (too_long) break;
+    }
+    if (!too_long) return current;
+
+    TriangleMesh next;
+    next.vertices = current.vertices;
+    next.triangles.reserve(current.triangles.size() * 4);
+    std::unordered_map<std::uint64_t, int> midpoint_of;
+    midpoint_of.reserve(current.triangles.size() * 2);
+    auto midpoint = [&](int a, int b) {
+      const std::uint64_t key = (static_cast<std::uint64_t>(std::min(a, b)) << 32) |
+                                static_cast<std::uint32_t>(std::max(a, b));
+      const auto [it, inserted] =
+          midpoint_of.try_emplace(key, static_cast<int>(next.vertices.size()));
+      if (inserted) next.vertices.push_back(0.5 * (current.vertices[a] + current.vertices[b]));
+      return it->second;
+    };
+    for (const Eigen::Vector3i& t : current.triangles) {
+      const int m01 = midpoint(t[0], t[1]);
+      const int m12 = midpoint(t[1], t[2]);
+      const int m20 = midpoint(t[2], t[0]);
+      next.triangles.emplace_back(t[0], m01, m20);
+      next.triangles.emplace_back(m01, t[1], m12);
+      next.triangles.emplace_back(m20, m12, t[2]);
+      next.triangles.emplace_back(m01, m12, m20);
+    }
+    current = std::move(next);
+  }
+}
+
+}  // namespace softid::geometry

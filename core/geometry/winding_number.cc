@@ -1,0 +1,206 @@
+#include "core/geometry/winding_number.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <numbers>
+#include <string>
+
+#include "core/common/check.h"
+
+namespace softid::geometry {
+namespace {
+
+constexpr int kLeafSize = 8;
+constexpr int kMaxTreeDepth = 96;
+
+// Signed solid angle of triangle (a, b, c) seen from p (Van Oosterom & Strackee 1983) [sr];
+// positive when p is on the side opposite to the counter-clockwise normal.
+double SolidAngle(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
+                  const Eigen::Vector3d& p) {
+  const Eigen::Vector3d pa = a - p, pb = b - p, pc = c - p;
+  const double la = pa.norm(), lb = pb.norm(), lc = pc.norm();
+  const double numerator = pa.dot(pb.cross(pc));
+  const double denominator = la * lb * lc + pa.dot(pb) * lc + pa.dot(pc) * lb + pb.dot(pc) * la;
+  return 2.0 * std::atan2(numerator, denominator);
+}
+
+// Slot of the monomial r_j r_k r_l in Node::cubic, ordered xxx, xxy, xxz, xyy, xyz, xzz, yyy,
+// yyz, yzz, zzz (the order the evaluation groups them in).
+int CubicMonomial(int j, int k, int l) {
+  int e[3] = {0, 0, 0};
+  ++e[j];
+  ++e[k];
+  ++e[l];
+  static constexpr int kSlot[4][4] = {
+      // kSlot[ex][ey] with ez = 3 - ex - ey.
+      {9, 8, 7, 6},    // ex = 0: zzz, yzz, yyz, yyy
+      {5, 4, 3, -1},   // ex = 1: xzz, xyz, xyy
+      {2, 1, -1, -1},  // ex = 2: xxz, xxy
+      {0, -1, -1, -1}  // ex = 3: xxx
+  };
+  return kSlot[e[0]][e[1]];
+}
+
+}  // namespace
+
+WindingNumber::WindingNumber(const TriangleMesh& mesh) {
+  const int n = static_cast<int>(mesh.triangles.size());
+  const int num_vertices = static_cast<int>(mesh.vertices.size());
+  std::vector<Eigen::Vector3d> centroids(n);
+  for (int t = 0; t < n; ++t) {
+    const Eigen::Vector3i& tri = mesh.triangles[t];
+    SOFTID_THROW_UNLESS(
+        (tri.array() >= 0).all() && (tri.array() < num_vertices).all(),
+        "WindingNumber: triangle " + std::to_string(t) + " has a vertex index out of range");
+    centroids[t] = (mesh.vertices[tri[0]] + mesh.vertices[tri[1]] + mesh.vertices[tri[2]]) / 3.0;
+  }
+  if (n == 0) return;
+  std::vector<int> order(n);
+  for (int t = 0; t < n; ++t) order[t] = t;
+  nodes_.reserve(2 * (n / kLeafSize + 1));
+  Build(0, n, &order, centroids, mesh);
+  corners_.reserve(3 * static_cast<size_t>(n));
+  for (int t : order) {
+    for (int c = 0; c < 3; ++c) corners_.push_back(mesh.vertices[mesh.triangles[t][c]]);
+  }
+}
+
+int WindingNumber::Build(int begin, int end, std::vector<int>* order,
+                         const std::vector<Eigen::Vector3d>& centroids, const TriangleMesh& mesh) {
+  const int index = static_cast<int>(nodes_.size());
+  nodes_.emplace_back();
+  // Moments of the cluster.
+  double area = 0.0;
+  Eigen::Vector3d weighted = Eigen::Vector3d::Zero(), mean = Eigen::Vector3d::Zero();
+  Eigen::Vector3d dipole = Eigen::Vector3d::Zero();
+  Eigen::AlignedBox3d centroid_box;
+  for (int i = begin; i < end; ++i) {
+    const int t = (*order)[i];
+    const Eigen::Vector3i& tri = mesh.triangles[t];
+    const Eigen::Vector3d area_normal =
+        0.5 * (mesh.vertices[tri[1]] - mesh.vertices[tri[0]])
+                  .cross(mesh.vertices[tri[2]] - mesh.vertices[tri[0]]);
+    const double a = area_normal.norm();
+    area += a;
+    weighted += a * centroids[t];
+    mean += centroids[t];
+    dipole += area_normal;
+    centroid_box.extend(centroids[t]);
+  }
+  const Eigen::Vector3d center =
+      area > 0.0 ? Eigen::Vector3d(weighted / area) : Eigen::Vector3d(mean / double(end - begin));
+  Eigen::Matrix3d second = Eigen::Matrix3d::Zero();
+  std::array<Eigen::Matrix3d, 3> third;  // third[j](k, l) = T_jkl
+  for (Eigen::Matrix3d& m : third) m.setZero();
+  double radius_sq = 0.0;
+  for (int i = begin; i < end; ++i) {
+    const int t = (*order)[i];
+    const Eigen::Vector3i& tri = mesh.triangles[t];
+    const Eigen::Vector3d area_normal =
+        0.5 * (mesh.vertices[tri[1]] - mesh.vertices[tri[0]])
+                  .cross(mesh.vertices[tri[2]] - mesh.vertices[tri[0]]);
+    second += (centroids[t] - center) * area_normal.transpose();
+    // Mean of (x - c)(x - c)^T over the triangle: (sum u_i u_i^T + s s^T) / 12, u_i = corner - c.
+    const Eigen::Vector3d u0 = mesh.vertices[tri[0]] - center, u1 = mesh.vertices[tri[1]] - center,
+                          u2 = mesh.vertices[tri[2]] - center;
+    const Eigen::Vector3d sum = u0 + u1 + u2;
+    const Eigen::Matrix3d moment =
+        (u0 * u0.transpose() + u1 * u1.transpose() + u2 * u2.transpose() + sum * sum.transpose()) /
+        12.0;
+    for (int j = 0; j < 3; ++j) third[j] += area_normal[j] * moment;
+    for (int c = 0; c < 3; ++c) {
+      radius_sq = std::max(radius_sq, (mesh.vertices[tri[c]] - center).squaredNorm());
+    }
+  }
+  Node& node = nodes_[index];
+  node.center = center;
+  node.radius_sq = radius_sq;
+  node.dipole = dipole;
+  node.second_trace = second.trace();
+  node.quadratic = {second(0, 0),
+                    second(1, 1),
+                    second(2, 2),
+                    second(0, 1) + second(1, 0),
+                    second(1, 2) + second(2, 1),
+                    second(2, 0) + second(0, 2)};
+  for (int l = 0; l < 3; ++l) {
+    node.third_linear[l] =
+        2.0 * (third[0](0, l) + third[1](1, l) + third[2](2, l)) + third[l].trace();
+  }
+  node.cubic.fill(0.0);
+  for (int j = 0; j < 3; ++j) {
+    for (int k = 0; k < 3; ++k) {
+      for (int l = 0; l < 3; ++l) node.cubic[CubicMonomial(j, k, l)] += third[j](k, l);
+    }
+  }
+  node.begin = begin;
+  node.end = end;
+  if (end - begin <= kLeafSize) return index;
+  int axis;
+  centroid_box.sizes().maxCoeff(&axis);
+  const int mid = begin + (end - begin) / 2;
+  std::nth_element(order->begin() + begin, order->begin() + mid, order->begin() + end,
+                   [&](int a, int b) { return centroids[a][axis] < centroids[b][axis]; });
+  Build(begin, mid, order, centroids, mesh);  // left child = index + 1
+  const int right = Build(mid, end, order, centroids, mesh);
+  nodes_[index].right = right;
+  return index;
+}
+
+double WindingNumber::LeafSolidAngle(const Node& node, const Eigen::Vector3d& p) const {
+  double omega = 0.0;
+  for (int t = node.begin; t < node.end; ++t) {
+    omega += SolidAngle(corners_[3 * t], corners_[3 * t + 1], corners_[3 * t + 2], p);
+  }
+  return omega;
+}
+
+double WindingNumber::Evaluate(const Eigen::Vector3d& p, double far_factor) const {
+  if (nodes_.empty()) return 0.0;
+  const double far_sq = far_factor * far_factor;
+  std::array<int, kMaxTreeDepth> stack;
+  int size = 0;
+  stack[size++] = 0;
+  double omega = 0.0;
+  while (size > 0) {
+    const Node& node = nodes_[stack[--size]];
+    const Eigen::Vector3d r = node.center - p;
+    const double d_sq = r.squaredNorm();
+    if (d_sq > far_sq * node.radius_sq) {
+      const double inv_d_sq = 1.0 / d_sq;
+      const double inv_d3 = inv_d_sq * std::sqrt(inv_d_sq);
+      const double inv_d5 = inv_d3 * inv_d_sq;
+      const double x = r.x(), y = r.y(), z = r.z();
+      const double xx = x * x, yy = y * y, zz = z * z;
+      const std::array<double, 6>& q = node.quadratic;
+      const double quadratic =
+          q[0] * xx + q[1] * yy + q[2] * zz + q[3] * x * y + q[4] * y * z + q[5] * z * x;
+      const std::array<double, 10>& c = node.cubic;
+      const double cubic =
+          x * (c[0] * xx + c[1] * x * y + c[2] * x * z + c[3] * yy + c[4] * y * z + c[5] * zz) +
+          y * (c[6] * yy + c[7] * y * z + c[8] * zz) + c[9] * zz * z;
+      omega += inv_d3 * (r.dot(node.dipole) + node.second_trace) -
+               inv_d5 * (3.0 * quadratic + 1.5 * node.third_linear.dot(r)) +
+               7.5 * inv_d5 * inv_d_sq * cubic;
+    } else if (node.right < 0) {
+      omega += LeafSolidAngle(node, p);
+    } else {
+      SOFTID_DEMAND(size + 2 <= kMaxTreeDepth);
+      stack[size++] = node.right;
+      stack[size++] = static_cast<int>(&node - nodes_.data()) + 1;
+    }
+  }
+  return omega / (4.0 * std::numbers::pi);
+}
+
+double WindingNumber::Exact(const Eigen::Vector3d& p) const {
+  double omega = 0.0;
+  const int n = static_cast<int>(corners_.size() / 3);
+  for (int t = 0; t < n; ++t) {
+    omega += SolidAngle(corners_[3 * t], corners_[3 * t + 1], corners_[3 * t + 2], p);
+  }
+  return omega / (4.0 * std::numbers::pi);
+}
+
+}  // namespace softid::geometry
