@@ -1,0 +1,544 @@
+#include "core/capture/capture.h"
+
+#include <fcntl.h>
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <system_error>
+
+namespace softid::capture {
+
+using nlohmann::json;
+
+int Capture::NumFrames() const {
+  return cameras.empty() ? 0 : static_cast<int>(cameras.front().frames.size());
+}
+
+namespace {
+
+// Largest accepted image side [pixels]; keeps width * height far from integer overflow.
+constexpr int kMaxImageSide = 1 << 16;
+
+std::string JoinPath(std::string_view parent, std::string_view key) {
+  return parent.empty() ? std::string(key) : fmt::format("{}.{}", parent, key);
+}
+
+std::string IndexPath(std::string_view parent, size_t index) {
+  return fmt::format("{}[{}]", parent, index);
+}
+
+// A JSON value for an error message, shortened when long.
+std::string Shown(const json& value) {
+  std::string text = value.dump();
+  constexpr size_t kMaxChars = 80;
+  if (text.size() > kMaxChars) text = text.substr(0, kMaxChars - 3) + "...";
+  return text;
+}
+
+// Builds InvalidArgument messages "<source>: <path> = <value>: <reason>".
+class JsonReader {
+ public:
+  explicit JsonReader(std::string_view source) : source_(source) {}
+
+  Status Error(std::string_view path, const json& value, std::string_view reason) const {
+    return Status::InvalidArgument(
+        fmt::format("{}: {} = {}: {}", source_, path, Shown(value), reason));
+  }
+  Status Error(std::string_view path, std::string_view reason) const {
+    return Status::InvalidArgument(fmt::format("{}: {}: {}", source_, path, reason));
+  }
+  Status WithSource(const Status& status) const { return status.WithContext(source_); }
+
+  // The member `key` of `object` (at `parent`), or an error when it is missing.
+  Result<const json*> Require(const json& object, std::string_view parent,
+                              std::string_view key) const {
+    const auto it = object.find(key);
+    if (it == object.end()) return Error(JoinPath(parent, key), "missing required field");
+    return &*it;
+  }
+
+  Status CheckObject(std::string_view path, const json& value) const {
+    if (value.is_object()) return Status::Ok();
+    return Error(path.empty() ? "(root)" : path, value, "must be a JSON object");
+  }
+
+  Status CheckArray(std::string_view path, const json& value) const {
+    if (value.is_array()) return Status::Ok();
+    return Error(path, value, "must be a JSON array");
+  }
+
+  Result<double> Number(std::string_view path, const json& value) const {
+    if (!value.is_number()) return Error(path, value, "must be a number");
+    const double x = value.get<double>();
+    if (!std::isfinite(x)) return Error(path, value, "must be finite");
+    return x;
+  }
+
+  Result<double> PositiveNumber(std::string_view path, const json& value) const {
+    SOFTID_ASSIGN_OR_RETURN(const double x, Number(path, value));
+    if (!(x > 0.0)) return Error(path, value, "must be positive and finite");
+    return x;
+  }
+
+  // An integer; integral floating-point values such as 640.0 are accepted.
+  Result<int> Integer(std::string_view path, const json& value) const {
+    if (!value.is_number()) return Error(path, value, "must be an integer");
+    if (value.is_number_float()) {
+      const double x = value.get<double>();
+      if (!(std::isfinite(x) && x == std::floor(x)))
+        return Error(path, value, "must be an integer");
+      if (std::abs(x) > kMaxImageSide) return Error(path, value, "out of range");
+      return static_cast<int>(x);
+    }
+    if (value.is_number_unsigned()) {
+      if (value.get<uint64_t>() > static_cast<uint64_t>(kMaxImageSide)) {
+        return Error(path, value, "out of range");
+      }
+      return static_cast<int>(value.get<uint64_t>());
+    }
+    const int64_t x = value.get<int64_t>();
+    if (x > kMaxImageSide || x < -kMaxImageSide) return Error(path, value, "out of range");
+    return static_cast<int>(x);
+  }
+
+  Result<std::string> String(std::string_view path, const json& value) const {
+    if (!value.is_string()) return Error(path, value, "must be a string");
+    return value.get<std::string>();
+  }
+
+  // A '/'-separated path relative to the capture folder that does not leave it (lexically).
+  Result<std::string> RelativePath(std::string_view path, const json& value) const {
+    SOFTID_ASSIGN_OR_RETURN(std::string file, String(path, value));
+    if (file.empty()) return Error(path, value, "must not be empty");
+    if (file.find('\\') != std::string::npos || file.find('\0') != std::string::npos) {
+      return Error(path, value, "must use '/' as separator (no '\\' or NUL characters)");
+    }
+    const std::filesystem::path p(file);
+    if (p.is_absolute() || p.has_root_directory() || p.has_root_name()) {
+      return Error(path, value, "must be relative to the capture folder, not absolute");
+    }
+    for (const auto& component : p) {
+      if (component == "..")
+        return Error(path, value, "must not leave the capture folder (\"..\")");
+    }
+    if (!p.has_filename()) return Error(path, value, "must name a file");
+    return file;
+  }
+
+  Result<Eigen::Vector3d> Vector3(std::string_view path, const json& value) const {
+    if (!value.is_array() || value.size() != 3) {
+      return Error(path, value, "must be an array of 3 numbers");
+    }
+    Eigen::Vector3d v;
+    for (int i = 0; i < 3; ++i) {
+      SOFTID_ASSIGN_OR_RETURN(v[i], Number(IndexPath(path, i), value[i]));
+    }
+    return v;
+  }
+
+ private:
+  std::string source_;
+};
+
+Result<CameraRecording> ParseCamera(const JsonReader& reader, const json& value,
+                                    std::string_view path) {
+  SOFTID_RETURN_IF_ERROR(reader.CheckObject(path, value));
+  CameraRecording recording;
+  PinholeCamera& camera = recording.camera;
+  SOFTID_ASSIGN_OR_RETURN(const json* name, reader.Require(value, path, "name"));
+  SOFTID_ASSIGN_OR_RETURN(camera.name, reader.String(JoinPath(path, "name"), *name));
+  if (camera.name.empty()) return reader.Error(JoinPath(path, "name"), *name, "must not be empty");
+
+  const auto integer_field = [&](std::string_view key, int* out) -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const json* field, reader.Require(value, path, key));
+    SOFTID_ASSIGN_OR_RETURN(*out, reader.Integer(JoinPath(path, key), *field));
+    return Status::Ok();
+  };
+  const auto number_field = [&](std::string_view key, double* out) -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const json* field, reader.Require(value, path, key));
+    SOFTID_ASSIGN_OR_RETURN(*out, reader.Number(JoinPath(path, key), *field));
+    return Status::Ok();
+  };
+  SOFTID_RETURN_IF_ERROR(integer_field("width", &camera.width));
+  SOFTID_RETURN_IF_ERROR(integer_field("height", &camera.height));
+  SOFTID_RETURN_IF_ERROR(number_field("fx", &camera.fx));
+  SOFTID_RETURN_IF_ERROR(number_field("fy", &camera.fy));
+  SOFTID_RETURN_IF_ERROR(number_field("cx", &camera.cx));
+  SOFTID_RETURN_IF_ERROR(number_field("cy", &camera.cy));
+  // Value checks of the intrinsics, with messages "<path>.fx = -1: must be positive and finite".
+  SOFTID_RETURN_IF_ERROR(reader.WithSource(camera.Validate(fmt::format("{}.", path))));
+
+  SOFTID_ASSIGN_OR_RETURN(const json* depth_scale, reader.Require(value, path, "depth_scale"));
+  const std::string depth_scale_path = JoinPath(path, "depth_scale");
+  SOFTID_ASSIGN_OR_RETURN(recording.depth_scale, reader.Number(depth_scale_path, *depth_scale));
+  if (!(recording.depth_scale > 0.0)) {
+    return reader.Error(depth_scale_path, *depth_scale,
+                        "must be positive (metres per unit of the 16-bit PNG)");
+  }
+
+  const std::string pose_path = JoinPath(path, "world_from_camera");
+  SOFTID_ASSIGN_OR_RETURN(const json* pose, reader.Require(value, path, "world_from_camera"));
+  if (!pose->is_array() || pose->size() != 16) {
+    return reader.Error(pose_path, *pose, "must be an array of 16 numbers (row-major 4x4)");
+  }
+  Eigen::Matrix4d X_WC;
+  for (int i = 0; i < 16; ++i) {
+    SOFTID_ASSIGN_OR_RETURN(X_WC(i / 4, i % 4), reader.Number(IndexPath(pose_path, i), (*pose)[i]));
+  }
+  SOFTID_RETURN_IF_ERROR(reader.WithSource(ValidateRigidTransform(X_WC, pose_path)));
+  X_WC.row(3) << 0, 0, 0, 1;
+  camera.X_WC.matrix() = X_WC;
+
+  const std::string frames_path = JoinPath(path, "frames");
+  SOFTID_ASSIGN_OR_RETURN(const json* frames, reader.Require(value, path, "frames"));
+  SOFTID_RETURN_IF_ERROR(reader.CheckArray(frames_path, *frames));
+  if (frames->empty()) return reader.Error(frames_path, *frames, "must list at least one frame");
+  for (size_t k = 0; k < frames->size(); ++k) {
+    SOFTID_ASSIGN_OR_RETURN(std::string frame,
+                            reader.RelativePath(IndexPath(frames_path, k), (*frames)[k]));
+    recording.frames.push_back(std::move(frame));
+  }
+  return recording;
+}
+
+// Whether `target` resolves (following symlinks) to a location inside `root`.
+bool StaysInside(const std::filesystem::path& root, const std::filesystem::path& target) {
+  std::error_code error;
+  const std::filesystem::path canonical_root = std::filesystem::canonical(root, error);
+  if (error) return false;
+  const std::filesystem::path resolved = std::filesystem::weakly_canonical(target, error);
+  if (error) return false;
+  const std::filesystem::path relative = resolved.lexically_relative(canonical_root);
+  return !relative.empty() && *relative.begin() != "..";
+}
+
+// Checks that a referenced file resolves inside the capture folder.
+Status CheckInsideFolder(const JsonReader& reader, const std::filesystem::path& directory,
+                         std::string_view path, const std::string& file) {
+  if (StaysInside(directory, directory / file)) return Status::Ok();
+  return reader.Error(path, json(file), "resolves outside the capture folder (symlink)");
+}
+
+Result<std::string> ReadTextFile(const std::filesystem::path& path) {
+  std::ifstream file(path, std::ios::binary);
+  if (!file) return Status::IoError(fmt::format("{}: cannot open file", path.string()));
+  std::ostringstream text;
+  text << file.rdbuf();
+  if (file.bad()) return Status::IoError(fmt::format("{}: read error", path.string()));
+  return text.str();
+}
+
+// Writes `text` to `path` and flushes it to the disk.
+Status WriteFileDurably(const std::filesystem::path& path, const std::string& text) {
+  std::FILE* file = std::fopen(path.c_str(), "wb");
+  if (file == nullptr) return Status::IoError(fmt::format("{}: cannot create file", path.string()));
+  bool ok = std::fwrite(text.data(), 1, text.size(), file) == text.size();
+  ok = std::fflush(file) == 0 && ok;
+  ok = ::fsync(::fileno(file)) == 0 && ok;
+  ok = std::fclose(file) == 0 && ok;
+  if (!ok) return Status::IoError(fmt::format("{}: write failed", path.string()));
+  return Status::Ok();
+}
+
+void SyncDirectory(const std::filesystem::path& directory) {
+  const int fd = ::open(directory.c_str(), O_RDONLY | O_DIRECTORY);
+  if (fd < 0) return;
+  ::fsync(fd);
+  ::close(fd);
+}
+
+// Whether `name` can be used as a single folder name.
+bool IsSafeFolderName(const std::string& name) {
+  if (name.empty() || name == "." || name == "..") return false;
+  for (const char c : name) {
+    if (c == '/' || c == '\\' || static_cast<unsigned char>(c) < 0x20) return false;
+  }
+  return true;
+}
+
+bool EndsWithObj(const std::string& file) {
+  if (file.size() < 4) return false;
+  std::string extension = file.substr(file.size() - 4);
+  for (char& c : extension) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return extension == ".obj";
+}
+
+}  // namespace
+
+json ToJson(const Capture& capture) {
+  json out = json::object();
+  out["format"] = std::string(kCaptureFormat);
+  out["mesh"] = capture.mesh_file;
+  out["fps"] = capture.fps;
+  if (capture.mass_kg) out["mass_kg"] = *capture.mass_kg;
+  if (capture.fixed_region) {
+    const Eigen::Vector3d& min = capture.fixed_region->min();
+    const Eigen::Vector3d& max = capture.fixed_region->max();
+    out["fixed_region"] = {{"min", {min.x(), min.y(), min.z()}},
+                           {"max", {max.x(), max.y(), max.z()}}};
+  }
+  json cameras = json::array();
+  for (const CameraRecording& recording : capture.cameras) {
+    const PinholeCamera& camera = recording.camera;
+    json pose = json::array();
+    for (int i = 0; i < 16; ++i) pose.push_back(camera.X_WC.matrix()(i / 4, i % 4));
+    cameras.push_back({{"name", camera.name},
+                       {"width", camera.width},
+                       {"height", camera.height},
+                       {"fx", camera.fx},
+                       {"fy", camera.fy},
+                       {"cx", camera.cx},
+                       {"cy", camera.cy},
+                       {"depth_scale", recording.depth_scale},
+                       {"world_from_camera", std::move(pose)},
+                       {"frames", recording.frames}});
+  }
+  out["cameras"] = std::move(cameras);
+  return out;
+}
+
+Result<Capture> CaptureFromJson(const json& root, std::string_view source) {
+  const JsonReader reader(source);
+  SOFTID_RETURN_IF_ERROR(reader.CheckObject("", root));
+  Capture capture;
+
+  // Format first, so that another version's differing fields are reported as a version mismatch.
+  SOFTID_ASSIGN_OR_RETURN(const json* format, reader.Require(root, "", "format"));
+  SOFTID_ASSIGN_OR_RETURN(const std::string format_string, reader.String("format", *format));
+  if (format_string != kCaptureFormat) {
+    constexpr std::string_view kFamily = "softid-capture/";
+    if (format_string.starts_with(kFamily)) {
+      return reader.Error(
+          "format", *format,
+          fmt::format("unsupported version (this reader supports \"{}\")", kCaptureFormat));
+    }
+    return reader.Error("format", *format,
+                        fmt::format("not a softid capture (expected \"{}\")", kCaptureFormat));
+  }
+
+  SOFTID_ASSIGN_OR_RETURN(const json* mesh, reader.Require(root, "", "mesh"));
+  SOFTID_ASSIGN_OR_RETURN(capture.mesh_file, reader.RelativePath("mesh", *mesh));
+
+  SOFTID_ASSIGN_OR_RETURN(const json* fps, reader.Require(root, "", "fps"));
+  SOFTID_ASSIGN_OR_RETURN(capture.fps, reader.PositiveNumber("fps", *fps));
+
+  if (const auto it = root.find("mass_kg"); it != root.end()) {
+    SOFTID_ASSIGN_OR_RETURN(capture.mass_kg, reader.PositiveNumber("mass_kg", *it));
+  }
+
+  if (const auto it = root.find("fixed_region"); it != root.end()) {
+    SOFTID_RETURN_IF_ERROR(reader.CheckObject("fixed_region", *it));
+    SOFTID_ASSIGN_OR_RETURN(const json* min_json, reader.Require(*it, "fixed_region", "min"));
+    SOFTID_ASSIGN_OR_RETURN(const json* max_json, reader.Require(*it, "fixed_region", "max"));
+    SOFTID_ASSIGN_OR_RETURN(const Eigen::Vector3d min,
+                            reader.Vector3("fixed_region.min", *min_json));
+    SOFTID_ASSIGN_OR_RETURN(const Eigen::Vector3d max,
+                            reader.Vector3("fixed_region.max", *max_json));
+    for (int i = 0; i < 3; ++i) {
+      if (min[i] > max[i]) {
+        return reader.Error(fmt::format("fixed_region.min[{}]", i), (*min_json)[i],
+                            fmt::format("greater than fixed_region.max[{}] = {}: min must be <= "
+                                        "max in every coordinate",
+                                        i, Shown((*max_json)[i])));
+      }
+    }
+    capture.fixed_region = Eigen::AlignedBox3d(min, max);
+  }
+
+  SOFTID_ASSIGN_OR_RETURN(const json* cameras, reader.Require(root, "", "cameras"));
+  SOFTID_RETURN_IF_ERROR(reader.CheckArray("cameras", *cameras));
+  if (cameras->empty()) return reader.Error("cameras", *cameras, "must list at least one camera");
+  std::set<std::string> names;
+  for (size_t i = 0; i < cameras->size(); ++i) {
+    const std::string path = IndexPath("cameras", i);
+    SOFTID_ASSIGN_OR_RETURN(CameraRecording recording, ParseCamera(reader, (*cameras)[i], path));
+    if (!names.insert(recording.camera.name).second) {
+      return reader.Error(JoinPath(path, "name"), json(recording.camera.name),
+                          "duplicate camera name");
+    }
+    if (i > 0 && recording.frames.size() != capture.cameras.front().frames.size()) {
+      return reader.Error(
+          JoinPath(path, "frames"),
+          fmt::format("has {} frames but cameras[0].frames has {}: all cameras "
+                      "must have the same number of frames",
+                      recording.frames.size(), capture.cameras.front().frames.size()));
+    }
+    capture.cameras.push_back(std::move(recording));
+  }
+  return capture;
+}
+
+Result<Capture> ReadCapture(const std::filesystem::path& directory,
+                            const ReadCaptureOptions& options) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  std::error_code error;
+  if (!std::filesystem::is_directory(directory, error)) {
+    return Status::NotFound(fmt::format("{}: capture folder not found", directory.string()));
+  }
+  const std::filesystem::path json_path = directory / kCaptureFileName;
+  const std::string source = json_path.string();
+  if (!std::filesystem::is_regular_file(json_path, error)) {
+    return Status::NotFound(fmt::format(
+        "{}: not found (not a capture folder, or the capture was not completely written)", source));
+  }
+  SOFTID_ASSIGN_OR_RETURN(const std::string text, ReadTextFile(json_path));
+  json root;
+  try {
+    root = json::parse(text);
+  } catch (const json::exception& e) {
+    return Status::InvalidArgument(fmt::format("{}: invalid JSON: {}", source, e.what()));
+  }
+  SOFTID_ASSIGN_OR_RETURN(Capture capture, CaptureFromJson(root, source));
+  capture.directory = directory;
+  const JsonReader reader(source);
+
+  // The mesh: inside the folder, loads, not empty.
+  SOFTID_RETURN_IF_ERROR(CheckInsideFolder(reader, directory, "mesh", capture.mesh_file));
+  {
+    const Result<geometry::TriangleMesh> mesh = LoadCaptureMesh(capture);
+    if (!mesh.ok()) {
+      return reader.Error("mesh", json(capture.mesh_file),
+                          fmt::format("cannot load mesh: {}", mesh.status().message()));
+    }
+    if (mesh->vertices.empty() || mesh->triangles.empty()) {
+      return reader.Error("mesh", json(capture.mesh_file), "mesh is empty (no triangles)");
+    }
+  }
+
+  // Every frame: inside the folder, a 16-bit single-channel PNG of the camera's size.
+  for (size_t i = 0; i < capture.cameras.size(); ++i) {
+    const CameraRecording& recording = capture.cameras[i];
+    const PinholeCamera& camera = recording.camera;
+    for (size_t k = 0; k < recording.frames.size(); ++k) {
+      const std::string path = fmt::format("cameras[{}].frames[{}]", i, k);
+      const std::string& file = recording.frames[k];
+      SOFTID_RETURN_IF_ERROR(CheckInsideFolder(reader, directory, path, file));
+      const std::filesystem::path frame_path = directory / file;
+      Status status;
+      if (options.decode_frames) {
+        status =
+            ReadDepthPng(frame_path, recording.depth_scale, camera.width, camera.height).status();
+      } else {
+        status = CheckDepthPngHeader(frame_path, camera.width, camera.height);
+      }
+      if (!status.ok()) return reader.Error(path, json(file), status.message());
+    }
+  }
+  return capture;
+}
+
+Result<geometry::TriangleMesh> LoadCaptureMesh(const Capture& capture) {
+  return geometry::ReadTriangleMesh(capture.directory / capture.mesh_file);
+}
+
+Result<DepthImage> LoadFrame(const Capture& capture, int camera, int frame) {
+  if (camera < 0 || camera >= capture.NumCameras()) {
+    return Status::InvalidArgument(
+        fmt::format("LoadFrame: camera = {}: out of range [0, {})", camera, capture.NumCameras()));
+  }
+  const CameraRecording& recording = capture.cameras[camera];
+  if (frame < 0 || frame >= static_cast<int>(recording.frames.size())) {
+    return Status::InvalidArgument(
+        fmt::format("LoadFrame: frame = {}: out of range [0, {})", frame, recording.frames.size()));
+  }
+  return ReadDepthPng(capture.directory / recording.frames[frame], recording.depth_scale,
+                      recording.camera.width, recording.camera.height);
+}
+
+Status WriteCapture(const std::filesystem::path& directory, const Capture& capture,
+                    const geometry::TriangleMesh& mesh,
+                    const std::vector<std::vector<DepthImage>>& frames_per_camera) {
+  const std::string source = fmt::format("WriteCapture({})", directory.string());
+  Capture out = capture;
+  out.directory = directory;
+  if (out.mesh_file.empty()) out.mesh_file = "object.obj";
+  if (!EndsWithObj(out.mesh_file)) {
+    return Status::InvalidArgument(
+        fmt::format("{}: mesh = \"{}\": must end in \".obj\" (the mesh is written as OBJ)", source,
+                    out.mesh_file));
+  }
+  if (frames_per_camera.size() != out.cameras.size()) {
+    return Status::InvalidArgument(
+        fmt::format("{}: {} image lists for {} cameras: need one per camera", source,
+                    frames_per_camera.size(), out.cameras.size()));
+  }
+  for (size_t i = 0; i < out.cameras.size(); ++i) {
+    CameraRecording& recording = out.cameras[i];
+    const std::string& name = recording.camera.name;
+    if (!IsSafeFolderName(name)) {
+      return Status::InvalidArgument(fmt::format(
+          "{}: cameras[{}].name = \"{}\": must be usable as a folder name (not empty, no '/', "
+          "'\\' or control characters, not \".\" or \"..\")",
+          source, i, name));
+    }
+    recording.frames.clear();
+    for (size_t k = 0; k < frames_per_camera[i].size(); ++k) {
+      recording.frames.push_back(fmt::format("{}/{:06d}.png", name, k));
+    }
+  }
+  // The same rules a reader applies (also catches empty or unequal frame lists).
+  SOFTID_RETURN_IF_ERROR(CaptureFromJson(ToJson(out), source).status());
+  for (size_t i = 0; i < out.cameras.size(); ++i) {
+    const PinholeCamera& camera = out.cameras[i].camera;
+    for (size_t k = 0; k < frames_per_camera[i].size(); ++k) {
+      const DepthImage& image = frames_per_camera[i][k];
+      if (image.width != camera.width || image.height != camera.height ||
+          image.depth.size() != static_cast<size_t>(image.width) * image.height) {
+        return Status::InvalidArgument(fmt::format(
+            "{}: frames_per_camera[{}][{}] is {}x{} with {} values: camera \"{}\" is {}x{}", source,
+            i, k, image.width, image.height, image.depth.size(), camera.name, camera.width,
+            camera.height));
+      }
+    }
+  }
+  if (mesh.vertices.empty() || mesh.triangles.empty()) {
+    return Status::InvalidArgument(fmt::format("{}: mesh is empty (no triangles)", source));
+  }
+
+  std::error_code error;
+  std::filesystem::create_directories(directory, error);
+  if (error) {
+    return Status::IoError(
+        fmt::format("{}: cannot create folder: {}", directory.string(), error.message()));
+  }
+  const std::filesystem::path json_path = directory / kCaptureFileName;
+  std::filesystem::remove(json_path, error);
+  if (error) {
+    return Status::IoError(fmt::format("{}: cannot remove the previous capture.json: {}",
+                                       json_path.string(), error.message()));
+  }
+  const std::filesystem::path mesh_path = directory / out.mesh_file;
+  std::filesystem::create_directories(mesh_path.parent_path(), error);
+  SOFTID_RETURN_IF_ERROR(geometry::WriteTriangleMeshObj(mesh_path, mesh));
+  for (size_t i = 0; i < out.cameras.size(); ++i) {
+    const CameraRecording& recording = out.cameras[i];
+    std::filesystem::create_directories(directory / recording.camera.name, error);
+    if (error) {
+      return Status::IoError(fmt::format("{}: cannot create folder: {}",
+                                         (directory / recording.camera.name).string(),
+                                         error.message()));
+    }
+    for (size_t k = 0; k < recording.frames.size(); ++k) {
+      SOFTID_RETURN_IF_ERROR(WriteDepthPng(directory / recording.frames[k], frames_per_camera[i][k],
+                                           recording.depth_scale));
+    }
+  }
+  const std::filesystem::path temp_path = directory / (std::string(kCaptureFileName) + ".tmp");
+  SOFTID_RETURN_IF_ERROR(WriteFileDurably(temp_path, ToJson(out).dump(2) + "\n"));
+  std::filesystem::rename(temp_path, json_path, error);
+  if (error) {
+    return Status::IoError(fmt::format("{}: cannot rename to {}: {}", temp_path.string(),
+                                       json_path.string(), error.message()));
+  }
+  SyncDirectory(directory);
+  return Status::Ok();
+}
+
+}  // namespace softid::capture

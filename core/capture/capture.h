@@ -1,0 +1,122 @@
+// Captures: a rest-pose mesh plus synchronised depth videos from calibrated cameras, stored as a
+// folder with capture.json (format "softid-capture/1"), the mesh and 16-bit depth PNGs.
+//
+// capture.json is a public contract that capture stations write against:
+//   {
+//     "format": "softid-capture/1",
+//     "mesh": "object.obj",               // rest pose at t = 0, world frame, metres (OBJ/PLY/STL)
+//     "fps": 60,                          // frames per second, > 0
+//     "mass_kg": 0.25,                    // optional, > 0: density = mass / mesh volume
+//     "fixed_region": {"min": [x, y, z], "max": [x, y, z]},  // optional [m]: clamped nodes
+//     "cameras": [{                       // >= 1 camera, unique names
+//       "name": "cam0", "width": 640, "height": 480,         // [pixels], integers > 0
+//       "fx": 525.0, "fy": 525.0, "cx": 319.5, "cy": 239.5,  // [pixels], (cx, cy) in the image
+//       "depth_scale": 0.001,             // metres per unit of the 16-bit PNG, > 0
+//       "world_from_camera": [16 numbers, row-major 4x4],    // X_WC, rigid; OpenCV camera axes
+//       "frames": ["cam0/000000.png", "cam0/000001.png"]     // frame k shows time k / fps
+//     }]
+//   }
+// Gravity is -z in the world frame. Every camera has the same number of frames (>= 1). Frames are
+// 16-bit single-channel PNGs of depth along the camera z axis (value * depth_scale metres), 0 = no
+// data; only the object's pixels are non-zero. File paths are relative to the capture folder,
+// '/'-separated, and may not leave it (no absolute paths, no "..", no symlinks pointing outside).
+// Unknown extra fields are ignored. Malformed input is rejected with InvalidArgument whose message
+// names the file, the field path and the value, e.g.
+//   "<dir>/capture.json: cameras[0].fx = -1: must be positive and finite".
+#pragma once
+
+#include <Eigen/Geometry>
+#include <filesystem>
+#include <nlohmann/json_fwd.hpp>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/capture/camera.h"
+#include "core/capture/depth_image.h"
+#include "core/common/status.h"
+#include "core/geometry/triangle_mesh.h"
+
+namespace softid::capture {
+
+// The one format version this library reads and writes.
+inline constexpr std::string_view kCaptureFormat = "softid-capture/1";
+// Name of the capture description inside a capture folder.
+inline constexpr std::string_view kCaptureFileName = "capture.json";
+
+// One camera's calibration and depth video.
+struct CameraRecording {
+  PinholeCamera camera;
+  double depth_scale = 0.001;  // [m per PNG unit], > 0
+  // Frame PNGs relative to the capture folder, '/'-separated; frame k shows time k / fps [s].
+  std::vector<std::string> frames;
+};
+
+struct Capture {
+  // Capture folder; set by ReadCapture, not stored in capture.json.
+  std::filesystem::path directory;
+  // Rest-pose mesh at t = 0 (world frame, metres), relative to the capture folder.
+  std::string mesh_file = "object.obj";
+  double fps = 0.0;                                 // frames per second [1/s], > 0
+  std::optional<double> mass_kg;                    // [kg], > 0 when present
+  std::optional<Eigen::AlignedBox3d> fixed_region;  // world frame [m]: nodes inside are clamped
+  std::vector<CameraRecording> cameras;
+
+  // Number of frames per camera (all cameras have the same); 0 without cameras.
+  int NumFrames() const;
+  int NumCameras() const { return static_cast<int>(cameras.size()); }
+  // Time shown by frame k [s].
+  double FrameTime(int frame) const { return frame / fps; }
+};
+
+struct ReadCaptureOptions {
+  // true (default): decode every frame PNG, which also detects corrupt or truncated image data.
+  // false: check only each frame's PNG header (16-bit greyscale of the camera's size); much
+  // faster for long captures, corrupt pixel data then surfaces in LoadFrame.
+  bool decode_frames = true;
+
+  // Always OK; present for uniformity with other options structs.
+  Status Validate() const { return Status::Ok(); }
+};
+
+// capture.json contents of `capture` (directory is not stored). Optional fields are omitted when
+// unset. Doubles round-trip exactly.
+nlohmann::json ToJson(const Capture& capture);
+
+// Parses and validates capture.json contents without touching any file: format and version,
+// required fields and their JSON types, values (see the format above), relative paths that stay
+// inside the folder (lexically), unique camera names, equal frame counts. Errors are
+// InvalidArgument "<source>: <field path> = <value>: <reason>". The result has an empty directory.
+Result<Capture> CaptureFromJson(const nlohmann::json& json,
+                                std::string_view source = kCaptureFileName);
+
+// Reads <directory>/capture.json with CaptureFromJson, then checks the files it references: the
+// mesh loads with geometry::ReadTriangleMesh and is not empty; every frame exists and is a 16-bit
+// single-channel PNG of its camera's size (decoded or header-only, see options); no path leaves
+// the folder through a symlink. NotFound when the directory or capture.json does not exist;
+// InvalidArgument naming capture.json, the field, the value and the problem for anything else.
+Result<Capture> ReadCapture(const std::filesystem::path& directory,
+                            const ReadCaptureOptions& options = {});
+
+// Loads the capture's mesh (world frame, metres) with geometry::ReadTriangleMesh.
+Result<geometry::TriangleMesh> LoadCaptureMesh(const Capture& capture);
+
+// Loads frame `frame` of camera `camera` (depth in metres along the camera z axis).
+// InvalidArgument for indices out of range; otherwise as ReadDepthPng.
+Result<DepthImage> LoadFrame(const Capture& capture, int camera, int frame);
+
+// Writes a capture folder: `mesh` as OBJ to capture.mesh_file ("object.obj" when empty; must end
+// in ".obj"), frames_per_camera[i][k] as <camera name>/%06d.png with camera i's depth_scale, and
+// capture.json last (through a temporary file renamed into place, after removing any previous
+// capture.json) so an interrupted write never looks complete. capture.directory and each
+// camera's `frames` are ignored (frame names are generated). Everything is validated before the
+// first file is written: the same rules as CaptureFromJson, camera names usable as folder names
+// (no '/', '\\', "." or ".."), one image list per camera with equal counts (>= 1), image sizes
+// matching the cameras, a non-empty mesh. InvalidArgument for invalid input (also for depths a
+// PNG cannot store, see WriteDepthPng), IoError when a file cannot be written.
+Status WriteCapture(const std::filesystem::path& directory, const Capture& capture,
+                    const geometry::TriangleMesh& mesh,
+                    const std::vector<std::vector<DepthImage>>& frames_per_camera);
+
+}  // namespace softid::capture
