@@ -1,0 +1,70 @@
+// Solves the step systems A x = b (nearly symmetric: the corotated consistent tangent is not) by
+// restarted GMRES, right-preconditioned with a sparse Cholesky factor (CHOLMOD, supernodal) of the
+// lower triangle of a reference matrix A_ref, rotated with the body: P^-1 = Q A_ref^-1 Q^T with
+// Q = blockdiag(R R_ref^T). A tumbling body's matrix is (nearly) R A_rest R^T, so one factor serves
+// many steps; refactorising every step would cost ~0.2-0.4 s at 10k DOFs. The caller renews the
+// factor when RefactorPays().
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/SparseCore>
+#include <memory>
+
+#include "core/common/status.h"
+
+namespace softid::fem {
+
+class LinearSolver {
+ public:
+  using Matrix = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
+  struct Options {
+    double relative_tolerance = 1e-10;  // ||A x - b|| <= tol ||b||
+    int max_iterations = 500;           // total, over restarts
+    int restart = 40;                   // Krylov basis size before a restart
+  };
+  struct Summary {
+    int iterations = 0;
+    double relative_residual = -1.0;
+    bool converged = false;
+  };
+
+  LinearSolver();
+  ~LinearSolver();
+  LinearSolver(LinearSolver&&) noexcept;
+  LinearSolver& operator=(LinearSolver&&) noexcept;
+
+  // Factorises `a` (its lower triangle is read) as the reference, taken at body rotation
+  // `rotation`. Fails when that is not positive definite; a previous factor is then kept.
+  Status Factorize(const Matrix& a, const Eigen::Matrix3d& rotation);
+  bool HasFactor() const;
+  int num_factorizations() const { return num_factorizations_; }
+  // Ski-rental rule for renewing the factor: true once the CG time spent beyond what the fresh
+  // factor needed (iterations above the first solve after factorising) exceeds the measured time
+  // of one factorisation. Both costs are measured, so the rule adapts to the problem size.
+  bool RefactorPays() const;
+
+  // Solves a x = b; x holds the initial guess on entry. @pre HasFactor()
+  Summary Solve(const Matrix& a, const Eigen::VectorXd& b, const Eigen::Matrix3d& rotation,
+                const Options& options, Eigen::VectorXd* x);
+
+ private:
+  void ApplyPreconditioner(const Eigen::Ref<const Eigen::VectorXd>& r, Eigen::VectorXd* z);
+
+  struct Factor;
+  std::unique_ptr<Factor> factor_;
+  Eigen::Matrix3d reference_rotation_ = Eigen::Matrix3d::Identity();
+  Eigen::Matrix3d preconditioner_rotation_ = Eigen::Matrix3d::Identity();
+  int num_factorizations_ = 0;
+  double factor_seconds_ = 0.0;         // last factorisation
+  double seconds_per_iteration_ = 0.0;  // running estimate
+  int baseline_iterations_ = -1;        // first solve after the factorisation
+  double excess_seconds_ = 0.0;         // CG time beyond the baseline since the factorisation
+  // Work storage, kept to avoid allocation per solve: Krylov basis V, preconditioned basis Z,
+  // Hessenberg matrix H, Givens rotations and the rotated residual g.
+  Eigen::MatrixXd basis_, preconditioned_;
+  Eigen::MatrixXd hessenberg_;
+  Eigen::VectorXd givens_c_, givens_s_, g_;
+  Eigen::VectorXd r_, w_, rotated_;
+};
+
+}  // namespace softid::fem

@@ -1,0 +1,42 @@
+// Forces on surface points from the surroundings: penalty contact with the ground plane,
+// regularised Coulomb friction, and air drag. Each returns the force and its derivatives, so the
+// implicit step can put them in its Jacobian (they are symmetric positive semi-definite).
+#pragma once
+
+#include <Eigen/Core>
+
+#include "core/fem/physical_parameters.h"
+
+namespace softid::fem {
+
+struct PointForce {
+  Eigen::Vector3d force = Eigen::Vector3d::Zero();      // f [N]
+  Eigen::Matrix3d stiffness = Eigen::Matrix3d::Zero();  // -df/dx [N/m]
+  Eigen::Matrix3d damping = Eigen::Matrix3d::Zero();    // -df/dv [N s/m]
+};
+
+struct ContactLaw {
+  GroundPlane plane;
+  double stiffness = 0.0;                 // k [Pa/m]: pressure per metre of penetration
+  double smoothing = 0.0;                 // 1/a [m]: softplus width of the onset
+  double damping = 0.0;                   // c [s]: normal damping = c * (-df/dx) v
+  double friction_coefficient = 0.0;      // mu [-]
+  double friction_velocity_scale = 1e-3;  // eps [m/s]
+};
+
+// Normal penalty force magnitude f_n = k A softplus(-a d) / a with d = n.x - offset [N]: only
+// repulsive, smooth; 0 (quickly) when the point is far above the plane.
+double ContactNormalForce(const ContactLaw& law, double area, const Eigen::Vector3d& x);
+
+// Penalty f_n n, normal damping, and friction -mu f_n_lagged v_t / sqrt(|v_t|^2 + eps^2). The
+// friction uses the normal force of the previous time step (`lagged_normal_force`), so within a
+// step it depends on v alone and its Jacobian is symmetric; coupling it to this step's f_n makes
+// Newton stall at impacts, where f_n jumps.
+PointForce GroundContactForce(const ContactLaw& law, double area, const Eigen::Vector3d& x,
+                              const Eigen::Vector3d& v, double lagged_normal_force);
+
+// Drag on a point of area A: f = -(A / 4) (c1 + c2 |v|) v (projected area ~ surface / 4).
+PointForce AirDragForce(double drag_linear, double drag_quadratic, double area,
+                        const Eigen::Vector3d& v);
+
+}  // namespace softid::fem

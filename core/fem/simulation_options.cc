@@ -1,0 +1,52 @@
+#include "core/fem/simulation_options.h"
+
+#include <cmath>
+
+#include "core/common/json_fields.h"
+
+namespace softid::fem {
+
+Status SimulationOptions::Validate() const {
+  using json::Invalid;
+  if (cell_size <= 0.0 && cells_along_longest_side < 2) {
+    return Invalid("cells_along_longest_side", cells_along_longest_side, "must be at least 2");
+  }
+  if (!std::isfinite(cell_size) || cell_size < 0.0) {
+    return Invalid("cell_size", cell_size, "must be non-negative and finite");
+  }
+  if (padding_cells < 1) return Invalid("padding_cells", padding_cells, "must be at least 1");
+  if (!(min_cell_volume_fraction >= 0.0 && min_cell_volume_fraction < 0.5)) {
+    return Invalid("min_cell_volume_fraction", min_cell_volume_fraction, "must lie in [0, 0.5)");
+  }
+  if (!(time_step > 0.0) || !std::isfinite(time_step)) {
+    return Invalid("time_step", time_step, "must be positive and finite");
+  }
+  if (!(newmark_gamma >= 0.5 && newmark_gamma <= 1.0)) {
+    return Invalid("newmark_gamma", newmark_gamma, "must lie in [0.5, 1]");
+  }
+  if (!(newmark_beta > 0.0 && newmark_beta <= 0.5)) {
+    return Invalid("newmark_beta", newmark_beta, "must lie in (0, 0.5]");
+  }
+  if (max_newton_iterations < 1) {
+    return Invalid("max_newton_iterations", max_newton_iterations, "must be at least 1");
+  }
+  if (!(newton_tolerance > 0.0))
+    return Invalid("newton_tolerance", newton_tolerance, "must be positive");
+  if (!(linear_tolerance > 0.0))
+    return Invalid("linear_tolerance", linear_tolerance, "must be positive");
+  if (max_linear_iterations < 1) {
+    return Invalid("max_linear_iterations", max_linear_iterations, "must be at least 1");
+  }
+  if (!(contact_smoothing >= 0.0) || !std::isfinite(contact_smoothing)) {
+    return Invalid("contact_smoothing", contact_smoothing, "must be non-negative and finite");
+  }
+  if (!(friction_velocity_scale > 0.0)) {
+    return Invalid("friction_velocity_scale", friction_velocity_scale, "must be positive");
+  }
+  if (!(surface_edge_fraction > 0.0)) {
+    return Invalid("surface_edge_fraction", surface_edge_fraction, "must be positive");
+  }
+  return Status::Ok();
+}
+
+}  // namespace softid::fem

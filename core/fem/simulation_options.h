@@ -1,0 +1,49 @@
+// Numerical settings of the forward simulation (not physics: those are PhysicalParameters).
+#pragma once
+
+#include "core/common/status.h"
+
+namespace softid::fem {
+
+struct SimulationOptions {
+  // Grid resolution: cells along the longest side of the rest mesh's bounds, unless cell_size > 0.
+  int cells_along_longest_side = 20;  // [-], >= 2
+  double cell_size = 0.0;             // h [m]; > 0 overrides cells_along_longest_side
+  // Empty cells around the object's bounds; the cost's narrow band lives there.
+  int padding_cells = 3;  // [-], >= 1
+  // Cut cells with less inside volume than this fraction of h^3 are dropped: their nodes would be
+  // nearly massless and stiffness-free, which only ruins the conditioning.
+  double min_cell_volume_fraction = 1e-3;  // [-], in [0, 0.5)
+
+  double time_step = 1.0 / 240.0;  // dt [s], > 0 (a capture's dt is 1 / (fps * substeps))
+  // Newmark parameters. The defaults (gamma = 0.6, beta = (gamma + 1/2)^2 / 4) add a little
+  // numerical dissipation of the highest frequencies, which keeps penalty contact calm; beta = 1/4,
+  // gamma = 1/2 is the energy-conserving average-acceleration rule.
+  double newmark_beta = 0.3025;  // [-], in (0, 0.5]
+  double newmark_gamma = 0.6;    // [-], in [0.5, 1]
+
+  // Newton iterations on the nonlinear (corotated, contact) step equations; converged when the
+  // largest displacement update is below newton_tolerance * h.
+  int max_newton_iterations = 12;  // [-], >= 1
+  double newton_tolerance = 1e-6;  // [-], > 0
+  // Conjugate gradients preconditioned by a sparse Cholesky factor (CHOLMOD) of a reference system
+  // matrix, rotated with the body. The factor is renewed when the extra iterations it causes have
+  // cost more than a factorisation (see LinearSolver::RefactorPays).
+  // Inexact Newton: each linear solve only needs to shrink the residual by this factor for Newton
+  // to converge to its own tolerance; tighter solves cost iterations and buy nothing.
+  double linear_tolerance = 1e-6;   // relative residual [-], > 0
+  int max_linear_iterations = 500;  // [-], >= 1
+
+  // Width of the smooth onset of contact force (softplus length) [m]; 0 selects 1e-3 L, L the
+  // longest side of the rest mesh.
+  double contact_smoothing = 0.0;
+  // Regularised Coulomb friction: slip speeds well below this behave as stick [m/s], > 0.
+  double friction_velocity_scale = 1e-3;
+  // The surface (contact, drag, rendering) is subdivided until its edges are at most this fraction
+  // of h, so coarse input meshes still deform smoothly with the grid.
+  double surface_edge_fraction = 0.5;  // [-], > 0
+
+  Status Validate() const;
+};
+
+}  // namespace softid::fem

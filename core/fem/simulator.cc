@@ -1,0 +1,506 @@
+#include "core/fem/simulator.h"
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+
+#include "core/common/check.h"
+#include "core/fem/corotation.h"
+#include "core/fem/hex_element.h"
+
+namespace softid::fem {
+namespace {
+
+void ThrowIfError(const Status& status) {
+  if (!status.ok()) throw std::invalid_argument(status.message());
+}
+
+// y = blockdiag(R) x for a 24-vector.
+Vector24d RotateCorners(const Eigen::Matrix3d& r, const Vector24d& x) {
+  Vector24d y;
+  for (int c = 0; c < 8; ++c) y.segment<3>(3 * c).noalias() = r * x.segment<3>(3 * c);
+  return y;
+}
+
+// [v]x: the matrix of the cross product v x (.).
+Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d m;
+  m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
+  return m;
+}
+
+}  // namespace
+
+Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalParameters& parameters,
+                     const SimulationOptions& options,
+                     const std::optional<Eigen::AlignedBox3d>& fixed_region)
+    : parameters_(parameters), options_(options) {
+  ThrowIfError(parameters.Validate());
+  ThrowIfError(options.Validate());
+  SOFTID_THROW_UNLESS(!rest_mesh.triangles.empty(), "rest mesh has no triangles");
+  length_ = rest_mesh.Bounds().sizes().maxCoeff();
+  SOFTID_THROW_UNLESS(length_ > 0.0, "rest mesh has zero extent");
+
+  geometry::SignedDistanceOptions sdf_options;
+  sdf_options.cells_along_longest_side = options.cells_along_longest_side;
+  sdf_options.cell_size = options.cell_size;
+  sdf_options.padding_cells = options.padding_cells;
+  Result<geometry::SignedDistanceField> sdf =
+      geometry::ComputeSignedDistanceField(rest_mesh, sdf_options);
+  ThrowIfError(sdf.status());
+  sdf_ = std::move(sdf).value();
+  mesh_ = BuildHexMesh(sdf_, options.min_cell_volume_fraction);
+  SOFTID_THROW_UNLESS(mesh_.NumElements() > 0, "the mesh has no inside at this grid resolution");
+  const double h = mesh_.CellSize();
+  const int n = mesh_.NumNodes();
+
+  // Surface carried by the grid.
+  surface_ = geometry::SubdivideToEdgeLength(rest_mesh, options.surface_edge_fraction * h);
+  embedding_ = EmbedPoints(mesh_, surface_.vertices);
+  surface_areas_ = geometry::VertexAreas(surface_);
+
+  // Lumped mass and element stiffness (fixed for the whole run).
+  mass_ = Eigen::VectorXd::Zero(n);
+  element_stiffness_.resize(mesh_.NumElements());
+  element_rotation_.assign(mesh_.NumElements(), Eigen::Matrix3d::Identity());
+  const double lambda = parameters.LameLambda();
+  const double mu = parameters.LameMu();
+  for (int e = 0; e < mesh_.NumElements(); ++e) {
+    const auto& w = mesh_.element_weights[e];
+    for (int c = 0; c < 8; ++c)
+      mass_[mesh_.element_nodes[e][c]] += parameters.density * w.node_volume[c];
+    const double scale = parameters.stiffness_field.Scale(mesh_.ElementCentre(e));
+    element_stiffness_[e] = ElementStiffness(w.octant_volume, h, scale * lambda, scale * mu);
+  }
+
+  fixed_.assign(n, 0);
+  if (fixed_region) {
+    for (int i = 0; i < n; ++i) fixed_[i] = fixed_region->contains(mesh_.rest_positions[i]) ? 1 : 0;
+  }
+
+  if (parameters.ground) {
+    contact_.plane = *parameters.ground;
+    contact_.stiffness = parameters.contact_stiffness > 0.0
+                             ? parameters.contact_stiffness
+                             : 100.0 * parameters.youngs_modulus / length_;
+    contact_.smoothing =
+        options.contact_smoothing > 0.0 ? options.contact_smoothing : 1e-3 * length_;
+    contact_.damping = parameters.contact_damping;
+    contact_.friction_coefficient = parameters.friction_coefficient;
+    contact_.friction_velocity_scale = options.friction_velocity_scale;
+  }
+  has_surface_forces_ = parameters.ground.has_value() || parameters.drag_linear > 0.0 ||
+                        parameters.drag_quadratic > 0.0;
+
+  assembler_ = ElementAssembler(n, mesh_.element_nodes);
+  residual_.resize(3 * n);
+  update_.resize(3 * n);
+  Reset();
+
+  // Reference factor: the step matrix at rest (no rotation, no contact).
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(3 * n);
+  const ContactLaw saved = contact_;
+  const bool saved_forces = has_surface_forces_;
+  has_surface_forces_ = false;
+  Assemble(Mode::kDynamic, zero, zero, zero);
+  has_surface_forces_ = saved_forces;
+  contact_ = saved;
+  ThrowIfError(solver_.Factorize(assembler_.matrix(), Eigen::Matrix3d::Identity()));
+}
+
+int Simulator::num_fixed_nodes() const {
+  return static_cast<int>(std::count(fixed_.begin(), fixed_.end(), 1));
+}
+
+void Simulator::SetState(const SimulationState& state) {
+  SOFTID_THROW_UNLESS(state.u.size() == 3 * mesh_.NumNodes() && state.v.size() == state.u.size() &&
+                          state.a.size() == state.u.size(),
+                      "state size does not match the mesh");
+  state_ = state;
+}
+
+void Simulator::Reset() {
+  const int n = mesh_.NumNodes();
+  state_.time = 0.0;
+  state_.u = Eigen::VectorXd::Zero(3 * n);
+  state_.v = Eigen::VectorXd::Zero(3 * n);
+  Eigen::Vector3d com = Eigen::Vector3d::Zero();
+  for (int i = 0; i < n; ++i) com += mass_[i] * mesh_.rest_positions[i];
+  com /= mass_.sum();
+  for (int i = 0; i < n; ++i) {
+    if (fixed_[i]) continue;
+    state_.v.segment<3>(3 * i) =
+        parameters_.initial_velocity +
+        parameters_.initial_angular_velocity.cross(mesh_.rest_positions[i] - com);
+  }
+  state_.a = InitialAcceleration(state_.v);
+}
+
+Eigen::VectorXd Simulator::InitialAcceleration(const Eigen::VectorXd& v) {
+  // M a0 = f(u0, v0): Assemble with a = 0 gives r = D v0 + g(u0) - f_ext, so a0 = -M^-1 r.
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(v.size());
+  UpdateLaggedNormalForces();
+  Assemble(Mode::kDynamic, state_.u, v, zero);
+  Eigen::VectorXd a(v.size());
+  for (int i = 0; i < mesh_.NumNodes(); ++i) {
+    a.segment<3>(3 * i) = fixed_[i] ? Eigen::Vector3d::Zero().eval()
+                                    : Eigen::Vector3d(-residual_.segment<3>(3 * i) / mass_[i]);
+  }
+  return a;
+}
+
+void Simulator::NewmarkKinematics(const Eigen::VectorXd& u, Eigen::VectorXd* v,
+                                  Eigen::VectorXd* a) const {
+  const double dt = options_.time_step;
+  const double beta = options_.newmark_beta;
+  const double gamma = options_.newmark_gamma;
+  // a_{n+1} = (u_{n+1} - u_n - dt v_n - dt^2 (1/2 - beta) a_n) / (beta dt^2)
+  // v_{n+1} = v_n + dt ((1 - gamma) a_n + gamma a_{n+1})
+  a->noalias() =
+      (u - state_.u - dt * state_.v - (dt * dt * (0.5 - beta)) * state_.a) / (beta * dt * dt);
+  v->noalias() = state_.v + dt * ((1.0 - gamma) * state_.a + gamma * (*a));
+}
+
+Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const Eigen::VectorXd& v,
+                                    const Eigen::VectorXd& a) {
+  const bool dynamic = mode == Mode::kDynamic;
+  const double dt = options_.time_step;
+  const double beta = options_.newmark_beta;
+  const double gamma = options_.newmark_gamma;
+  const double alpha_m = parameters_.mass_damping;
+  const double beta_k = parameters_.stiffness_damping;
+  // d a / d u and d v / d u of the Newmark update.
+  const double da_du = dynamic ? 1.0 / (beta * dt * dt) : 0.0;
+  const double dv_du = dynamic ? gamma / (beta * dt) : 0.0;
+  const double mass_coefficient = da_du + alpha_m * dv_du;
+  const double stiffness_coefficient = 1.0 + beta_k * dv_du;
+  const double h = mesh_.CellSize();
+
+  assembler_.SetZero();
+  residual_.setZero();
+  Eigen::Matrix3d rotation_sum = Eigen::Matrix3d::Zero();
+
+  // Elastic and stiffness-damping forces: r_e = R K l with l = R^T (x + beta v) - X, R the polar
+  // rotation of F at the cell centre. Consistent tangent (d/du, v and a following u by Newmark):
+  //   c_k R K R^T + R (-[sigma_a]x + sum_b K_ab [l_b]x) W_c,   sigma = K l,
+  // where W_c = (tr(S) I - S)^-1 [g_c]x R^T is dw/dx_c of the rotation's spin (dR = R [w]x,
+  // F = R S); see core/fem/doc/corotation.md. The second term is not symmetric.
+  const auto& centre_gradients = CentreGradientsUnitCell();
+  std::array<Eigen::Vector3d, 8> x;
+  for (int e = 0; e < mesh_.NumElements(); ++e) {
+    const auto& nodes = mesh_.element_nodes[e];
+    Vector24d local;
+    for (int c = 0; c < 8; ++c) {
+      const Eigen::Vector3d& p = mesh_.rest_positions[nodes[c]];
+      x[c] = p + u.segment<3>(3 * nodes[c]);
+    }
+    const Eigen::Matrix3d f = DeformationGradient(x, h);
+    const Eigen::Matrix3d r = PolarRotation(f);
+    element_rotation_[e] = r;
+    rotation_sum += mesh_.element_weights[e].volume * r;
+    for (int c = 0; c < 8; ++c) {
+      Eigen::Vector3d y = x[c];
+      if (dynamic && beta_k > 0.0) y += beta_k * v.segment<3>(3 * nodes[c]);
+      local.segment<3>(3 * c).noalias() = r.transpose() * y - mesh_.rest_positions[nodes[c]];
+    }
+    const Matrix24d& k = element_stiffness_[e];
+    const Vector24d sigma = k * local;
+    for (int c = 0; c < 8; ++c)
+      residual_.segment<3>(3 * nodes[c]).noalias() += r * sigma.segment<3>(3 * c);
+
+    // Spin derivative W_c; skipped when S is degenerate (two singular values summing to zero
+    // only under inversion), where the rotation is not differentiable.
+    const Eigen::Matrix3d s = r.transpose() * f;
+    const Eigen::Matrix3d spin = s.trace() * Eigen::Matrix3d::Identity() - s;
+    const bool geometric = std::abs(spin.determinant()) > 1e-12;
+    std::array<Eigen::Matrix3d, 8> w;
+    std::array<Eigen::Matrix3d, 8> q;
+    if (geometric) {
+      const Eigen::Matrix3d spin_inverse = spin.inverse();
+      for (int c = 0; c < 8; ++c) {
+        w[c] = spin_inverse * Skew(centre_gradients[c] / h) * r.transpose();
+        Eigen::Matrix3d z = -Skew(sigma.segment<3>(3 * c));
+        for (int b = 0; b < 8; ++b)
+          z.noalias() += k.block<3, 3>(3 * c, 3 * b) * Skew(local.segment<3>(3 * b));
+        q[c] = r * z;
+      }
+    }
+    for (int i = 0; i < 8; ++i) {
+      for (int j = 0; j < 8; ++j) {
+        Eigen::Matrix3d block =
+            stiffness_coefficient * (r * k.block<3, 3>(3 * i, 3 * j) * r.transpose());
+        if (geometric) block.noalias() += q[i] * w[j];
+        assembler_.AddBlock(e, i, j, block);
+      }
+    }
+  }
+
+  // Inertia, mass damping, gravity.
+  for (int i = 0; i < mesh_.NumNodes(); ++i) {
+    Eigen::Vector3d inertial = -parameters_.gravity;
+    if (dynamic) inertial += a.segment<3>(3 * i) + alpha_m * v.segment<3>(3 * i);
+    residual_.segment<3>(3 * i) += mass_[i] * inertial;
+    if (dynamic)
+      assembler_.AddNodeBlock(i, mass_coefficient * mass_[i] * Eigen::Matrix3d::Identity());
+  }
+
+  // Surface forces: contact, friction, drag.
+  if (has_surface_forces_) {
+    for (int p = 0; p < embedding_.NumPoints(); ++p) {
+      const Eigen::Vector3d xp = embedding_.rest_positions[p] + embedding_.Interpolate(mesh_, u, p);
+      const Eigen::Vector3d vp =
+          dynamic ? embedding_.Interpolate(mesh_, v, p) : Eigen::Vector3d::Zero().eval();
+      PointForce f;
+      if (parameters_.ground) {
+        f = GroundContactForce(contact_, surface_areas_[p], xp, vp,
+                               dynamic ? lagged_normal_force_[p] : 0.0);
+      }
+      if (dynamic && (parameters_.drag_linear > 0.0 || parameters_.drag_quadratic > 0.0)) {
+        const PointForce drag = AirDragForce(parameters_.drag_linear, parameters_.drag_quadratic,
+                                             surface_areas_[p], vp);
+        f.force += drag.force;
+        f.damping += drag.damping;
+      }
+      if (f.force.isZero(0.0) && f.stiffness.isZero(0.0) && f.damping.isZero(0.0)) continue;
+      const Eigen::Matrix3d jacobian = f.stiffness + dv_du * f.damping;
+      const int e = embedding_.element[p];
+      const auto& w = embedding_.weights[p];
+      const auto& nodes = mesh_.element_nodes[e];
+      for (int i = 0; i < 8; ++i) {
+        residual_.segment<3>(3 * nodes[i]) -= w[i] * f.force;
+        for (int j = 0; j < 8; ++j) assembler_.AddBlock(e, i, j, (w[i] * w[j]) * jacobian);
+      }
+    }
+  }
+
+  // Clamped nodes: eliminated.
+  for (int i = 0; i < mesh_.NumNodes(); ++i) {
+    if (!fixed_[i]) continue;
+    residual_.segment<3>(3 * i).setZero();
+    assembler_.EliminateNode(i);
+  }
+  return PolarRotation(rotation_sum);
+}
+
+StepSummary Simulator::NewtonSolve(Mode mode) {
+  StepSummary summary;
+  const bool dynamic = mode == Mode::kDynamic;
+  const double dt = options_.time_step;
+  const double h = mesh_.CellSize();
+  u_next_ = state_.u;
+  v_next_ = state_.v;
+  a_next_ = state_.a;
+  if (dynamic) {
+    // Predictor: a_{n+1} = a_n.
+    u_next_ = state_.u + dt * state_.v + (0.5 * dt * dt) * state_.a;
+    for (int i = 0; i < mesh_.NumNodes(); ++i) {
+      if (fixed_[i]) u_next_.segment<3>(3 * i).setZero();
+    }
+    NewmarkKinematics(u_next_, &v_next_, &a_next_);
+  } else {
+    v_next_.setZero();
+    a_next_.setZero();
+  }
+  LinearSolver::Options linear;
+  linear.relative_tolerance = options_.linear_tolerance;
+  linear.max_iterations = options_.max_linear_iterations;
+
+  // Newton on the step equations with the consistent tangent. Full steps, except that no surface
+  // point may be pushed deeper into the ground than a few contact smoothing lengths beyond where
+  // the contact was linearised (a continuous-collision filter, as in IPC), nor have its slip
+  // reversed by more than a few friction velocity scales: from outside either smooth knee the
+  // linearisation sees no stiffness and would overshoot far across it.
+  // The residual norm is no merit function here: in bending, element forces exceed the net
+  // nodal forces a thousandfold and ||r|| grows over good steps.
+  Eigen::Matrix3d body_rotation = Assemble(mode, u_next_, v_next_, a_next_);
+  double residual_norm = residual_.norm();
+  for (int it = 0; it < options_.max_newton_iterations; ++it) {
+    if (!std::isfinite(residual_norm)) {
+      summary.diverged = true;
+      return summary;
+    }
+    if (!dynamic && !solver_.HasFactor()) {
+      if (!solver_.Factorize(assembler_.matrix(), body_rotation).ok()) {
+        summary.diverged = true;
+        return summary;
+      }
+    }
+    update_.setZero();
+    LinearSolver::Summary solve =
+        solver_.Solve(assembler_.matrix(), -residual_, body_rotation, linear, &update_);
+    summary.linear_iterations += solve.iterations;
+    if (!solve.converged || (dynamic && solver_.RefactorPays())) {
+      // The reference factor no longer fits (large deformation, contact): renew it here. When
+      // that fails the previous factor stays in use.
+      summary.refactorized = solver_.Factorize(assembler_.matrix(), body_rotation).ok();
+      if (!solve.converged) {
+        update_.setZero();
+        solve = solver_.Solve(assembler_.matrix(), -residual_, body_rotation, linear, &update_);
+        summary.linear_iterations += solve.iterations;
+        if (!solve.converged && !(solve.relative_residual < 1e-6)) {
+          summary.diverged = true;
+          return summary;
+        }
+      }
+    }
+    const double full_step = update_.lpNorm<Eigen::Infinity>();
+    if (!std::isfinite(full_step)) {
+      summary.diverged = true;
+      return summary;
+    }
+    const bool small = full_step <= options_.newton_tolerance * h;
+    const double step = std::min(ContactStepLimit(u_next_, update_),
+                                 dynamic ? FrictionStepLimit(v_next_, update_) : 1.0);
+    u_trial_ = u_next_ + step * update_;
+    if (dynamic) NewmarkKinematics(u_trial_, &v_next_, &a_next_);
+    body_rotation = Assemble(mode, u_trial_, v_next_, a_next_);
+    residual_norm = residual_.norm();
+    u_next_.swap(u_trial_);
+    summary.newton_iterations = it + 1;
+    summary.max_update = step * full_step;
+    if (small) {
+      summary.converged = true;
+      break;
+    }
+  }
+  if (!std::isfinite(residual_norm)) {
+    summary.diverged = true;
+    return summary;
+  }
+  state_.u = u_next_;
+  state_.v = v_next_;
+  state_.a = a_next_;
+  return summary;
+}
+
+void Simulator::EvaluateStepResidual(const Eigen::VectorXd& u_next, Eigen::VectorXd* residual,
+                                     Eigen::SparseMatrix<double>* jacobian) {
+  SOFTID_THROW_UNLESS(u_next.size() == state_.u.size(), "u_next size does not match the mesh");
+  UpdateLaggedNormalForces();
+  Eigen::VectorXd v(u_next.size()), a(u_next.size());
+  NewmarkKinematics(u_next, &v, &a);
+  Assemble(Mode::kDynamic, u_next, v, a);
+  if (residual) *residual = residual_;
+  if (jacobian) *jacobian = assembler_.matrix();
+}
+
+void Simulator::UpdateLaggedNormalForces() {
+  lagged_normal_force_.assign(embedding_.NumPoints(), 0.0);
+  if (!parameters_.ground || parameters_.friction_coefficient <= 0.0) return;
+  for (int p = 0; p < embedding_.NumPoints(); ++p) {
+    const Eigen::Vector3d xp =
+        embedding_.rest_positions[p] + embedding_.Interpolate(mesh_, state_.u, p);
+    lagged_normal_force_[p] = ContactNormalForce(contact_, surface_areas_[p], xp);
+  }
+}
+
+double Simulator::ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update) const {
+  if (!parameters_.ground) return 1.0;
+  constexpr double kMaxPenetrationStep = 4.0;  // contact smoothing lengths
+  constexpr double kMinStep = 1.0 / 64.0;
+  const double allowed = kMaxPenetrationStep * contact_.smoothing;
+  double step = 1.0;
+  for (int p = 0; p < embedding_.NumPoints(); ++p) {
+    const Eigen::Vector3d move = embedding_.Interpolate(mesh_, update, p);
+    const double change = contact_.plane.normal.dot(move);
+    if (change >= 0.0) continue;
+    const double d = contact_.plane.SignedDistance(embedding_.rest_positions[p] +
+                                                   embedding_.Interpolate(mesh_, u, p));
+    const double floor = std::min(d, 0.0) - allowed;
+    if (d + change < floor) step = std::min(step, (floor - d) / change);
+  }
+  return std::max(step, kMinStep);
+}
+
+double Simulator::FrictionStepLimit(const Eigen::VectorXd& v, const Eigen::VectorXd& update) const {
+  if (!parameters_.ground || parameters_.friction_coefficient <= 0.0) return 1.0;
+  constexpr double kMaxReversal = 4.0;  // friction velocity scales past zero slip
+  constexpr double kMinStep = 1.0 / 64.0;
+  const double eps = contact_.friction_velocity_scale;
+  const double dv_du = options_.newmark_gamma / (options_.newmark_beta * options_.time_step);
+  const Eigen::Vector3d& n = contact_.plane.normal;
+  double step = 1.0;
+  for (int p = 0; p < embedding_.NumPoints(); ++p) {
+    if (lagged_normal_force_[p] <= 0.0) continue;
+    Eigen::Vector3d vt = embedding_.Interpolate(mesh_, v, p);
+    vt -= n.dot(vt) * n;
+    const double speed = vt.norm();
+    if (speed <= eps) continue;  // inside the knee the linearisation is good
+    Eigen::Vector3d dvt = dv_du * embedding_.Interpolate(mesh_, update, p);
+    dvt -= n.dot(dvt) * n;
+    const double along = -dvt.dot(vt) / speed;  // how far the step slows the slip
+    const double allowed = speed + kMaxReversal * eps;
+    if (along > allowed) step = std::min(step, allowed / along);
+  }
+  return std::max(step, kMinStep);
+}
+
+StepSummary Simulator::Step() {
+  UpdateLaggedNormalForces();
+  const StepSummary summary = NewtonSolve(Mode::kDynamic);
+  if (!summary.diverged) state_.time += options_.time_step;
+  return summary;
+}
+
+StepSummary Simulator::SolveStatic() {
+  // The static Jacobian differs from the dynamic one: factorise it separately, then restore.
+  LinearSolver dynamic_solver = std::move(solver_);
+  solver_ = LinearSolver();
+  const StepSummary summary = NewtonSolve(Mode::kStatic);
+  solver_ = std::move(dynamic_solver);
+  return summary;
+}
+
+std::vector<Eigen::Vector3d> Simulator::SurfacePositions() const {
+  std::vector<Eigen::Vector3d> positions(embedding_.NumPoints());
+  for (int p = 0; p < embedding_.NumPoints(); ++p) {
+    positions[p] = embedding_.rest_positions[p] + embedding_.Interpolate(mesh_, state_.u, p);
+  }
+  return positions;
+}
+
+geometry::TriangleMesh Simulator::DeformedSurface() const {
+  geometry::TriangleMesh mesh = surface_;
+  mesh.vertices = SurfacePositions();
+  return mesh;
+}
+
+Energies Simulator::ComputeEnergies() const {
+  Energies energies;
+  const double h = mesh_.CellSize();
+  for (int i = 0; i < mesh_.NumNodes(); ++i) {
+    const Eigen::Vector3d x = mesh_.rest_positions[i] + state_.u.segment<3>(3 * i);
+    energies.kinetic += 0.5 * mass_[i] * state_.v.segment<3>(3 * i).squaredNorm();
+    energies.gravitational -= mass_[i] * parameters_.gravity.dot(x);
+  }
+  std::array<Eigen::Vector3d, 8> x;
+  for (int e = 0; e < mesh_.NumElements(); ++e) {
+    const auto& nodes = mesh_.element_nodes[e];
+    Vector24d rest, displaced;
+    for (int c = 0; c < 8; ++c) {
+      x[c] = mesh_.rest_positions[nodes[c]] + state_.u.segment<3>(3 * nodes[c]);
+      rest.segment<3>(3 * c) = mesh_.rest_positions[nodes[c]];
+      displaced.segment<3>(3 * c) = x[c];
+    }
+    const Eigen::Matrix3d r = PolarRotation(DeformationGradient(x, h));
+    const Vector24d local = RotateCorners(r.transpose(), displaced) - rest;
+    energies.elastic += 0.5 * local.dot(element_stiffness_[e] * local);
+  }
+  return energies;
+}
+
+Eigen::Vector3d Simulator::CentreOfMass() const {
+  Eigen::Vector3d com = Eigen::Vector3d::Zero();
+  for (int i = 0; i < mesh_.NumNodes(); ++i) {
+    com += mass_[i] * (mesh_.rest_positions[i] + state_.u.segment<3>(3 * i));
+  }
+  return com / mass_.sum();
+}
+
+Eigen::Vector3d Simulator::CentreOfMassVelocity() const {
+  Eigen::Vector3d p = Eigen::Vector3d::Zero();
+  for (int i = 0; i < mesh_.NumNodes(); ++i) p += mass_[i] * state_.v.segment<3>(3 * i);
+  return p / mass_.sum();
+}
+
+}  // namespace softid::fem

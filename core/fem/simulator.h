@@ -1,0 +1,142 @@
+// Forward simulation of a deformable body embedded in a hexahedral grid (Weiss et al. 2020, Sec.
+// 3): corotated linear elasticity on cut cells, lumped mass, Rayleigh damping, implicit Newmark
+// time stepping solved by Newton iterations, penalty contact with a ground plane, regularised
+// Coulomb friction, air drag, a spatially varying Young's modulus and an optional clamped region.
+//
+// State per step is only (u, v, a) per node; element matrices depend on the parameters alone and
+// rotations are recomputed from u, so the adjoint can re-run the assembly of any step from the
+// stored states without storing matrices.
+//
+// Thread-compatibility: one Simulator per thread.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <optional>
+#include <vector>
+
+#include "core/fem/element_assembler.h"
+#include "core/fem/hex_element.h"
+#include "core/fem/hex_mesh.h"
+#include "core/fem/linear_solver.h"
+#include "core/fem/physical_parameters.h"
+#include "core/fem/point_forces.h"
+#include "core/fem/simulation_options.h"
+#include "core/fem/surface_embedding.h"
+#include "core/geometry/signed_distance_field.h"
+#include "core/geometry/triangle_mesh.h"
+
+namespace softid::fem {
+
+// Displacement u [m], velocity v [m/s] and acceleration a [m/s^2] of every FE node (3 per node).
+struct SimulationState {
+  Eigen::VectorXd u, v, a;
+  double time = 0.0;  // [s]
+};
+
+struct StepSummary {
+  int newton_iterations = 0;
+  int linear_iterations = 0;  // summed over Newton iterations
+  bool converged = false;     // Newton met its tolerance
+  bool diverged = false;      // non-finite state or a failed linear solve: the run is invalid
+  bool refactorized = false;  // the preconditioner was renewed during this step
+  double max_update = -1.0;   // last Newton update, max norm [m]
+};
+
+struct Energies {
+  double kinetic = 0.0;        // [J]
+  double elastic = 0.0;        // [J] (corotated: of the unrotated displacement)
+  double gravitational = 0.0;  // -sum m g . x [J]
+  double Total() const { return kinetic + elastic + gravitational; }
+};
+
+class Simulator {
+ public:
+  // @throws std::invalid_argument naming the field when parameters or options are invalid, or when
+  //   the mesh has no inside at this resolution.
+  Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalParameters& parameters,
+            const SimulationOptions& options,
+            const std::optional<Eigen::AlignedBox3d>& fixed_region = std::nullopt);
+
+  const PhysicalParameters& parameters() const { return parameters_; }
+  const SimulationOptions& options() const { return options_; }
+  const geometry::SignedDistanceField& signed_distance() const { return sdf_; }
+  const HexMesh& hex_mesh() const { return mesh_; }
+  // The rest surface carried by the grid (the input mesh, subdivided where coarser than the grid).
+  const geometry::TriangleMesh& rest_surface() const { return surface_; }
+  const SurfaceEmbedding& surface_embedding() const { return embedding_; }
+  const Eigen::VectorXd& lumped_mass() const { return mass_; }  // per node [kg]
+  double total_mass() const { return mass_.sum(); }
+  bool is_fixed(int node) const { return fixed_[node] != 0; }
+  int num_fixed_nodes() const;
+  // Longest side of the rest mesh bounds [m].
+  double characteristic_length() const { return length_; }
+  const ContactLaw& contact_law() const { return contact_; }
+
+  const SimulationState& state() const { return state_; }
+  void SetState(const SimulationState& state);
+  // Back to t = 0: u = 0, v from the initial linear and angular velocity, a from the equations of
+  // motion.
+  void Reset();
+  // Advances by one time step.
+  StepSummary Step();
+  // Newton solve of the static equilibrium at the current state's u (v, a set to zero). Needs a
+  // clamped region or ground contact to be well posed.
+  StepSummary SolveStatic();
+
+  // The step equations r(u_next) = 0 that Step() solves, from the current state to a candidate
+  // end-of-step displacement u_next (v and a follow from u_next by Newmark), and their exact
+  // Jacobian d r / d u_next (not symmetric: corotation). For the adjoint and for tests.
+  void EvaluateStepResidual(const Eigen::VectorXd& u_next, Eigen::VectorXd* residual,
+                            Eigen::SparseMatrix<double>* jacobian);
+
+  // Deformed positions of the surface vertices [m].
+  std::vector<Eigen::Vector3d> SurfacePositions() const;
+  geometry::TriangleMesh DeformedSurface() const;
+  Energies ComputeEnergies() const;
+  Eigen::Vector3d CentreOfMass() const;
+  Eigen::Vector3d CentreOfMassVelocity() const;
+
+ private:
+  enum class Mode { kDynamic, kStatic };
+  // Residual r(u) of the step equations and their Jacobian (into assembler_.matrix()); v and a are
+  // the Newmark velocity and acceleration implied by u. Returns the body rotation.
+  Eigen::Matrix3d Assemble(Mode mode, const Eigen::VectorXd& u, const Eigen::VectorXd& v,
+                           const Eigen::VectorXd& a);
+  // Largest fraction of a Newton update (<= 1) that keeps every surface point above
+  // min(its distance, 0) - 4 contact smoothing lengths.
+  double ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update) const;
+  // Largest fraction of a Newton update (<= 1) that reverses no contact point's slip by more than
+  // 4 friction velocity scales.
+  double FrictionStepLimit(const Eigen::VectorXd& v, const Eigen::VectorXd& update) const;
+  void NewmarkKinematics(const Eigen::VectorXd& u, Eigen::VectorXd* v, Eigen::VectorXd* a) const;
+  Eigen::VectorXd InitialAcceleration(const Eigen::VectorXd& v);
+  StepSummary NewtonSolve(Mode mode);
+
+  PhysicalParameters parameters_;
+  SimulationOptions options_;
+  double length_ = 0.0;
+  geometry::SignedDistanceField sdf_;
+  HexMesh mesh_;
+  geometry::TriangleMesh surface_;
+  SurfaceEmbedding embedding_;
+  std::vector<double> surface_areas_;
+  // Contact normal force per surface point at the start of the step (for lagged friction); a
+  // function of u_n, so it is recomputed, not part of the state.
+  std::vector<double> lagged_normal_force_;
+  void UpdateLaggedNormalForces();
+  std::vector<Matrix24d, Eigen::aligned_allocator<Matrix24d>> element_stiffness_;
+  std::vector<Eigen::Matrix3d> element_rotation_;
+  Eigen::VectorXd mass_;
+  std::vector<char> fixed_;
+  ContactLaw contact_;
+  bool has_surface_forces_ = false;
+
+  ElementAssembler assembler_;
+  LinearSolver solver_;
+  SimulationState state_;
+  // Work vectors of the Newton iteration.
+  Eigen::VectorXd residual_, update_, u_next_, u_trial_, v_next_, a_next_;
+};
+
+}  // namespace softid::fem

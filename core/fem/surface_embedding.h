@@ -1,0 +1,34 @@
+// Points carried by the grid: each point is tied to one element and moves with the trilinear
+// interpolation of that element's node displacements. Points in cells that are not elements (thin
+// features below the grid resolution) use the nearest element, extrapolating its trilinear map,
+// which still moves rigidly with rigid motions because the weights sum to one.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <vector>
+
+#include "core/fem/hex_mesh.h"
+
+namespace softid::fem {
+
+struct SurfaceEmbedding {
+  std::vector<int> element;                     // per point
+  std::vector<std::array<double, 8>> weights;   // per point, corner order of the element
+  std::vector<Eigen::Vector3d> rest_positions;  // per point [m]
+
+  int NumPoints() const { return static_cast<int>(element.size()); }
+  // x_p = X_p + sum_c w_c u_c; `u` holds 3 entries per FE node.
+  template <typename Vector>
+  Eigen::Vector3d Interpolate(const HexMesh& mesh, const Vector& u, int point) const {
+    Eigen::Vector3d value = Eigen::Vector3d::Zero();
+    const auto& nodes = mesh.element_nodes[element[point]];
+    for (int c = 0; c < 8; ++c) value += weights[point][c] * u.template segment<3>(3 * nodes[c]);
+    return value;
+  }
+};
+
+// @throws std::invalid_argument when a point has no element within two cells.
+SurfaceEmbedding EmbedPoints(const HexMesh& mesh, const std::vector<Eigen::Vector3d>& points);
+
+}  // namespace softid::fem

@@ -1,0 +1,281 @@
+#include "core/fem/simulator.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "core/geometry/primitives.h"
+#include "core/geometry/triangle_mesh.h"
+#include "tests/core/fem/simulator_test_util.h"
+
+namespace softid::fem {
+namespace {
+
+using geometry::MakeBox;
+using geometry::MakeSphere;
+using geometry::MakeTorus;
+using testing::BarSetup;
+using testing::MakeClampedBar;
+using testing::PeakTimes;
+using testing::TipDeflection;
+
+constexpr double kPi = std::numbers::pi;
+
+SimulationOptions AverageAcceleration(double dt) {
+  SimulationOptions options;
+  options.time_step = dt;
+  options.newmark_beta = 0.25;
+  options.newmark_gamma = 0.5;
+  return options;
+}
+
+// Free fall before contact follows x0 + v0 t + g t^2 / 2 exactly (average-acceleration Newmark).
+TEST(Simulator, FreeFallIsExactParabola) {
+  PhysicalParameters p;
+  p.youngs_modulus = 5e4;
+  p.gravity = Eigen::Vector3d(0.3, -0.2, -9.81);
+  p.initial_velocity = Eigen::Vector3d(1.0, 0.5, 2.0);
+  SimulationOptions options = AverageAcceleration(1.0 / 120.0);
+  options.cells_along_longest_side = 8;
+  Simulator sim(MakeSphere(0.1, 3), p, options);
+  const Eigen::Vector3d x0 = sim.CentreOfMass();
+  for (int step = 0; step < 60; ++step) ASSERT_FALSE(sim.Step().diverged);
+  const double t = sim.state().time;
+  const Eigen::Vector3d expected = x0 + p.initial_velocity * t + 0.5 * p.gravity * t * t;
+  const double travelled = (expected - x0).norm();
+  EXPECT_LT((sim.CentreOfMass() - expected).norm(), 1e-9 * travelled);
+  // Every node moves rigidly with the centre of mass.
+  const Eigen::Vector3d shift = expected - x0;
+  for (int i = 0; i < sim.hex_mesh().NumNodes(); ++i) {
+    EXPECT_LT((sim.state().u.segment<3>(3 * i) - shift).norm(), 1e-9 * travelled);
+  }
+}
+
+// The lumped mass equals density x volume of a sphere and a torus within 2 %.
+TEST(Simulator, MassIsDensityTimesVolume) {
+  PhysicalParameters p;
+  p.density = 800.0;
+  SimulationOptions options;
+  options.cells_along_longest_side = 16;
+  const double r = 0.1;
+  Simulator sphere(MakeSphere(r, 4), p, options);
+  EXPECT_NEAR(sphere.total_mass(), p.density * 4.0 / 3.0 * kPi * r * r * r,
+              0.02 * p.density * 4.0 / 3.0 * kPi * r * r * r);
+  const double big = 0.1, small = 0.035;
+  options.cells_along_longest_side = 32;  // 5 cells across the tube
+  Simulator torus(MakeTorus(big, small, 64, 32), p, options);
+  const double torus_volume = 2.0 * kPi * kPi * big * small * small;
+  EXPECT_NEAR(torus.total_mass(), p.density * torus_volume, 0.02 * p.density * torus_volume);
+}
+
+// A large rigid rotation creates no elastic force: the body keeps its rotated pose, at rest.
+TEST(Simulator, RigidRotationCreatesNoElasticForce) {
+  PhysicalParameters p;
+  p.gravity.setZero();
+  SimulationOptions options;
+  options.cells_along_longest_side = 8;
+  Simulator sim(MakeBox(Eigen::Vector3d(0.2, 0.1, 0.05), 0.02), p, options);
+  const Eigen::Matrix3d rotation =
+      Eigen::AngleAxisd(2.0, Eigen::Vector3d(1.0, 2.0, 0.5).normalized()).toRotationMatrix();
+  SimulationState state = sim.state();
+  for (int i = 0; i < sim.hex_mesh().NumNodes(); ++i) {
+    const Eigen::Vector3d& x = sim.hex_mesh().rest_positions[i];
+    state.u.segment<3>(3 * i) = rotation * x - x;
+  }
+  state.v.setZero();
+  state.a.setZero();
+  sim.SetState(state);
+  EXPECT_LT(sim.ComputeEnergies().elastic, 1e-20);
+  for (int step = 0; step < 10; ++step) ASSERT_FALSE(sim.Step().diverged);
+  EXPECT_LT((sim.state().u - state.u).lpNorm<Eigen::Infinity>(), 1e-12);
+  EXPECT_LT(sim.state().v.lpNorm<Eigen::Infinity>(), 1e-10);
+}
+
+// Static tip deflection of a cantilever approaches Euler-Bernoulli rho g A L^4 / (8 E I) (within
+// 10 % at 4 cells through the thickness), and the error shrinks as the grid refines.
+TEST(Simulator, CantileverMatchesEulerBernoulli) {
+  PhysicalParameters p;
+  p.youngs_modulus = 1e8;
+  p.poisson_ratio = 0.3;
+  p.density = 1000.0;
+  BarSetup bar;
+  const double b = bar.thickness, length = bar.length;
+  const double area = b * b, inertia = b * b * b * b / 12.0;
+  const double expected =
+      p.density * 9.81 * area * std::pow(length, 4) / (8.0 * p.youngs_modulus * inertia);
+  std::vector<double> errors;
+  for (int cells : {2, 4}) {
+    bar.cells_through_thickness = cells;
+    Simulator sim = MakeClampedBar(bar, p, SimulationOptions());
+    const StepSummary summary = sim.SolveStatic();
+    ASSERT_TRUE(summary.converged);
+    const double deflection = -TipDeflection(sim, length);
+    errors.push_back(std::abs(deflection - expected) / expected);
+    RecordProperty("error_" + std::to_string(cells), std::to_string(errors.back()));
+  }
+  EXPECT_LT(errors.back(), 0.10);
+  EXPECT_LT(errors[1], errors[0]);
+}
+
+// Free vibration of the cantilever: first bending frequency within 10 % of
+// 1.875^2 / (2 pi L^2) sqrt(E I / (rho A)); undamped average-acceleration Newmark keeps the
+// total energy within 1 % over 1000 steps.
+TEST(Simulator, CantileverFrequencyAndEnergyConservation) {
+  PhysicalParameters p;
+  p.youngs_modulus = 1e8;
+  p.density = 1000.0;
+  BarSetup bar;
+  const double b = bar.thickness, length = bar.length;
+  const double frequency = 1.875 * 1.875 / (2 * kPi * length * length) *
+                           std::sqrt(p.youngs_modulus * b * b / 12.0 / p.density);
+  const double dt = 1.0 / (frequency * 200.0);
+  Simulator sim = MakeClampedBar(bar, p, AverageAcceleration(dt));
+  const double energy0 = sim.ComputeEnergies().Total();
+  double max_kinetic = 0.0, max_drift = 0.0;
+  std::vector<double> tip;
+  for (int step = 0; step < 1000; ++step) {
+    ASSERT_FALSE(sim.Step().diverged);
+    tip.push_back(TipDeflection(sim, length));
+    const Energies e = sim.ComputeEnergies();
+    max_kinetic = std::max(max_kinetic, e.kinetic);
+    max_drift = std::max(max_drift, std::abs(e.Total() - energy0));
+  }
+  EXPECT_LT(max_drift, 0.01 * max_kinetic);
+  const std::vector<double> peaks = PeakTimes(tip, dt);
+  ASSERT_GE(peaks.size(), 3u);
+  const double period = (peaks.back() - peaks.front()) / static_cast<double>(peaks.size() - 1);
+  EXPECT_NEAR(1.0 / period, frequency, 0.10 * frequency);
+}
+
+// Rayleigh damping: the logarithmic decrement of the bar's vibration is within 5 % of
+// 2 pi zeta / sqrt(1 - zeta^2) with zeta = alpha / (2 omega) + beta omega / 2.
+TEST(Simulator, RayleighDampingLogDecrement) {
+  PhysicalParameters p;
+  p.youngs_modulus = 1e8;
+  p.density = 1000.0;
+  p.mass_damping = 0.3;
+  p.stiffness_damping = 0.002;
+  BarSetup bar;
+  const double b = bar.thickness, length = bar.length;
+  const double frequency = 1.875 * 1.875 / (2 * kPi * length * length) *
+                           std::sqrt(p.youngs_modulus * b * b / 12.0 / p.density);
+  const double dt = 1.0 / (frequency * 200.0);
+  Simulator sim = MakeClampedBar(bar, p, AverageAcceleration(dt));
+  // The static deflection is the centre of the oscillation.
+  Simulator statics = MakeClampedBar(bar, p, SimulationOptions());
+  ASSERT_TRUE(statics.SolveStatic().converged);
+  const double centre = TipDeflection(statics, length);
+  std::vector<double> signal;
+  for (int step = 0; step < 1000; ++step) {
+    ASSERT_FALSE(sim.Step().diverged);
+    signal.push_back(TipDeflection(sim, length) - centre);
+  }
+  std::vector<double> amplitudes;
+  const std::vector<double> peaks = PeakTimes(signal, dt, &amplitudes);
+  ASSERT_GE(peaks.size(), 4u);
+  const double period = (peaks.back() - peaks.front()) / static_cast<double>(peaks.size() - 1);
+  const double omega = 2 * kPi / period;
+  const double zeta = p.mass_damping / (2 * omega) + p.stiffness_damping * omega / 2;
+  const double expected = 2 * kPi * zeta / std::sqrt(1 - zeta * zeta);
+  const double measured =
+      std::log(amplitudes.front() / amplitudes.back()) / static_cast<double>(amplitudes.size() - 1);
+  EXPECT_NEAR(measured, expected, 0.05 * expected);
+}
+
+// A ball dropped onto the ground comes to rest there without drift or jitter.
+TEST(Simulator, BallSettlesOnGround) {
+  PhysicalParameters p;
+  p.youngs_modulus = 2e4;
+  p.density = 500.0;
+  // Damped well enough (zeta ~ 0.3 for the ~5 Hz bounce on its Hertzian compliance) that 3 s
+  // suffice; jitter or drift would show up as residual motion.
+  p.mass_damping = 5.0;
+  p.stiffness_damping = 0.01;
+  p.ground = GroundPlane{Eigen::Vector3d::UnitZ(), 0.0};
+  SimulationOptions options;
+  options.cells_along_longest_side = 8;
+  options.time_step = 1.0 / 240.0;
+  const double r = 0.1;
+  geometry::TriangleMesh ball = MakeSphere(r, 3);
+  for (auto& v : ball.vertices) v.z() += r + 0.02;
+  Simulator sim(ball, p, options);
+  for (int step = 0; step < 720; ++step) ASSERT_FALSE(sim.Step().diverged);  // 3 s
+  const Eigen::Vector3d settled = sim.CentreOfMass();
+  double max_speed = 0.0;
+  for (int step = 0; step < 240; ++step) {  // 1 s more
+    ASSERT_FALSE(sim.Step().diverged);
+    max_speed = std::max(max_speed, sim.CentreOfMassVelocity().norm());
+  }
+  EXPECT_LT((sim.CentreOfMass() - settled).norm(), 1e-3 * r);
+  EXPECT_LT(max_speed, 1e-3);
+  EXPECT_LT(std::abs(settled.x()) + std::abs(settled.y()), 1e-6);
+  // Resting on the floor: the penalty lets its lowest point sink p / k (peak Hertz pressure ~7 kPa
+  // over k = 100 E / L = 1e7 Pa/m: ~0.7 mm), and its centre is lowered by the Hertzian flattening.
+  double lowest = 1.0;
+  for (const auto& x : sim.SurfacePositions()) lowest = std::min(lowest, x.z());
+  EXPECT_LT(lowest, 0.0);
+  EXPECT_GT(lowest, -0.02 * r);
+  EXPECT_LT(settled.z(), r);
+  EXPECT_GT(settled.z(), 0.8 * r);
+}
+
+// A block on a ramp steeper than atan(mu) slides with g (sin theta - mu cos theta) within 5 %;
+// on a shallower one it sticks: regularised Coulomb friction lets it creep no faster than
+// eps tan(theta) / mu. The ramp is modelled by tilting gravity.
+struct RampMotion {
+  double acceleration = 0.0;  // along the slope [m/s^2]
+  double max_speed = 0.0;     // along the slope, over the measurement window [m/s]
+};
+
+RampMotion SlideOnRamp(double theta, double mu) {
+  PhysicalParameters p;
+  p.youngs_modulus = 2e5;
+  p.density = 500.0;
+  p.friction_coefficient = mu;
+  p.gravity = 9.81 * Eigen::Vector3d(std::sin(theta), 0.0, -std::cos(theta));
+  p.ground = GroundPlane{Eigen::Vector3d::UnitZ(), 0.0};
+  SimulationOptions options;
+  options.cells_along_longest_side = 8;
+  options.time_step = 1.0 / 240.0;
+  geometry::TriangleMesh block = MakeBox(Eigen::Vector3d(0.1, 0.1, 0.05), 0.0125);
+  for (auto& v : block.vertices) v.z() += 0.026;  // dropped from 1 mm
+  Simulator sim(block, p, options);
+  for (int step = 0; step < 48; ++step) EXPECT_FALSE(sim.Step().diverged);  // contact settles
+  RampMotion motion;
+  const double v0 = sim.CentreOfMassVelocity().x();
+  const double t0 = sim.state().time;
+  for (int step = 0; step < 96; ++step) {
+    EXPECT_FALSE(sim.Step().diverged);
+    motion.max_speed = std::max(motion.max_speed, std::abs(sim.CentreOfMassVelocity().x()));
+  }
+  motion.acceleration = (sim.CentreOfMassVelocity().x() - v0) / (sim.state().time - t0);
+  return motion;
+}
+
+TEST(Simulator, BlockSlidesDownSteepRamp) {
+  const double theta = 30.0 * kPi / 180.0, mu = 0.3;
+  const double expected = 9.81 * (std::sin(theta) - mu * std::cos(theta));
+  EXPECT_NEAR(SlideOnRamp(theta, mu).acceleration, expected, 0.05 * expected);
+}
+
+TEST(Simulator, BlockSticksOnShallowRamp) {
+  const double theta = 10.0 * kPi / 180.0, mu = 0.3;
+  const double creep = SimulationOptions().friction_velocity_scale * std::tan(theta) / mu;
+  EXPECT_LT(SlideOnRamp(theta, mu).max_speed, 3.0 * creep);
+}
+
+// Invalid parameters are rejected with the field named.
+TEST(Simulator, RejectsInvalidParameters) {
+  PhysicalParameters p;
+  p.poisson_ratio = 0.5;
+  try {
+    Simulator sim(MakeSphere(0.1, 2), p, SimulationOptions());
+    FAIL() << "expected a throw";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("poisson_ratio = 0.5"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace softid::fem

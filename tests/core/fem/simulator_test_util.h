@@ -1,0 +1,62 @@
+// Helpers shared by the simulator tests: a clamped bar and time-series analysis.
+#pragma once
+
+#include <Eigen/Core>
+#include <cmath>
+#include <vector>
+
+#include "core/fem/simulator.h"
+#include "core/geometry/primitives.h"
+
+namespace softid::fem::testing {
+
+// A bar of length L along x and square cross-section b x b, clamped at x = 0.
+struct BarSetup {
+  double length = 0.5;      // L [m]
+  double thickness = 0.05;  // b [m]
+  int cells_through_thickness = 4;
+};
+
+inline Simulator MakeClampedBar(const BarSetup& bar, PhysicalParameters parameters,
+                                SimulationOptions options) {
+  geometry::TriangleMesh mesh = geometry::MakeBox(
+      Eigen::Vector3d(bar.length, bar.thickness, bar.thickness), bar.thickness / 4);
+  for (auto& v : mesh.vertices) v.x() += bar.length / 2;  // bar spans x in [0, L]
+  options.cell_size = bar.thickness / bar.cells_through_thickness;
+  const double h = options.cell_size;
+  const Eigen::AlignedBox3d clamp(Eigen::Vector3d(-1.0, -1.0, -1.0),
+                                  Eigen::Vector3d(0.01 * h, 1.0, 1.0));
+  return Simulator(mesh, parameters, options, clamp);
+}
+
+// Mean z displacement of the FE nodes on the free end face (x = L).
+inline double TipDeflection(const Simulator& sim, double length) {
+  const auto& mesh = sim.hex_mesh();
+  const double h = mesh.CellSize();
+  double sum = 0.0;
+  int count = 0;
+  for (int i = 0; i < mesh.NumNodes(); ++i) {
+    if (std::abs(mesh.rest_positions[i].x() - length) < 0.01 * h) {
+      sum += sim.state().u[3 * i + 2];
+      ++count;
+    }
+  }
+  return count > 0 ? sum / count : NAN;
+}
+
+// Times of the local maxima of a sampled signal (parabolic refinement).
+inline std::vector<double> PeakTimes(const std::vector<double>& y, double dt,
+                                     std::vector<double>* values = nullptr) {
+  std::vector<double> times;
+  for (size_t i = 1; i + 1 < y.size(); ++i) {
+    if (y[i] > y[i - 1] && y[i] >= y[i + 1]) {
+      const double denom = y[i - 1] - 2 * y[i] + y[i + 1];
+      const double shift = denom != 0.0 ? 0.5 * (y[i - 1] - y[i + 1]) / denom : 0.0;
+      times.push_back((static_cast<double>(i) + shift) * dt);
+      if (values) values->push_back(y[i] - 0.25 * (y[i - 1] - y[i + 1]) * shift);
+    }
+  }
+  return times;
+}
+
+}  // namespace softid::fem::testing
