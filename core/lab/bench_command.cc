@@ -1,0 +1,122 @@
+// softid-lab bench: milliseconds per simulation step against the number of active cells, and the
+// fitted scaling exponent. The torus-drop scene is timed over its first 0.3 s, which includes the
+// impact (contact, refactorisation) as well as free flight.
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cmath>
+#include <memory>
+
+#include "core/fem/hex_mesh.h"
+#include "core/geometry/signed_distance_field.h"
+#include "core/lab/commands.h"
+#include "core/scenes/scene.h"
+#include "core/scenes/scene_runner.h"
+
+namespace softid::lab {
+namespace {
+
+struct BenchFlags {
+  std::vector<int> target_cells = {1000, 3000, 10000, 30000};
+  double seconds = 0.3;
+  int substeps = 4;
+  double fps = 60.0;
+};
+
+int ActiveCells(const scenes::Scene& scene, int cells_along_longest_side) {
+  geometry::SignedDistanceOptions options;
+  options.cells_along_longest_side = cells_along_longest_side;
+  options.padding_cells = 1;
+  auto sdf = geometry::ComputeSignedDistanceField(scene.mesh, options);
+  if (!sdf.ok()) return 0;
+  return fem::BuildHexMesh(*sdf, fem::SimulationOptions().min_cell_volume_fraction).NumElements();
+}
+
+// Resolution whose active-cell count is closest to `target` (cells scale like n^3).
+int ResolutionFor(const scenes::Scene& scene, int target) {
+  int n = 16;
+  for (int it = 0; it < 3; ++it) {
+    const int cells = ActiveCells(scene, n);
+    if (cells <= 0) break;
+    const int next =
+        std::max(2, static_cast<int>(std::lround(n * std::cbrt(double(target) / cells))));
+    if (next == n) break;
+    n = next;
+  }
+  return n;
+}
+
+int RunBench(const BenchFlags& flags) {
+  auto scene = scenes::MakeBuiltinScene("torus-drop");
+  if (!scene.ok()) return kExitFailure;
+  std::printf("softid-lab bench: torus-drop, first %.2f s, %d substeps at %.0f fps (dt = %.3g s)\n",
+              flags.seconds, flags.substeps, flags.fps, 1.0 / (flags.fps * flags.substeps));
+  std::printf("%10s %8s %8s %10s %10s %10s %10s %8s\n", "cells", "nodes", "res", "setup_s",
+              "ms/step", "newton/st", "cg/step", "refacts");
+  std::vector<double> log_cells, log_ms;
+  double ms_at_3000 = -1.0;
+  for (int target : flags.target_cells) {
+    const int n = ResolutionFor(*scene, target);
+    scenes::RunOptions run;
+    run.simulation.cells_along_longest_side = n;
+    run.fps = flags.fps;
+    run.substeps_per_frame = flags.substeps;
+    run.duration = flags.seconds;
+    int cells = 0, nodes = 0;
+    const auto start = std::chrono::steady_clock::now();
+    double setup = 0.0;
+    auto summary = scenes::RunScene(*scene, run, [&](int frame, const fem::Simulator& sim) {
+      if (frame == 0) {
+        cells = sim.hex_mesh().NumElements();
+        nodes = sim.hex_mesh().NumNodes();
+        setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      }
+    });
+    if (!summary.ok() || summary->diverged) {
+      std::printf("%10d  run failed: %s\n", target,
+                  summary.ok() ? "diverged" : summary.status().message().c_str());
+      return kExitFailure;
+    }
+    const double steps = std::max(1, summary->num_steps);
+    const double ms = 1e3 * summary->seconds / steps;
+    std::printf("%10d %8d %8d %10.2f %10.2f %10.2f %10.1f %8d\n", cells, nodes, n, setup, ms,
+                summary->newton_iterations / steps, summary->linear_iterations / steps,
+                summary->refactorizations);
+    std::fflush(stdout);
+    log_cells.push_back(std::log(cells));
+    log_ms.push_back(std::log(ms));
+    if (target == 3000) ms_at_3000 = ms;
+  }
+  if (log_cells.size() >= 2) {
+    // Least-squares slope of log(ms/step) against log(cells).
+    const double n = static_cast<double>(log_cells.size());
+    double sx = 0, sy = 0, sxx = 0, sxy = 0;
+    for (size_t i = 0; i < log_cells.size(); ++i) {
+      sx += log_cells[i];
+      sy += log_ms[i];
+      sxx += log_cells[i] * log_cells[i];
+      sxy += log_cells[i] * log_ms[i];
+    }
+    std::printf("scaling exponent (ms/step ~ cells^p): p = %.2f\n",
+                (n * sxy - sx * sy) / (n * sxx - sx * sx));
+  }
+  if (ms_at_3000 > 0.0) {
+    std::printf("at ~3000 cells: %.2f ms/step = %.2fx the 15 ms target (paper: ~300 ms on a GPU)\n",
+                ms_at_3000, ms_at_3000 / 15.0);
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+Command RegisterBench(CLI::App* app) {
+  auto flags = std::make_shared<BenchFlags>();
+  app->add_option("--cells", flags->target_cells, "target active-cell counts")
+      ->capture_default_str();
+  app->add_option("--seconds", flags->seconds, "simulated time per size [s]")
+      ->capture_default_str();
+  app->add_option("--substeps", flags->substeps, "steps per frame")->capture_default_str();
+  return [flags] { return RunBench(*flags); };
+}
+
+}  // namespace softid::lab

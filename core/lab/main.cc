@@ -1,0 +1,38 @@
+// softid-lab: the local laboratory tool (synthetic captures, simulation, benchmarks).
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <CLI/CLI.hpp>
+
+#include "core/lab/commands.h"
+
+int main(int argc, char** argv) {
+  auto logger = spdlog::stderr_color_mt("softid-lab");
+  spdlog::set_default_logger(logger);
+  spdlog::set_pattern("[%H:%M:%S.%e] [%^%l%$] %v");
+
+  CLI::App app{"softid-lab: simulate soft bodies, synthesise depth captures, benchmark"};
+  app.require_subcommand(1);
+  bool verbose = false;
+  app.add_flag("-v,--verbose", verbose, "debug logging");
+  std::vector<std::pair<CLI::App*, softid::lab::Command>> commands;
+  auto add = [&](const char* name, const char* help, auto registrar) {
+    CLI::App* sub = app.add_subcommand(name, help);
+    commands.emplace_back(sub, registrar(sub));
+  };
+  add("synth", "simulate a scene and write a synthetic capture (+ truth.json)",
+      softid::lab::RegisterSynth);
+  add("simulate", "simulate a scene and write the deformed surface per frame (PLY)",
+      softid::lab::RegisterSimulate);
+  add("bench", "time simulation steps at several grid sizes", softid::lab::RegisterBench);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? 0 : softid::lab::kExitInvalidInput;
+  }
+  if (verbose) spdlog::set_level(spdlog::level::debug);
+  for (auto& [sub, command] : commands) {
+    if (sub->parsed()) return command();
+  }
+  return softid::lab::kExitInvalidInput;
+}

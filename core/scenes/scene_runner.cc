@@ -1,0 +1,59 @@
+#include "core/scenes/scene_runner.h"
+
+#include <chrono>
+#include <cmath>
+
+#include "core/common/json_fields.h"
+
+namespace softid::scenes {
+
+Status RunOptions::Validate() const {
+  if (!(fps > 0.0) || !std::isfinite(fps)) return json::Invalid("fps", fps, "must be positive");
+  if (substeps_per_frame < 1) {
+    return json::Invalid("substeps", substeps_per_frame, "must be at least 1");
+  }
+  if (duration && (!(*duration > 0.0) || !std::isfinite(*duration))) {
+    return json::Invalid("duration", *duration, "must be positive and finite");
+  }
+  fem::SimulationOptions sim = simulation;
+  sim.time_step = 1.0 / (fps * substeps_per_frame);
+  return sim.Validate();
+}
+
+int RunOptions::NumFrames(const Scene& scene) const {
+  return static_cast<int>(std::floor(duration.value_or(scene.duration) * fps + 1e-9)) + 1;
+}
+
+Result<RunSummary> RunScene(const Scene& scene, const RunOptions& options,
+                            const std::function<void(int, const fem::Simulator&)>& on_frame) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  fem::SimulationOptions sim_options = options.simulation;
+  sim_options.time_step = 1.0 / (options.fps * options.substeps_per_frame);
+  fem::Simulator sim(scene.mesh, scene.parameters, sim_options, scene.fixed_region);
+  RunSummary summary;
+  const int num_frames = options.NumFrames(scene);
+  const auto start = std::chrono::steady_clock::now();
+  on_frame(0, sim);
+  summary.num_frames = 1;
+  for (int frame = 1; frame < num_frames; ++frame) {
+    for (int s = 0; s < options.substeps_per_frame; ++s) {
+      const fem::StepSummary step = sim.Step();
+      ++summary.num_steps;
+      summary.newton_iterations += step.newton_iterations;
+      summary.linear_iterations += step.linear_iterations;
+      summary.refactorizations += step.refactorized ? 1 : 0;
+      if (step.diverged) {
+        summary.diverged = true;
+        summary.seconds =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        return summary;
+      }
+    }
+    on_frame(frame, sim);
+    summary.num_frames = frame + 1;
+  }
+  summary.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return summary;
+}
+
+}  // namespace softid::scenes

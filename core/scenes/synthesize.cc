@@ -1,0 +1,115 @@
+#include "core/scenes/synthesize.h"
+
+#include <fstream>
+
+#include "core/capture/capture.h"
+#include "core/capture/depth_renderer.h"
+#include "core/common/json_fields.h"
+
+namespace softid::scenes {
+
+Status SynthesisOptions::Validate() const {
+  SOFTID_RETURN_IF_ERROR(run.Validate());
+  SOFTID_RETURN_IF_ERROR(cameras.Validate());
+  SOFTID_RETURN_IF_ERROR(noise.Validate());
+  if (!(depth_scale > 0.0) || !std::isfinite(depth_scale)) {
+    return json::Invalid("depth_scale", depth_scale, "must be positive and finite");
+  }
+  return Status::Ok();
+}
+
+Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& options,
+                                    const std::filesystem::path& out,
+                                    const std::function<void(int, int)>& progress) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  if (std::filesystem::exists(out / capture::kCaptureFileName)) {
+    return Status::FailedPrecondition("out = " + out.string() +
+                                      ": already holds a capture; choose an empty folder");
+  }
+  const std::vector<capture::PinholeCamera> cameras =
+      MakeCameraRing(options.cameras, scene.view_target, scene.view_radius);
+  capture::DepthRenderer renderer;
+  std::vector<std::vector<capture::DepthImage>> frames(cameras.size());
+  SynthesisSummary summary;
+  const int num_frames = options.run.NumFrames(scene);
+  long long valid_pixels = 0;
+
+  Result<RunSummary> run = [&]() -> Result<RunSummary> {
+    try {
+      return RunScene(scene, options.run, [&](int frame, const fem::Simulator& sim) {
+        if (frame == 0) {
+          summary.num_elements = sim.hex_mesh().NumElements();
+          summary.num_nodes = sim.hex_mesh().NumNodes();
+          summary.mass = sim.total_mass();
+        }
+        const geometry::TriangleMesh surface = sim.DeformedSurface();
+        for (size_t c = 0; c < cameras.size(); ++c) {
+          capture::DepthImage image = renderer.Render(surface, cameras[c]);
+          capture::ApplyDepthNoise(options.noise, frame, static_cast<int>(c), &image);
+          valid_pixels += image.NumValid();
+          frames[c].push_back(std::move(image));
+        }
+        if (progress) progress(frame, num_frames);
+      });
+    } catch (const std::invalid_argument& e) {
+      return Status::InvalidArgument(e.what());
+    }
+  }();
+  SOFTID_RETURN_IF_ERROR(run.status());
+  summary.run = *run;
+  if (run->diverged) {
+    return Status::FailedPrecondition("the simulation of scene " + scene.name + " diverged after " +
+                                      std::to_string(run->num_frames) +
+                                      " frames; lower the time step or stiffen the contact");
+  }
+  summary.num_cameras = static_cast<int>(cameras.size());
+  summary.mean_valid_pixels =
+      static_cast<double>(valid_pixels) / (static_cast<double>(num_frames) * cameras.size());
+
+  capture::Capture cap;
+  cap.fps = options.run.fps;
+  if (options.write_mass) {
+    cap.mass_kg = scene.parameters.density * std::abs(geometry::SignedVolume(scene.mesh));
+  }
+  cap.fixed_region = scene.fixed_region;
+  for (const auto& camera : cameras) {
+    capture::CameraRecording recording;
+    recording.camera = camera;
+    recording.depth_scale = options.depth_scale;
+    cap.cameras.push_back(recording);
+  }
+  std::error_code ec;
+  std::filesystem::create_directories(out, ec);
+  if (ec) return Status::IoError("out = " + out.string() + ": " + ec.message());
+
+  // truth.json first: capture.json is written last, so a folder with it is complete.
+  nlohmann::json truth = {
+      {"format", kTruthFormat},
+      {"scene", scene.name},
+      {"parameters", fem::ToJson(scene.parameters)},
+      {"generator",
+       {{"cells_along_longest_side", options.run.simulation.cells_along_longest_side},
+        {"cell_size", options.run.simulation.cell_size},
+        {"substeps_per_frame", options.run.substeps_per_frame},
+        {"time_step", 1.0 / (options.run.fps * options.run.substeps_per_frame)},
+        {"newmark_beta", options.run.simulation.newmark_beta},
+        {"newmark_gamma", options.run.simulation.newmark_gamma},
+        {"elements", summary.num_elements},
+        {"simulated_mass", summary.mass},
+        {"noise",
+         {{"sigma_constant", options.noise.sigma_constant},
+          {"sigma_quadratic", options.noise.sigma_quadratic},
+          {"dropout_probability", options.noise.dropout_probability},
+          {"seed", options.noise.seed},
+          {"depth_scale", options.depth_scale}}}}},
+  };
+  {
+    std::ofstream file(out / kTruthFileName);
+    file << truth.dump(2) << "\n";
+    if (!file) return Status::IoError("cannot write " + (out / kTruthFileName).string());
+  }
+  SOFTID_RETURN_IF_ERROR(capture::WriteCapture(out, cap, scene.mesh, frames));
+  return summary;
+}
+
+}  // namespace softid::scenes
