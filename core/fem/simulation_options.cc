@@ -18,6 +18,12 @@ Status SimulationOptions::Validate() const {
   if (!(min_cell_volume_fraction >= 0.0 && min_cell_volume_fraction < 0.5)) {
     return Invalid("min_cell_volume_fraction", min_cell_volume_fraction, "must lie in [0, 0.5)");
   }
+  if (!(ghost_stiffness_fraction >= 0.0 && ghost_stiffness_fraction <= 1.0)) {
+    return Invalid("ghost_stiffness_fraction", ghost_stiffness_fraction, "must lie in [0, 1]");
+  }
+  if (!(min_force_volume_fraction >= 0.0 && min_force_volume_fraction <= 1.0)) {
+    return Invalid("min_force_volume_fraction", min_force_volume_fraction, "must lie in [0, 1]");
+  }
   if (!(time_step > 0.0) || !std::isfinite(time_step)) {
     return Invalid("time_step", time_step, "must be positive and finite");
   }

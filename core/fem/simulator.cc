@@ -1,5 +1,6 @@
 #include "core/fem/simulator.h"
 
+#include <Eigen/Cholesky>
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -57,6 +58,8 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
   // Surface carried by the grid.
   surface_ = geometry::SubdivideToEdgeLength(rest_mesh, options.surface_edge_fraction * h);
   embedding_ = EmbedPoints(mesh_, surface_.vertices);
+  force_embedding_ = EmbedPoints(mesh_, surface_.vertices, /*clamp_to_element=*/true,
+                                 options.min_force_volume_fraction);
   surface_areas_ = geometry::VertexAreas(surface_);
 
   // Lumped mass and element stiffness (fixed for the whole run).
@@ -68,9 +71,14 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
   for (int e = 0; e < mesh_.NumElements(); ++e) {
     const auto& w = mesh_.element_weights[e];
     for (int c = 0; c < 8; ++c)
-      mass_[mesh_.element_nodes[e][c]] += parameters.density * w.node_volume[c];
+      mass_[mesh_.element_nodes[e][c]] += parameters.density * w.volume / 8.0;
     const double scale = parameters.stiffness_field.Scale(mesh_.ElementCentre(e));
-    element_stiffness_[e] = ElementStiffness(w.octant_volume, h, scale * lambda, scale * mu);
+    // Ghost stiffness (as in CutFEM): nearly empty octants keep a small floor of stiffness, so
+    // nodes that only touch slivers of material are not free to be pushed around by contact.
+    std::array<double, 8> stiffness_weights = w.octant_volume;
+    const double floor = options.ghost_stiffness_fraction * h * h * h / 8.0;
+    for (double& weight : stiffness_weights) weight = std::max(weight, floor);
+    element_stiffness_[e] = ElementStiffness(stiffness_weights, h, scale * lambda, scale * mu);
   }
 
   fixed_.assign(n, 0);
@@ -225,12 +233,37 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
         q[c] = r * z;
       }
     }
+    Matrix24d element_jacobian;
     for (int i = 0; i < 8; ++i) {
       for (int j = 0; j < 8; ++j) {
-        Eigen::Matrix3d block =
+        element_jacobian.block<3, 3>(3 * i, 3 * j).noalias() =
             stiffness_coefficient * (r * k.block<3, 3>(3 * i, 3 * j) * r.transpose());
-        if (geometric) block.noalias() += q[i] * w[j];
-        assembler_.AddBlock(e, i, j, block);
+      }
+    }
+    if (geometric) {
+      Matrix24d with_geometric = element_jacobian;
+      for (int i = 0; i < 8; ++i) {
+        for (int j = 0; j < 8; ++j)
+          with_geometric.block<3, 3>(3 * i, 3 * j).noalias() += q[i] * w[j];
+      }
+      // Projected Newton: a strongly compressed element's stress stiffness can outweigh its
+      // inertia and make the step matrix indefinite (GMRES then stalls). Keep the exact term only
+      // where the element's own block, with its share of the inertia, stays positive definite.
+      // Below a few percent strain the stress stiffness is far too small to matter.
+      constexpr double kCheckStrain = 0.05;
+      bool keep = !exact_tangent_only_if_definite_ ||
+                  (s - Eigen::Matrix3d::Identity()).lpNorm<Eigen::Infinity>() < kCheckStrain;
+      if (!keep) {
+        Matrix24d symmetric = 0.5 * (with_geometric + with_geometric.transpose());
+        symmetric.diagonal().array() +=
+            mass_coefficient * parameters_.density * mesh_.element_weights[e].volume / 8.0;
+        keep = Eigen::LLT<Matrix24d>(symmetric).info() == Eigen::Success;
+      }
+      if (keep) element_jacobian = with_geometric;
+    }
+    for (int i = 0; i < 8; ++i) {
+      for (int j = 0; j < 8; ++j) {
+        assembler_.AddBlock(e, i, j, element_jacobian.block<3, 3>(3 * i, 3 * j));
       }
     }
   }
@@ -246,10 +279,11 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
 
   // Surface forces: contact, friction, drag.
   if (has_surface_forces_) {
-    for (int p = 0; p < embedding_.NumPoints(); ++p) {
-      const Eigen::Vector3d xp = embedding_.rest_positions[p] + embedding_.Interpolate(mesh_, u, p);
+    for (int p = 0; p < force_embedding_.NumPoints(); ++p) {
+      const Eigen::Vector3d xp =
+          force_embedding_.rest_positions[p] + force_embedding_.Interpolate(mesh_, u, p);
       const Eigen::Vector3d vp =
-          dynamic ? embedding_.Interpolate(mesh_, v, p) : Eigen::Vector3d::Zero().eval();
+          dynamic ? force_embedding_.Interpolate(mesh_, v, p) : Eigen::Vector3d::Zero().eval();
       PointForce f;
       if (parameters_.ground) {
         f = GroundContactForce(contact_, surface_areas_[p], xp, vp,
@@ -263,8 +297,8 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
       }
       if (f.force.isZero(0.0) && f.stiffness.isZero(0.0) && f.damping.isZero(0.0)) continue;
       const Eigen::Matrix3d jacobian = f.stiffness + dv_du * f.damping;
-      const int e = embedding_.element[p];
-      const auto& w = embedding_.weights[p];
+      const int e = force_embedding_.element[p];
+      const auto& w = force_embedding_.weights[p];
       const auto& nodes = mesh_.element_nodes[e];
       for (int i = 0; i < 8; ++i) {
         residual_.segment<3>(3 * nodes[i]) -= w[i] * f.force;
@@ -349,13 +383,16 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
       return summary;
     }
     const bool small = full_step <= options_.newton_tolerance * h;
-    const double step = std::min(ContactStepLimit(u_next_, update_),
-                                 dynamic ? FrictionStepLimit(v_next_, update_) : 1.0);
-    u_trial_ = u_next_ + step * update_;
-    if (dynamic) NewmarkKinematics(u_trial_, &v_next_, &a_next_);
-    body_rotation = Assemble(mode, u_trial_, v_next_, a_next_);
-    residual_norm = residual_.norm();
-    u_next_.swap(u_trial_);
+    const double step = small ? 1.0
+                              : std::min(ContactStepLimit(u_next_, update_),
+                                         dynamic ? FrictionStepLimit(v_next_, update_) : 1.0);
+    u_next_ += step * update_;
+    if (dynamic) NewmarkKinematics(u_next_, &v_next_, &a_next_);
+    // A converged update needs no new assembly: the state is final.
+    if (!small) {
+      body_rotation = Assemble(mode, u_next_, v_next_, a_next_);
+      residual_norm = residual_.norm();
+    }
     summary.newton_iterations = it + 1;
     summary.max_update = step * full_step;
     if (small) {
@@ -379,17 +416,19 @@ void Simulator::EvaluateStepResidual(const Eigen::VectorXd& u_next, Eigen::Vecto
   UpdateLaggedNormalForces();
   Eigen::VectorXd v(u_next.size()), a(u_next.size());
   NewmarkKinematics(u_next, &v, &a);
+  exact_tangent_only_if_definite_ = false;
   Assemble(Mode::kDynamic, u_next, v, a);
+  exact_tangent_only_if_definite_ = true;
   if (residual) *residual = residual_;
   if (jacobian) *jacobian = assembler_.matrix();
 }
 
 void Simulator::UpdateLaggedNormalForces() {
-  lagged_normal_force_.assign(embedding_.NumPoints(), 0.0);
+  lagged_normal_force_.assign(force_embedding_.NumPoints(), 0.0);
   if (!parameters_.ground || parameters_.friction_coefficient <= 0.0) return;
-  for (int p = 0; p < embedding_.NumPoints(); ++p) {
+  for (int p = 0; p < force_embedding_.NumPoints(); ++p) {
     const Eigen::Vector3d xp =
-        embedding_.rest_positions[p] + embedding_.Interpolate(mesh_, state_.u, p);
+        force_embedding_.rest_positions[p] + force_embedding_.Interpolate(mesh_, state_.u, p);
     lagged_normal_force_[p] = ContactNormalForce(contact_, surface_areas_[p], xp);
   }
 }
@@ -400,12 +439,12 @@ double Simulator::ContactStepLimit(const Eigen::VectorXd& u, const Eigen::Vector
   constexpr double kMinStep = 1.0 / 64.0;
   const double allowed = kMaxPenetrationStep * contact_.smoothing;
   double step = 1.0;
-  for (int p = 0; p < embedding_.NumPoints(); ++p) {
-    const Eigen::Vector3d move = embedding_.Interpolate(mesh_, update, p);
+  for (int p = 0; p < force_embedding_.NumPoints(); ++p) {
+    const Eigen::Vector3d move = force_embedding_.Interpolate(mesh_, update, p);
     const double change = contact_.plane.normal.dot(move);
     if (change >= 0.0) continue;
-    const double d = contact_.plane.SignedDistance(embedding_.rest_positions[p] +
-                                                   embedding_.Interpolate(mesh_, u, p));
+    const double d = contact_.plane.SignedDistance(force_embedding_.rest_positions[p] +
+                                                   force_embedding_.Interpolate(mesh_, u, p));
     const double floor = std::min(d, 0.0) - allowed;
     if (d + change < floor) step = std::min(step, (floor - d) / change);
   }
@@ -420,13 +459,13 @@ double Simulator::FrictionStepLimit(const Eigen::VectorXd& v, const Eigen::Vecto
   const double dv_du = options_.newmark_gamma / (options_.newmark_beta * options_.time_step);
   const Eigen::Vector3d& n = contact_.plane.normal;
   double step = 1.0;
-  for (int p = 0; p < embedding_.NumPoints(); ++p) {
+  for (int p = 0; p < force_embedding_.NumPoints(); ++p) {
     if (lagged_normal_force_[p] <= 0.0) continue;
-    Eigen::Vector3d vt = embedding_.Interpolate(mesh_, v, p);
+    Eigen::Vector3d vt = force_embedding_.Interpolate(mesh_, v, p);
     vt -= n.dot(vt) * n;
     const double speed = vt.norm();
     if (speed <= eps) continue;  // inside the knee the linearisation is good
-    Eigen::Vector3d dvt = dv_du * embedding_.Interpolate(mesh_, update, p);
+    Eigen::Vector3d dvt = dv_du * force_embedding_.Interpolate(mesh_, update, p);
     dvt -= n.dot(dvt) * n;
     const double along = -dvt.dot(vt) / speed;  // how far the step slows the slip
     const double allowed = speed + kMaxReversal * eps;

@@ -86,7 +86,8 @@ class Simulator {
 
   // The step equations r(u_next) = 0 that Step() solves, from the current state to a candidate
   // end-of-step displacement u_next (v and a follow from u_next by Newmark), and their exact
-  // Jacobian d r / d u_next (not symmetric: corotation). For the adjoint and for tests.
+  // Jacobian d r / d u_next (not symmetric: corotation; Step() may use a projected one). For the
+  // adjoint and for tests.
   void EvaluateStepResidual(const Eigen::VectorXd& u_next, Eigen::VectorXd* residual,
                             Eigen::SparseMatrix<double>* jacobian);
 
@@ -119,7 +120,8 @@ class Simulator {
   geometry::SignedDistanceField sdf_;
   HexMesh mesh_;
   geometry::TriangleMesh surface_;
-  SurfaceEmbedding embedding_;
+  SurfaceEmbedding embedding_;        // rendering: follows the grid, extrapolating
+  SurfaceEmbedding force_embedding_;  // contact and drag: clamped into the elements
   std::vector<double> surface_areas_;
   // Contact normal force per surface point at the start of the step (for lagged friction); a
   // function of u_n, so it is recomputed, not part of the state.
@@ -132,11 +134,15 @@ class Simulator {
   ContactLaw contact_;
   bool has_surface_forces_ = false;
 
+  // Newton drops an element's stress-stiffness term where it would make the element's block
+  // indefinite; EvaluateStepResidual turns this off to return the exact Jacobian.
+  bool exact_tangent_only_if_definite_ = true;
+
   ElementAssembler assembler_;
   LinearSolver solver_;
   SimulationState state_;
   // Work vectors of the Newton iteration.
-  Eigen::VectorXd residual_, update_, u_next_, u_trial_, v_next_, a_next_;
+  Eigen::VectorXd residual_, update_, u_next_, v_next_, a_next_;
 };
 
 }  // namespace softid::fem

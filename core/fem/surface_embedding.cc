@@ -1,5 +1,6 @@
 #include "core/fem/surface_embedding.h"
 
+#include <algorithm>
 #include <limits>
 #include <string>
 
@@ -7,41 +8,66 @@
 
 namespace softid::fem {
 
-SurfaceEmbedding EmbedPoints(const HexMesh& mesh, const std::vector<Eigen::Vector3d>& points) {
+SurfaceEmbedding EmbedPoints(const HexMesh& mesh, const std::vector<Eigen::Vector3d>& points,
+                             bool clamp_to_element, double min_volume_fraction) {
   SurfaceEmbedding embedding;
   const auto& grid = mesh.grid;
   const double h = grid.cell_size;
   embedding.element.reserve(points.size());
   embedding.weights.reserve(points.size());
   embedding.rest_positions = points;
+  // Elements allowed to carry points; all of them when none is full enough.
+  const double h3 = h * h * h;
+  std::vector<char> eligible(mesh.NumElements(), 1);
+  if (min_volume_fraction > 0.0) {
+    bool any = false;
+    for (int e = 0; e < mesh.NumElements(); ++e) {
+      eligible[e] = mesh.element_weights[e].volume >= min_volume_fraction * h3;
+      any |= eligible[e] != 0;
+    }
+    if (!any) eligible.assign(mesh.NumElements(), 1);
+  }
+  auto element_of_cell = [&](int cell) {
+    const int e = mesh.grid_cell_to_element[cell];
+    return e >= 0 && eligible[e] ? e : -1;
+  };
   for (size_t p = 0; p < points.size(); ++p) {
     Eigen::Vector3d local;
     const int cell = grid.LocateCell(points[p], &local);
-    int element = mesh.grid_cell_to_element[cell];
+    int element = element_of_cell(cell);
     if (element < 0) {
-      // Nearest element centre within two rings of cells.
+      // Nearest element centre, searching rings of growing radius (features thinner than a cell
+      // may have lost all their cells).
       const Eigen::Vector3i c0 = grid.CellCoords(cell);
+      const int max_radius = grid.num_cells.maxCoeff();
       double best = std::numeric_limits<double>::infinity();
-      for (int dz = -2; dz <= 2; ++dz) {
-        for (int dy = -2; dy <= 2; ++dy) {
-          for (int dx = -2; dx <= 2; ++dx) {
-            const Eigen::Vector3i c = c0 + Eigen::Vector3i(dx, dy, dz);
-            if ((c.array() < 0).any() || (c.array() >= grid.num_cells.array()).any()) continue;
-            const int e = mesh.grid_cell_to_element[grid.CellIndex(c.x(), c.y(), c.z())];
-            if (e < 0) continue;
-            const double d = (mesh.ElementCentre(e) - points[p]).squaredNorm();
-            if (d < best) {
-              best = d;
-              element = e;
+      for (int radius = 1; radius <= max_radius && element < 0; ++radius) {
+        for (int dz = -radius; dz <= radius; ++dz) {
+          for (int dy = -radius; dy <= radius; ++dy) {
+            for (int dx = -radius; dx <= radius; ++dx) {
+              if (std::max({std::abs(dx), std::abs(dy), std::abs(dz)}) != radius) continue;
+              const Eigen::Vector3i c = c0 + Eigen::Vector3i(dx, dy, dz);
+              if ((c.array() < 0).any() || (c.array() >= grid.num_cells.array()).any()) continue;
+              const int e = element_of_cell(grid.CellIndex(c.x(), c.y(), c.z()));
+              if (e < 0) continue;
+              const double d = (mesh.ElementCentre(e) - points[p]).squaredNorm();
+              if (d < best) {
+                best = d;
+                element = e;
+              }
             }
           }
         }
       }
       SOFTID_THROW_UNLESS(element >= 0, "surface point " + std::to_string(p) +
-                                            " lies more than two cells from the simulated body");
+                                            " has no simulated element anywhere in the grid");
     }
     const Eigen::Vector3i c = grid.CellCoords(mesh.element_cell[element]);
     local = (points[p] - grid.origin) / h - c.cast<double>();
+    if (clamp_to_element) {
+      local = local.cwiseMax(0.0).cwiseMin(1.0);
+      embedding.rest_positions[p] = grid.origin + h * (c.cast<double>() + local);
+    }
     embedding.element.push_back(element);
     embedding.weights.push_back(geometry::TrilinearWeights(local));
   }

@@ -28,7 +28,14 @@ struct SurfaceEmbedding {
   }
 };
 
-// @throws std::invalid_argument when a point has no element within two cells.
-SurfaceEmbedding EmbedPoints(const HexMesh& mesh, const std::vector<Eigen::Vector3d>& points);
+// @param clamp_to_element when true, points outside their element are moved to its nearest point
+//   (local coordinates clamped to [0,1]^3; rest_positions updated accordingly), and only elements
+//   at least `min_volume_fraction` full may carry points. Forces use this: a feature thinner than
+//   the grid resolves then pushes on the body where the body is, not on a sliver element that it
+//   would crush (a nearly massless node with negative stress stiffness) or through an
+//   extrapolated lever. Rendering uses the unclamped embedding.
+// @throws std::invalid_argument when the mesh has no element at all.
+SurfaceEmbedding EmbedPoints(const HexMesh& mesh, const std::vector<Eigen::Vector3d>& points,
+                             bool clamp_to_element = false, double min_volume_fraction = 0.0);
 
 }  // namespace softid::fem

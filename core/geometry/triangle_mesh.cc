@@ -211,41 +211,61 @@ TriangleMesh SubdivideToEdgeLength(const TriangleMesh& mesh, double max_edge_len
   SOFTID_THROW_UNLESS(max_edge_length > 0.0 && std::isfinite(max_edge_length),
                       "SubdivideToEdgeLength: max_edge_length = " +
                           std::to_string(max_edge_length) + ": must be positive and finite");
+  // Only edges longer than the limit are split, so a scan with a few long slivers is not refined
+  // everywhere. A triangle's split depends only on which of its edges are split, and both sides
+  // of a shared edge agree, so the result stays watertight.
   const double max_sq = max_edge_length * max_edge_length;
   TriangleMesh current = mesh;
+  auto key_of = [](int a, int b) {
+    return (static_cast<std::uint64_t>(std::min(a, b)) << 32) |
+           static_cast<std::uint32_t>(std::max(a, b));
+  };
   while (true) {
-    bool too_long = false;
-    for (const Eigen::Vector3i& t : current.triangles) {
-      for (int c = 0; c < 3 && !too_long; ++c) {
-        too_long =
-            (current.vertices[t[c]] - current.vertices[t[(c + 1) % 3]]).squaredNorm() > max_sq;
-      }
-      if (too_long) break;
-    }
-    if (!too_long) return current;
-
     TriangleMesh next;
     next.vertices = current.vertices;
-    next.triangles.reserve(current.triangles.size() * 4);
     std::unordered_map<std::uint64_t, int> midpoint_of;
-    midpoint_of.reserve(current.triangles.size() * 2);
-    auto midpoint = [&](int a, int b) {
-      const std::uint64_t key = (static_cast<std::uint64_t>(std::min(a, b)) << 32) |
-                                static_cast<std::uint32_t>(std::max(a, b));
+    auto split = [&](int a, int b) -> int {  // midpoint index, or -1 when the edge is short
+      if ((current.vertices[a] - current.vertices[b]).squaredNorm() <= max_sq) return -1;
       const auto [it, inserted] =
-          midpoint_of.try_emplace(key, static_cast<int>(next.vertices.size()));
+          midpoint_of.try_emplace(key_of(a, b), static_cast<int>(next.vertices.size()));
       if (inserted) next.vertices.push_back(0.5 * (current.vertices[a] + current.vertices[b]));
       return it->second;
     };
+    next.triangles.reserve(current.triangles.size() * 2);
     for (const Eigen::Vector3i& t : current.triangles) {
-      const int m01 = midpoint(t[0], t[1]);
-      const int m12 = midpoint(t[1], t[2]);
-      const int m20 = midpoint(t[2], t[0]);
-      next.triangles.emplace_back(t[0], m01, m20);
-      next.triangles.emplace_back(m01, t[1], m12);
-      next.triangles.emplace_back(m20, m12, t[2]);
-      next.triangles.emplace_back(m01, m12, m20);
+      const int m[3] = {split(t[0], t[1]), split(t[1], t[2]), split(t[2], t[0])};
+      const int marked = (m[0] >= 0) + (m[1] >= 0) + (m[2] >= 0);
+      if (marked == 0) {
+        next.triangles.push_back(t);
+      } else if (marked == 3) {
+        next.triangles.emplace_back(t[0], m[0], m[2]);
+        next.triangles.emplace_back(m[0], t[1], m[1]);
+        next.triangles.emplace_back(m[2], m[1], t[2]);
+        next.triangles.emplace_back(m[0], m[1], m[2]);
+      } else if (marked == 1) {
+        // Rotate so the split edge is (v0, v1); keep the orientation.
+        const int r = m[0] >= 0 ? 0 : (m[1] >= 0 ? 1 : 2);
+        const int v0 = t[r], v1 = t[(r + 1) % 3], v2 = t[(r + 2) % 3], mid = m[r];
+        next.triangles.emplace_back(v0, mid, v2);
+        next.triangles.emplace_back(mid, v1, v2);
+      } else {
+        // Rotate so the unsplit edge is (v0, v1): corner triangle at v2, quad split by the shorter
+        // diagonal.
+        const int r = m[0] < 0 ? 0 : (m[1] < 0 ? 1 : 2);
+        const int v0 = t[r], v1 = t[(r + 1) % 3], v2 = t[(r + 2) % 3];
+        const int m12 = m[(r + 1) % 3], m20 = m[(r + 2) % 3];
+        next.triangles.emplace_back(m12, v2, m20);
+        const auto& x = next.vertices;
+        if ((x[v0] - x[m12]).squaredNorm() <= (x[v1] - x[m20]).squaredNorm()) {
+          next.triangles.emplace_back(v0, v1, m12);
+          next.triangles.emplace_back(v0, m12, m20);
+        } else {
+          next.triangles.emplace_back(v0, v1, m20);
+          next.triangles.emplace_back(v1, m12, m20);
+        }
+      }
     }
+    if (midpoint_of.empty()) return current;
     current = std::move(next);
   }
 }

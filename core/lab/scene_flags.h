@@ -26,7 +26,7 @@ struct SceneFlags {
   std::string stiffness_field;
   std::optional<double> stiffness_halves;
   // Simulation.
-  int cells = 24;
+  int cells = 20;
   double cell_size = 0.0;
   int substeps = 4;
   double fps = 60.0;
