@@ -65,6 +65,7 @@ int RunSynth(const SynthFlags& flags) {
               scene->mesh.vertices.size(), scene->mesh.triangles.size());
   std::printf("  cam*/         16-bit depth PNGs, %.0f object pixels per frame on average\n",
               s.mean_valid_pixels);
+  std::printf("  preview.png   contact sheet of cam0's depth frames\n");
   std::printf("  truth.json    true parameters (E = %.6g Pa, nu = %.3g, rho = %.6g kg/m^3)\n",
               scene->parameters.youngs_modulus, scene->parameters.poisson_ratio,
               scene->parameters.density);

@@ -3,6 +3,7 @@
 #include <fstream>
 
 #include "core/capture/capture.h"
+#include "core/capture/depth_preview.h"
 #include "core/capture/depth_renderer.h"
 #include "core/common/json_fields.h"
 
@@ -109,6 +110,8 @@ Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& 
     if (!file) return Status::IoError("cannot write " + (out / kTruthFileName).string());
   }
   SOFTID_RETURN_IF_ERROR(capture::WriteCapture(out, cap, scene.mesh, frames));
+  // For people: what the first camera saw, as a contact sheet.
+  SOFTID_RETURN_IF_ERROR(capture::WriteDepthPreview(out / kPreviewFileName, frames[0]));
   return summary;
 }
 

@@ -17,6 +17,7 @@ namespace softid::scenes {
 
 inline constexpr const char* kTruthFileName = "truth.json";
 inline constexpr const char* kTruthFormat = "softid-truth/1";
+inline constexpr const char* kPreviewFileName = "preview.png";
 
 struct SynthesisOptions {
   RunOptions run;
@@ -36,7 +37,8 @@ struct SynthesisSummary {
   double mean_valid_pixels = 0.0;  // per frame and camera
 };
 
-// Writes <out>/capture.json, <out>/object.obj, <out>/camN/%06d.png and <out>/truth.json.
+// Writes <out>/capture.json, <out>/object.obj, <out>/camN/%06d.png, <out>/truth.json and
+// <out>/preview.png (a contact sheet of the first camera's frames).
 // Refuses to write into a folder that already holds a capture.json.
 Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& options,
                                     const std::filesystem::path& out,
