@@ -13,45 +13,42 @@
 namespace softid::fem {
 namespace {
 
-// Terminal fall speed of a ball under drag: m g = A_p (c1 v + c2 v^2) with A_p = surface / 4.
-double TerminalSpeed(double drag_linear, double drag_quadratic) {
-  PhysicalParameters p;
-  p.youngs_modulus = 1e5;
-  p.density = 50.0;
-  p.drag_linear = drag_linear;
-  p.drag_quadratic = drag_quadratic;
+// A light ball falling under drag: m g = A_p (c1 v + c2 v^2) at terminal speed, with the
+// projected area A_p taken as a quarter of the surface.
+struct DragFall {
+  geometry::TriangleMesh ball = geometry::MakeSphere(0.1, 3);
+  PhysicalParameters parameters;
   SimulationOptions options;
-  options.cells_along_longest_side = 6;
-  options.time_step = 1.0 / 120.0;
-  Simulator sim(geometry::MakeSphere(0.1, 3), p, options);
-  for (int step = 0; step < 240; ++step) EXPECT_FALSE(sim.Step().diverged);  // 2 s >> m / (c A)
-  return -sim.CentreOfMassVelocity().z();
-}
+  DragFall() {
+    parameters.youngs_modulus = 1e5;
+    parameters.density = 50.0;
+    options.cells_along_longest_side = 6;
+    options.time_step = 1.0 / 120.0;
+  }
+  double Mass() const { return Simulator(ball, parameters, options).total_mass(); }
+  double ProjectedArea() const { return geometry::SurfaceArea(ball) / 4.0; }
+  // Fall speed after 2 s, well past the time constant of the drags tested.
+  double TerminalSpeed(double drag_linear, double drag_quadratic) {
+    parameters.drag_linear = drag_linear;
+    parameters.drag_quadratic = drag_quadratic;
+    Simulator sim(ball, parameters, options);
+    for (int step = 0; step < 240; ++step) EXPECT_FALSE(sim.Step().diverged);
+    return -sim.CentreOfMassVelocity().z();
+  }
+};
 
 TEST(AirDrag, LinearDragReachesTerminalSpeed) {
-  const geometry::TriangleMesh ball = geometry::MakeSphere(0.1, 3);
-  const double projected = geometry::SurfaceArea(ball) / 4.0;
-  PhysicalParameters p;
-  p.density = 50.0;
-  SimulationOptions options;
-  options.cells_along_longest_side = 6;
-  const double mass = Simulator(ball, p, options).total_mass();
-  const double c1 = 30.0;  // terminal ~2 m/s, reached in 2 s (time constant ~0.2 s)
-  const double expected = mass * 9.81 / (c1 * projected);
-  EXPECT_NEAR(TerminalSpeed(c1, 0.0), expected, 0.01 * expected);
+  DragFall fall;
+  const double c1 = 30.0;  // terminal ~2 m/s, time constant ~0.2 s
+  const double expected = fall.Mass() * 9.81 / (c1 * fall.ProjectedArea());
+  EXPECT_NEAR(fall.TerminalSpeed(c1, 0.0), expected, 0.01 * expected);
 }
 
 TEST(AirDrag, QuadraticDragReachesTerminalSpeed) {
-  const geometry::TriangleMesh ball = geometry::MakeSphere(0.1, 3);
-  const double projected = geometry::SurfaceArea(ball) / 4.0;
-  PhysicalParameters p;
-  p.density = 50.0;
-  SimulationOptions options;
-  options.cells_along_longest_side = 6;
-  const double mass = Simulator(ball, p, options).total_mass();
+  DragFall fall;
   const double c2 = 4.0;
-  const double expected = std::sqrt(mass * 9.81 / (c2 * projected));
-  EXPECT_NEAR(TerminalSpeed(0.0, c2), expected, 0.01 * expected);
+  const double expected = std::sqrt(fall.Mass() * 9.81 / (c2 * fall.ProjectedArea()));
+  EXPECT_NEAR(fall.TerminalSpeed(0.0, c2), expected, 0.01 * expected);
 }
 
 // A cantilever whose clamped half is twice as stiff sags by 17/32 of the uniform bar's

@@ -126,9 +126,8 @@ TEST(Simulator, CantileverFrequencyAndEnergyConservation) {
   p.youngs_modulus = 1e8;
   p.density = 1000.0;
   BarSetup bar;
-  const double b = bar.thickness, length = bar.length;
-  const double frequency = 1.875 * 1.875 / (2 * kPi * length * length) *
-                           std::sqrt(p.youngs_modulus * b * b / 12.0 / p.density);
+  const double length = bar.length;
+  const double frequency = testing::BarFirstFrequency(bar, p);
   const double dt = 1.0 / (frequency * 200.0);
   Simulator sim = MakeClampedBar(bar, p, AverageAcceleration(dt));
   const double energy0 = sim.ComputeEnergies().Total();
@@ -157,9 +156,8 @@ TEST(Simulator, RayleighDampingLogDecrement) {
   p.mass_damping = 0.3;
   p.stiffness_damping = 0.002;
   BarSetup bar;
-  const double b = bar.thickness, length = bar.length;
-  const double frequency = 1.875 * 1.875 / (2 * kPi * length * length) *
-                           std::sqrt(p.youngs_modulus * b * b / 12.0 / p.density);
+  const double length = bar.length;
+  const double frequency = testing::BarFirstFrequency(bar, p);
   const double dt = 1.0 / (frequency * 200.0);
   Simulator sim = MakeClampedBar(bar, p, AverageAcceleration(dt));
   // The static deflection is the centre of the oscillation.

@@ -29,6 +29,14 @@ inline Simulator MakeClampedBar(const BarSetup& bar, PhysicalParameters paramete
   return Simulator(mesh, parameters, options, clamp);
 }
 
+// First bending frequency of the clamped bar, Euler-Bernoulli: 1.875^2 / (2 pi L^2) sqrt(EI / rhoA)
+// [Hz], with I / A = b^2 / 12 for the square section.
+inline double BarFirstFrequency(const BarSetup& bar, const PhysicalParameters& p) {
+  const double b = bar.thickness, length = bar.length;
+  return 1.875 * 1.875 / (2.0 * M_PI * length * length) *
+         std::sqrt(p.youngs_modulus * b * b / 12.0 / p.density);
+}
+
 // Mean z displacement of the FE nodes on the free end face (x = L).
 inline double TipDeflection(const Simulator& sim, double length) {
   const auto& mesh = sim.hex_mesh();
