@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
+#include <system_error>
+#include <thread>
 
 #include "core/common/check.h"
 #include "core/fem/corotation.h"
@@ -29,6 +31,12 @@ Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
   m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
   return m;
 }
+
+// Threads for the element loop of Assemble: at most this many, and only on meshes large enough
+// that the loop outweighs starting them (~20 us per thread and assembly) and the elements shared
+// between ranges (run by one thread) are few.
+constexpr int kMaxAssemblyThreads = 4;
+constexpr int kMinElementsPerAssemblyThread = 256;
 
 }  // namespace
 
@@ -79,6 +87,34 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
     const double floor = options.ghost_stiffness_fraction * h * h * h / 8.0;
     for (double& weight : stiffness_weights) weight = std::max(weight, floor);
     element_stiffness_[e] = ElementStiffness(stiffness_weights, h, scale * lambda, scale * mu);
+  }
+
+  // Element ranges of the parallel assembly: a node touched by two ranges is shared.
+  {
+    const int threads = std::clamp(std::min(static_cast<int>(std::thread::hardware_concurrency()),
+                                            mesh_.NumElements() / kMinElementsPerAssemblyThread),
+                                   1, kMaxAssemblyThreads);
+    const size_t num_elements = mesh_.element_nodes.size();
+    auto range_of = [&](size_t e) { return static_cast<int>(e * threads / num_elements); };
+    constexpr int kUntouched = -1, kShared = -2;
+    std::vector<int> node_range(n, kUntouched);
+    for (size_t e = 0; e < num_elements; ++e) {
+      for (int node : mesh_.element_nodes[e]) {
+        int& owner = node_range[node];
+        if (owner == kUntouched)
+          owner = range_of(e);
+        else if (owner != range_of(e))
+          owner = kShared;
+      }
+    }
+    element_chunks_.assign(threads, {});
+    shared_elements_.clear();
+    for (size_t e = 0; e < num_elements; ++e) {
+      const int range = range_of(e);
+      const bool own = std::all_of(mesh_.element_nodes[e].begin(), mesh_.element_nodes[e].end(),
+                                   [&](int node) { return node_range[node] == range; });
+      (own ? element_chunks_[range] : shared_elements_).push_back(static_cast<int>(e));
+    }
   }
 
   fixed_.assign(n, 0);
@@ -181,92 +217,36 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
   const double da_du = dynamic ? 1.0 / (beta * dt * dt) : 0.0;
   const double dv_du = dynamic ? gamma / (beta * dt) : 0.0;
   const double mass_coefficient = da_du + alpha_m * dv_du;
-  const double stiffness_coefficient = 1.0 + beta_k * dv_du;
-  const double h = mesh_.CellSize();
+  ElementTerms terms;
+  terms.dynamic = dynamic;
+  terms.stiffness_damping = beta_k;
+  terms.stiffness_coefficient = 1.0 + beta_k * dv_du;
+  terms.mass_coefficient = mass_coefficient;
 
   assembler_.SetZero();
   residual_.setZero();
+
+  // Elements: the ranges' own elements in parallel, then the shared ones.
+  auto run = [&](const std::vector<int>& elements) {
+    for (int e : elements) AssembleElement(e, terms, u, v);
+  };
+  {
+    std::vector<std::jthread> workers;
+    workers.reserve(element_chunks_.size());
+    size_t started = 1;
+    try {
+      for (; started < element_chunks_.size(); ++started)
+        workers.emplace_back(run, std::cref(element_chunks_[started]));
+    } catch (const std::system_error&) {
+      // No thread to be had: this thread takes over the ranges not started.
+    }
+    run(element_chunks_[0]);
+    for (size_t t = started; t < element_chunks_.size(); ++t) run(element_chunks_[t]);
+  }  // joins the workers
+  run(shared_elements_);
   Eigen::Matrix3d rotation_sum = Eigen::Matrix3d::Zero();
-
-  // Elastic and stiffness-damping forces: r_e = R K l with l = R^T (x + beta v) - X, R the polar
-  // rotation of F at the cell centre. Consistent tangent (d/du, v and a following u by Newmark):
-  //   c_k R K R^T + R (-[sigma_a]x + sum_b K_ab [l_b]x) W_c,   sigma = K l,
-  // where W_c = (tr(S) I - S)^-1 [g_c]x R^T is dw/dx_c of the rotation's spin (dR = R [w]x,
-  // F = R S); see core/fem/doc/corotation.md. The second term is not symmetric.
-  const auto& centre_gradients = CentreGradientsUnitCell();
-  std::array<Eigen::Vector3d, 8> x;
-  for (int e = 0; e < mesh_.NumElements(); ++e) {
-    const auto& nodes = mesh_.element_nodes[e];
-    Vector24d local;
-    for (int c = 0; c < 8; ++c) {
-      const Eigen::Vector3d& p = mesh_.rest_positions[nodes[c]];
-      x[c] = p + u.segment<3>(3 * nodes[c]);
-    }
-    const Eigen::Matrix3d f = DeformationGradient(x, h);
-    const Eigen::Matrix3d r = PolarRotation(f);
-    element_rotation_[e] = r;
-    rotation_sum += mesh_.element_weights[e].volume * r;
-    for (int c = 0; c < 8; ++c) {
-      Eigen::Vector3d y = x[c];
-      if (dynamic && beta_k > 0.0) y += beta_k * v.segment<3>(3 * nodes[c]);
-      local.segment<3>(3 * c).noalias() = r.transpose() * y - mesh_.rest_positions[nodes[c]];
-    }
-    const Matrix24d& k = element_stiffness_[e];
-    const Vector24d sigma = k * local;
-    for (int c = 0; c < 8; ++c)
-      residual_.segment<3>(3 * nodes[c]).noalias() += r * sigma.segment<3>(3 * c);
-
-    // Spin derivative W_c; skipped when S is degenerate (two singular values summing to zero
-    // only under inversion), where the rotation is not differentiable.
-    const Eigen::Matrix3d s = r.transpose() * f;
-    const Eigen::Matrix3d spin = s.trace() * Eigen::Matrix3d::Identity() - s;
-    const bool geometric = std::abs(spin.determinant()) > 1e-12;
-    std::array<Eigen::Matrix3d, 8> w;
-    std::array<Eigen::Matrix3d, 8> q;
-    if (geometric) {
-      const Eigen::Matrix3d spin_inverse = spin.inverse();
-      for (int c = 0; c < 8; ++c) {
-        w[c] = spin_inverse * Skew(centre_gradients[c] / h) * r.transpose();
-        Eigen::Matrix3d z = -Skew(sigma.segment<3>(3 * c));
-        for (int b = 0; b < 8; ++b)
-          z.noalias() += k.block<3, 3>(3 * c, 3 * b) * Skew(local.segment<3>(3 * b));
-        q[c] = r * z;
-      }
-    }
-    Matrix24d element_jacobian;
-    for (int i = 0; i < 8; ++i) {
-      for (int j = 0; j < 8; ++j) {
-        element_jacobian.block<3, 3>(3 * i, 3 * j).noalias() =
-            stiffness_coefficient * (r * k.block<3, 3>(3 * i, 3 * j) * r.transpose());
-      }
-    }
-    if (geometric) {
-      Matrix24d with_geometric = element_jacobian;
-      for (int i = 0; i < 8; ++i) {
-        for (int j = 0; j < 8; ++j)
-          with_geometric.block<3, 3>(3 * i, 3 * j).noalias() += q[i] * w[j];
-      }
-      // Projected Newton: a strongly compressed element's stress stiffness can outweigh its
-      // inertia and make the step matrix indefinite (GMRES then stalls). Keep the exact term only
-      // where the element's own block, with its share of the inertia, stays positive definite.
-      // Below a few percent strain the stress stiffness is far too small to matter.
-      constexpr double kCheckStrain = 0.05;
-      bool keep = !exact_tangent_only_if_definite_ ||
-                  (s - Eigen::Matrix3d::Identity()).lpNorm<Eigen::Infinity>() < kCheckStrain;
-      if (!keep) {
-        Matrix24d symmetric = 0.5 * (with_geometric + with_geometric.transpose());
-        symmetric.diagonal().array() +=
-            mass_coefficient * parameters_.density * mesh_.element_weights[e].volume / 8.0;
-        keep = Eigen::LLT<Matrix24d>(symmetric).info() == Eigen::Success;
-      }
-      if (keep) element_jacobian = with_geometric;
-    }
-    for (int i = 0; i < 8; ++i) {
-      for (int j = 0; j < 8; ++j) {
-        assembler_.AddBlock(e, i, j, element_jacobian.block<3, 3>(3 * i, 3 * j));
-      }
-    }
-  }
+  for (int e = 0; e < mesh_.NumElements(); ++e)
+    rotation_sum += mesh_.element_weights[e].volume * element_rotation_[e];
 
   // Inertia, mass damping, gravity.
   for (int i = 0; i < mesh_.NumNodes(); ++i) {
@@ -314,6 +294,93 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
     assembler_.EliminateNode(i);
   }
   return PolarRotation(rotation_sum);
+}
+
+void Simulator::AssembleElement(int e, const ElementTerms& terms, const Eigen::VectorXd& u,
+                                const Eigen::VectorXd& v) {
+  // Elastic and stiffness-damping forces: r_e = R K l with l = R^T (x + beta v) - X, R the polar
+  // rotation of F at the cell centre. Consistent tangent (d/du, v and a following u by Newmark):
+  //   c_k R K R^T + R (-[sigma_a]x + sum_b K_ab [l_b]x) W_c,   sigma = K l,
+  // where W_c = (tr(S) I - S)^-1 [g_c]x R^T is dw/dx_c of the rotation's spin (dR = R [w]x,
+  // F = R S); see core/fem/doc/corotation.md. The second term is not symmetric.
+  const double h = mesh_.CellSize();
+  const auto& centre_gradients = CentreGradientsUnitCell();
+  const auto& nodes = mesh_.element_nodes[e];
+  std::array<Eigen::Vector3d, 8> x;
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d& p = mesh_.rest_positions[nodes[c]];
+    x[c] = p + u.segment<3>(3 * nodes[c]);
+  }
+  const Eigen::Matrix3d f = DeformationGradient(x, h);
+  const Eigen::Matrix3d r = PolarRotation(f);
+  const Eigen::Matrix3d rt = r.transpose();
+  element_rotation_[e] = r;
+  const bool damp = terms.dynamic && terms.stiffness_damping > 0.0;
+  Vector24d local;
+  for (int c = 0; c < 8; ++c) {
+    Eigen::Vector3d y = x[c];
+    if (damp) y += terms.stiffness_damping * v.segment<3>(3 * nodes[c]);
+    local.segment<3>(3 * c).noalias() = rt * y - mesh_.rest_positions[nodes[c]];
+  }
+  const Matrix24d& k = element_stiffness_[e];
+  const Vector24d sigma = k * local;
+  for (int c = 0; c < 8; ++c)
+    residual_.segment<3>(3 * nodes[c]).noalias() += r * sigma.segment<3>(3 * c);
+
+  // Corotated stiffness blocks c_k R K_ij R^T; K is symmetric, so block (j, i) is the transpose
+  // of block (i, j).
+  std::array<Eigen::Matrix3d, 64> stiffness;
+  for (int i = 0; i < 8; ++i) {
+    for (int j = i; j < 8; ++j) {
+      const Eigen::Matrix3d rk = r * k.block<3, 3>(3 * i, 3 * j);
+      stiffness[8 * i + j].noalias() = terms.stiffness_coefficient * (rk * rt);
+      if (j != i) stiffness[8 * j + i] = stiffness[8 * i + j].transpose();
+    }
+  }
+
+  // Spin derivative W_c; skipped when S is degenerate (two singular values summing to zero
+  // only under inversion), where the rotation is not differentiable.
+  const Eigen::Matrix3d s = rt * f;
+  const Eigen::Matrix3d spin = s.trace() * Eigen::Matrix3d::Identity() - s;
+  bool geometric = std::abs(spin.determinant()) > 1e-12;
+  std::array<Eigen::Matrix3d, 8> w;
+  std::array<Eigen::Matrix3d, 8> q;
+  if (geometric) {
+    const Eigen::Matrix3d spin_inverse = spin.inverse();
+    std::array<Eigen::Matrix3d, 8> skew_local;
+    for (int b = 0; b < 8; ++b) skew_local[b] = Skew(local.segment<3>(3 * b));
+    for (int c = 0; c < 8; ++c) {
+      w[c].noalias() = spin_inverse * (Skew(centre_gradients[c] / h) * rt);
+      Eigen::Matrix3d z = -Skew(sigma.segment<3>(3 * c));
+      for (int b = 0; b < 8; ++b) z.noalias() += k.block<3, 3>(3 * c, 3 * b) * skew_local[b];
+      q[c].noalias() = r * z;
+    }
+    // Projected Newton: a strongly compressed element's stress stiffness can outweigh its
+    // inertia and make the step matrix indefinite (GMRES then stalls). Keep the exact term only
+    // where the element's own block, with its share of the inertia, stays positive definite.
+    // Below a few percent strain the stress stiffness is far too small to matter.
+    constexpr double kCheckStrain = 0.05;
+    if (exact_tangent_only_if_definite_ &&
+        !((s - Eigen::Matrix3d::Identity()).lpNorm<Eigen::Infinity>() < kCheckStrain)) {
+      Matrix24d symmetric;
+      for (int i = 0; i < 8; ++i) {
+        for (int j = 0; j < 8; ++j) {
+          symmetric.block<3, 3>(3 * i, 3 * j).noalias() = stiffness[8 * i + j] + q[i] * w[j];
+        }
+      }
+      symmetric = 0.5 * (symmetric + symmetric.transpose()).eval();
+      symmetric.diagonal().array() +=
+          terms.mass_coefficient * parameters_.density * mesh_.element_weights[e].volume / 8.0;
+      geometric = Eigen::LLT<Matrix24d>(symmetric).info() == Eigen::Success;
+    }
+  }
+  for (int i = 0; i < 8; ++i) {
+    for (int j = 0; j < 8; ++j) {
+      Eigen::Matrix3d& block = stiffness[8 * i + j];
+      if (geometric) block.noalias() += q[i] * w[j];
+      assembler_.AddBlock(e, i, j, block);
+    }
+  }
 }
 
 StepSummary Simulator::NewtonSolve(Mode mode) {

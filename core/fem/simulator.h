@@ -7,7 +7,8 @@
 // rotations are recomputed from u, so the adjoint can re-run the assembly of any step from the
 // stored states without storing matrices.
 //
-// Thread-compatibility: one Simulator per thread.
+// Thread-compatibility: one Simulator per thread. The element loop of the assembly runs on up to
+// 4 threads of its own on large meshes, with results independent of their timing.
 #pragma once
 
 #include <Eigen/Core>
@@ -104,6 +105,18 @@ class Simulator {
   // the Newmark velocity and acceleration implied by u. Returns the body rotation.
   Eigen::Matrix3d Assemble(Mode mode, const Eigen::VectorXd& u, const Eigen::VectorXd& v,
                            const Eigen::VectorXd& a);
+  // Coefficients of one assembly shared by all elements.
+  struct ElementTerms {
+    bool dynamic = false;
+    double stiffness_damping = 0.0;      // beta_k, applied when dynamic
+    double stiffness_coefficient = 1.0;  // of R K R^T in the tangent
+    double mass_coefficient = 0.0;       // of the lumped mass in the tangent
+  };
+  // One element's force (into residual_), tangent blocks (into assembler_) and rotation (into
+  // element_rotation_). Touches only the element's own nodes, so elements sharing no node may be
+  // assembled concurrently.
+  void AssembleElement(int e, const ElementTerms& terms, const Eigen::VectorXd& u,
+                       const Eigen::VectorXd& v);
   // Largest fraction of a Newton update (<= 1) that keeps every surface point above
   // min(its distance, 0) - 4 contact smoothing lengths.
   double ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update) const;
@@ -129,6 +142,13 @@ class Simulator {
   void UpdateLaggedNormalForces();
   std::vector<Matrix24d, Eigen::aligned_allocator<Matrix24d>> element_stiffness_;
   std::vector<Eigen::Matrix3d> element_rotation_;
+  // Parallel element loop of Assemble: the elements are cut into one contiguous range (a slab of
+  // the grid) per thread; thread t assembles the elements of range t that share no node with
+  // another range (element_chunks_[t], ascending), then one thread the rest (shared_elements_,
+  // ascending). Writes of different threads never overlap and every matrix and residual entry is
+  // summed in a fixed order, whatever the thread timing.
+  std::vector<std::vector<int>> element_chunks_;
+  std::vector<int> shared_elements_;
   Eigen::VectorXd mass_;
   std::vector<char> fixed_;
   ContactLaw contact_;
