@@ -116,56 +116,48 @@ TEST(TriangleMesh, ReadsAsciiStlAndMergesVertices) {
   EXPECT_NEAR(SignedVolume(*read), 0.1 * 0.1 * 0.1 / 6.0, 1e-9);
 }
 
+// Reading `path` fails with `code` and the message names the path.
+void ExpectRejectedNamingPath(const std::filesystem::path& path, StatusCode code) {
+  const Result<TriangleMesh> read = ReadTriangleMesh(path);
+  ASSERT_FALSE(read.ok());
+  EXPECT_EQ(read.status().code(), code);
+  EXPECT_NE(read.status().message().find(path.string()), std::string::npos)
+      << read.status().message();
+}
+
 // A missing file is NotFound and the message names the path.
 TEST(TriangleMesh, MissingFileNamesPath) {
   const auto path = TempPath("does_not_exist.obj");
-  const Result<TriangleMesh> read = ReadTriangleMesh(path);
-  ASSERT_FALSE(read.ok());
-  EXPECT_EQ(read.status().code(), StatusCode::kNotFound);
-  EXPECT_NE(read.status().message().find(path.string()), std::string::npos)
-      << read.status().message();
+  ExpectRejectedNamingPath(path, StatusCode::kNotFound);
 }
 
 // A garbage file is InvalidArgument and the message names the path.
 TEST(TriangleMesh, GarbageFileNamesPath) {
   const auto path = TempPath("garbage.ply");
   WriteText(path, "ply\nformat nonsense 7\n\x01\x02\x03 not a mesh at all\n");
-  const Result<TriangleMesh> read = ReadTriangleMesh(path);
-  ASSERT_FALSE(read.ok());
-  EXPECT_EQ(read.status().code(), StatusCode::kInvalidArgument);
-  EXPECT_NE(read.status().message().find(path.string()), std::string::npos)
-      << read.status().message();
+  ExpectRejectedNamingPath(path, StatusCode::kInvalidArgument);
 }
 
 // An empty file is InvalidArgument and the message names the path.
 TEST(TriangleMesh, EmptyFileNamesPath) {
   const auto path = TempPath("empty.stl");
   WriteText(path, "");
-  const Result<TriangleMesh> read = ReadTriangleMesh(path);
-  ASSERT_FALSE(read.ok());
-  EXPECT_EQ(read.status().code(), StatusCode::kInvalidArgument);
-  EXPECT_NE(read.status().message().find(path.string()), std::string::npos)
-      << read.status().message();
+  ExpectRejectedNamingPath(path, StatusCode::kInvalidArgument);
 }
 
 // A point cloud OBJ (vertices only) is rejected for having no triangles.
 TEST(TriangleMesh, NoTrianglesIsAnError) {
   const auto path = TempPath("points.obj");
   WriteText(path, "v 0 0 0\nv 1 0 0\nv 0 1 0\n");
-  const Result<TriangleMesh> read = ReadTriangleMesh(path);
-  ASSERT_FALSE(read.ok());
-  EXPECT_EQ(read.status().code(), StatusCode::kInvalidArgument);
-  EXPECT_NE(read.status().message().find(path.string()), std::string::npos);
+  ExpectRejectedNamingPath(path, StatusCode::kInvalidArgument);
 }
 
 // Non-finite coordinates are rejected naming the path.
 TEST(TriangleMesh, NonFiniteCoordinatesAreAnError) {
   const auto path = TempPath("nan.obj");
   WriteText(path, "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n");
+  ExpectRejectedNamingPath(path, StatusCode::kInvalidArgument);
   const Result<TriangleMesh> read = ReadTriangleMesh(path);
-  ASSERT_FALSE(read.ok());
-  EXPECT_EQ(read.status().code(), StatusCode::kInvalidArgument);
-  EXPECT_NE(read.status().message().find(path.string()), std::string::npos);
   EXPECT_NE(read.status().message().find("non-finite"), std::string::npos)
       << read.status().message();
 }
