@@ -9,4 +9,4 @@ out=${SOFTID_OUT:-$(mktemp -d /tmp/softid-capture.XXXXXX)}
 "$build_dir/core/lab/softid-lab" synth --scene torus-drop --out "$out"
 echo
 echo "files:"
-(cd "$out" && ls -d capture.json truth.json object.obj cam*/ && echo "frames per camera: $(ls cam0 | wc -l)")
+(cd "$out" && ls -d capture.json truth.json object.obj preview.png cam*/ && echo "frames per camera: $(ls cam0 | wc -l)")
