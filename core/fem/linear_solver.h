@@ -38,7 +38,7 @@ class LinearSolver {
   Status Factorize(const Matrix& a, const Eigen::Matrix3d& rotation);
   bool HasFactor() const;
   int num_factorizations() const { return num_factorizations_; }
-  // Ski-rental rule for renewing the factor: true once the CG time spent beyond what the fresh
+  // Ski-rental rule for renewing the factor: true once the GMRES time spent beyond what the fresh
   // factor needed (iterations above the first solve after factorising) exceeds the measured time
   // of one factorisation. Both costs are measured, so the rule adapts to the problem size.
   bool RefactorPays() const;
@@ -58,7 +58,7 @@ class LinearSolver {
   double factor_seconds_ = 0.0;         // last factorisation
   double seconds_per_iteration_ = 0.0;  // running estimate
   int baseline_iterations_ = -1;        // first solve after the factorisation
-  double excess_seconds_ = 0.0;         // CG time beyond the baseline since the factorisation
+  double excess_seconds_ = 0.0;         // GMRES time beyond the baseline since the factorisation
   // Work storage, kept to avoid allocation per solve: Krylov basis V, preconditioned basis Z,
   // Hessenberg matrix H, Givens rotations and the rotated residual g.
   Eigen::MatrixXd basis_, preconditioned_;

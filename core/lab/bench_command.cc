@@ -52,7 +52,7 @@ int RunBench(const BenchFlags& flags) {
   std::printf("softid-lab bench: torus-drop, first %.2f s, %d substeps at %.0f fps (dt = %.3g s)\n",
               flags.seconds, flags.substeps, flags.fps, 1.0 / (flags.fps * flags.substeps));
   std::printf("%10s %8s %8s %10s %10s %10s %10s %8s\n", "cells", "nodes", "res", "setup_s",
-              "ms/step", "newton/st", "cg/step", "refacts");
+              "ms/step", "newton/st", "gmres/st", "refacts");
   std::vector<double> log_cells, log_ms;
   double ms_at_3000 = -1.0;
   for (int target : flags.target_cells) {
