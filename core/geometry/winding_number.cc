@@ -11,6 +11,12 @@
 namespace softid::geometry {
 namespace {
 
+// Area times unit normal of a triangle [m^2].
+Eigen::Vector3d AreaNormal(const TriangleMesh& mesh, const Eigen::Vector3i& tri) {
+  return 0.5 * (mesh.vertices[tri[1]] - mesh.vertices[tri[0]])
+                   .cross(mesh.vertices[tri[2]] - mesh.vertices[tri[0]]);
+}
+
 constexpr int kLeafSize = 8;
 constexpr int kMaxTreeDepth = 96;
 
@@ -78,9 +84,7 @@ int WindingNumber::Build(int begin, int end, std::vector<int>* order,
   for (int i = begin; i < end; ++i) {
     const int t = (*order)[i];
     const Eigen::Vector3i& tri = mesh.triangles[t];
-    const Eigen::Vector3d area_normal =
-        0.5 * (mesh.vertices[tri[1]] - mesh.vertices[tri[0]])
-                  .cross(mesh.vertices[tri[2]] - mesh.vertices[tri[0]]);
+    const Eigen::Vector3d area_normal = AreaNormal(mesh, tri);
     const double a = area_normal.norm();
     area += a;
     weighted += a * centroids[t];
@@ -97,9 +101,7 @@ int WindingNumber::Build(int begin, int end, std::vector<int>* order,
   for (int i = begin; i < end; ++i) {
     const int t = (*order)[i];
     const Eigen::Vector3i& tri = mesh.triangles[t];
-    const Eigen::Vector3d area_normal =
-        0.5 * (mesh.vertices[tri[1]] - mesh.vertices[tri[0]])
-                  .cross(mesh.vertices[tri[2]] - mesh.vertices[tri[0]]);
+    const Eigen::Vector3d area_normal = AreaNormal(mesh, tri);
     second += (centroids[t] - center) * area_normal.transpose();
     // Mean of (x - c)(x - c)^T over the triangle: (sum u_i u_i^T + s s^T) / 12, u_i = corner - c.
     const Eigen::Vector3d u0 = mesh.vertices[tri[0]] - center, u1 = mesh.vertices[tri[1]] - center,
