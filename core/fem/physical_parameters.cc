@@ -241,6 +241,7 @@ const char* ParameterUnit(const std::string& name) {
       {"initial_velocity", "m/s"},
       {"initial_angular_velocity", "rad/s"},
       {"ground", "m"},
+      {"ground_plane", "m"},
       {"contact_stiffness", "Pa/m"},
       {"contact_damping", "s"},
       {"friction_coefficient", "1"},

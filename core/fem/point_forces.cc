@@ -39,6 +39,8 @@ PointForce GroundContactForce(const ContactLaw& law, double area, const Eigen::V
   if (law.damping > 0.0) {
     out.force -= law.damping * normal_stiffness * n.dot(v) * n;
     out.damping += law.damping * normal_stiffness * nnt;
+    // d sigma / d d = -a sigma (1 - sigma).
+    out.stiffness_indefinite = (-law.damping * k_area * a * sigma * (1.0 - sigma) * n.dot(v)) * nnt;
   }
   if (friction) {
     const Eigen::Matrix3d tangential = Eigen::Matrix3d::Identity() - nnt;

@@ -13,6 +13,10 @@ struct PointForce {
   Eigen::Vector3d force = Eigen::Vector3d::Zero();      // f [N]
   Eigen::Matrix3d stiffness = Eigen::Matrix3d::Zero();  // -df/dx [N/m]
   Eigen::Matrix3d damping = Eigen::Matrix3d::Zero();    // -df/dv [N s/m]
+  // The rest of -df/dx, which can be indefinite: the position dependence of the normal damping
+  // (its coefficient follows the penalty's slope). Newton leaves it out of its tangent, the exact
+  // step Jacobian (adjoint) includes it.
+  Eigen::Matrix3d stiffness_indefinite = Eigen::Matrix3d::Zero();  // [N/m]
 };
 
 struct ContactLaw {

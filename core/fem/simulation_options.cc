@@ -43,6 +43,9 @@ Status SimulationOptions::Validate() const {
   if (max_linear_iterations < 1) {
     return Invalid("max_linear_iterations", max_linear_iterations, "must be at least 1");
   }
+  if (!(adjoint_linear_tolerance > 0.0)) {
+    return Invalid("adjoint_linear_tolerance", adjoint_linear_tolerance, "must be positive");
+  }
   if (!(contact_smoothing >= 0.0) || !std::isfinite(contact_smoothing)) {
     return Invalid("contact_smoothing", contact_smoothing, "must be non-negative and finite");
   }

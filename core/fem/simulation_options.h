@@ -43,6 +43,9 @@ struct SimulationOptions {
   // (torus-drop at 3k cells: 1e-6 -> 1e-3 is 1.5x faster, same state to 6 digits).
   double linear_tolerance = 1e-3;  // relative residual [-], > 0
   int max_linear_iterations = 500;  // [-], >= 1
+  // Relative residual of the adjoint's transposed solves [-], > 0. Unlike the forward solves, an
+  // inexact adjoint solve is an error in the gradient itself.
+  double adjoint_linear_tolerance = 1e-9;
 
   // Width of the smooth onset of contact force (softplus length) [m]; 0 selects 1e-3 L, L the
   // longest side of the rest mesh.

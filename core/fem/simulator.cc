@@ -70,25 +70,6 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
                                  options.min_force_volume_fraction);
   surface_areas_ = geometry::VertexAreas(surface_);
 
-  // Lumped mass and element stiffness (fixed for the whole run).
-  mass_ = Eigen::VectorXd::Zero(n);
-  element_stiffness_.resize(mesh_.NumElements());
-  element_rotation_.assign(mesh_.NumElements(), Eigen::Matrix3d::Identity());
-  const double lambda = parameters.LameLambda();
-  const double mu = parameters.LameMu();
-  for (int e = 0; e < mesh_.NumElements(); ++e) {
-    const auto& w = mesh_.element_weights[e];
-    for (int c = 0; c < 8; ++c)
-      mass_[mesh_.element_nodes[e][c]] += parameters.density * w.volume / 8.0;
-    const double scale = parameters.stiffness_field.Scale(mesh_.ElementCentre(e));
-    // Ghost stiffness (as in CutFEM): nearly empty octants keep a small floor of stiffness, so
-    // nodes that only touch slivers of material are not free to be pushed around by contact.
-    std::array<double, 8> stiffness_weights = w.octant_volume;
-    const double floor = options.ghost_stiffness_fraction * h * h * h / 8.0;
-    for (double& weight : stiffness_weights) weight = std::max(weight, floor);
-    element_stiffness_[e] = ElementStiffness(stiffness_weights, h, scale * lambda, scale * mu);
-  }
-
   // Element ranges of the parallel assembly: a node touched by two ranges is shared.
   {
     const int threads = std::clamp(std::min(static_cast<int>(std::thread::hardware_concurrency()),
@@ -122,33 +103,69 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
     for (int i = 0; i < n; ++i) fixed_[i] = fixed_region->contains(mesh_.rest_positions[i]) ? 1 : 0;
   }
 
+  assembler_ = ElementAssembler(n, mesh_.element_nodes);
+  residual_.resize(3 * n);
+  update_.resize(3 * n);
+  ApplyParameters();
+}
+
+void Simulator::SetParameters(const PhysicalParameters& parameters) {
+  ThrowIfError(parameters.Validate());
+  parameters_ = parameters;
+  ApplyParameters();
+}
+
+void Simulator::ApplyParameters() {
+  const PhysicalParameters& parameters = parameters_;
+  const double h = mesh_.CellSize();
+  const int n = mesh_.NumNodes();
+  // Lumped mass and element stiffness (fixed for the whole run).
+  mass_ = Eigen::VectorXd::Zero(n);
+  element_stiffness_.resize(mesh_.NumElements());
+  element_rotation_.assign(mesh_.NumElements(), Eigen::Matrix3d::Identity());
+  element_stiffness_weights_.resize(mesh_.NumElements());
+  element_scale_.resize(mesh_.NumElements());
+  const double lambda = parameters.LameLambda();
+  const double mu = parameters.LameMu();
+  for (int e = 0; e < mesh_.NumElements(); ++e) {
+    const auto& w = mesh_.element_weights[e];
+    for (int c = 0; c < 8; ++c)
+      mass_[mesh_.element_nodes[e][c]] += parameters.density * w.volume / 8.0;
+    const double scale = parameters.stiffness_field.Scale(mesh_.ElementCentre(e));
+    // Ghost stiffness (as in CutFEM): nearly empty octants keep a small floor of stiffness, so
+    // nodes that only touch slivers of material are not free to be pushed around by contact.
+    std::array<double, 8> stiffness_weights = w.octant_volume;
+    const double floor = options_.ghost_stiffness_fraction * h * h * h / 8.0;
+    for (double& weight : stiffness_weights) weight = std::max(weight, floor);
+    element_stiffness_[e] = ElementStiffness(stiffness_weights, h, scale * lambda, scale * mu);
+    element_stiffness_weights_[e] = stiffness_weights;
+    element_scale_[e] = scale;
+  }
+
+  contact_ = ContactLaw();
   if (parameters.ground) {
     contact_.plane = *parameters.ground;
     contact_.stiffness = parameters.contact_stiffness > 0.0
                              ? parameters.contact_stiffness
                              : 100.0 * parameters.youngs_modulus / length_;
     contact_.smoothing =
-        options.contact_smoothing > 0.0 ? options.contact_smoothing : 1e-3 * length_;
+        options_.contact_smoothing > 0.0 ? options_.contact_smoothing : 1e-3 * length_;
     contact_.damping = parameters.contact_damping;
     contact_.friction_coefficient = parameters.friction_coefficient;
-    contact_.friction_velocity_scale = options.friction_velocity_scale;
+    contact_.friction_velocity_scale = options_.friction_velocity_scale;
   }
   has_surface_forces_ = parameters.ground.has_value() || parameters.drag_linear > 0.0 ||
                         parameters.drag_quadratic > 0.0;
 
-  assembler_ = ElementAssembler(n, mesh_.element_nodes);
-  residual_.resize(3 * n);
-  update_.resize(3 * n);
   Reset();
 
   // Reference factor: the step matrix at rest (no rotation, no contact).
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(3 * n);
-  const ContactLaw saved = contact_;
   const bool saved_forces = has_surface_forces_;
   has_surface_forces_ = false;
   Assemble(Mode::kDynamic, zero, zero, zero);
   has_surface_forces_ = saved_forces;
-  contact_ = saved;
+  solver_ = LinearSolver();
   ThrowIfError(solver_.Factorize(assembler_.matrix(), Eigen::Matrix3d::Identity()));
 }
 
@@ -274,9 +291,11 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
                                              surface_areas_[p], vp);
         f.force += drag.force;
         f.damping += drag.damping;
+        f.stiffness_indefinite += drag.stiffness_indefinite;
       }
       if (f.force.isZero(0.0) && f.stiffness.isZero(0.0) && f.damping.isZero(0.0)) continue;
-      const Eigen::Matrix3d jacobian = f.stiffness + dv_du * f.damping;
+      Eigen::Matrix3d jacobian = f.stiffness + dv_du * f.damping;
+      if (!exact_tangent_only_if_definite_) jacobian += f.stiffness_indefinite;
       const int e = force_embedding_.element[p];
       const auto& w = force_embedding_.weights[p];
       const auto& nodes = mesh_.element_nodes[e];

@@ -20,6 +20,7 @@
 #include "core/fem/hex_element.h"
 #include "core/fem/hex_mesh.h"
 #include "core/fem/linear_solver.h"
+#include "core/fem/parameter_gradient.h"
 #include "core/fem/physical_parameters.h"
 #include "core/fem/point_forces.h"
 #include "core/fem/simulation_options.h"
@@ -33,6 +34,11 @@ namespace softid::fem {
 struct SimulationState {
   Eigen::VectorXd u, v, a;
   double time = 0.0;  // [s]
+};
+
+// Derivatives of a scalar loss with respect to a SimulationState's u, v and a (the adjoint state).
+struct StateAdjoint {
+  Eigen::VectorXd u, v, a;
 };
 
 struct StepSummary {
@@ -74,6 +80,12 @@ class Simulator {
   double characteristic_length() const { return length_; }
   const ContactLaw& contact_law() const { return contact_; }
 
+  // Replaces the physical parameters, keeping the grid, the embedding and the surface (which
+  // depend only on the rest mesh and the options), and resets to t = 0. Much cheaper than a new
+  // Simulator: the optimiser calls this once per cost evaluation.
+  // @throws std::invalid_argument naming the field when parameters are invalid.
+  void SetParameters(const PhysicalParameters& parameters);
+
   const SimulationState& state() const { return state_; }
   void SetState(const SimulationState& state);
   // Back to t = 0: u = 0, v from the initial linear and angular velocity, a from the equations of
@@ -91,6 +103,21 @@ class Simulator {
   // adjoint and for tests.
   void EvaluateStepResidual(const Eigen::VectorXd& u_next, Eigen::VectorXd* residual,
                             Eigen::SparseMatrix<double>* jacobian);
+
+  // Discrete adjoint of one Step() from `previous` to `next` (the state Step() produced from
+  // `previous` with the current parameters). On entry `adjoint` holds dL/d(next) through every
+  // later use of `next`; on return it holds dL/d(previous) through `next` (the caller adds any
+  // direct dependence of L on `previous`). d L / d parameters through this step is added to
+  // `gradient`. One transposed solve with the exact step Jacobian, re-assembled from the states:
+  // nothing per step is stored but the states. Leaves the simulator in state `previous`.
+  // Fails (Internal) when the transposed system cannot be solved.
+  Status BackpropagateStep(const SimulationState& previous, const SimulationState& next,
+                           StateAdjoint* adjoint, ParameterGradient* gradient);
+  // Adjoint of Reset(): adds d L / d parameters through the initial state (its velocity from the
+  // initial linear and angular velocity, its acceleration from the equations of motion), given
+  // dL/d(initial state) in `adjoint`. `initial` is the state Reset() produced.
+  void BackpropagateInitialState(const SimulationState& initial, const StateAdjoint& adjoint,
+                                 ParameterGradient* gradient);
 
   // Deformed positions of the surface vertices [m].
   std::vector<Eigen::Vector3d> SurfacePositions() const;
@@ -125,6 +152,22 @@ class Simulator {
   double FrictionStepLimit(const Eigen::VectorXd& v, const Eigen::VectorXd& update) const;
   void NewmarkKinematics(const Eigen::VectorXd& u, Eigen::VectorXd* v, Eigen::VectorXd* a) const;
   Eigen::VectorXd InitialAcceleration(const Eigen::VectorXd& v);
+  // Mass, element stiffness and contact law from parameters_; refactorises the reference.
+  void ApplyParameters();
+  // The adjoint of the step residual r(u, v, a; u_previous, parameters) (u_previous enters through
+  // the lagged friction normal force) for multiplier lambda: sets velocity_adjoint = (dr/dv)^T
+  // lambda and previous_adjoint = -(dr/du_previous)^T lambda, and adds -lambda^T dr/dparameters
+  // to `gradient`. (dr/da)^T lambda is M lambda.
+  void ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd& v, const Eigen::VectorXd& a,
+                       const Eigen::VectorXd& u_previous, const Eigen::VectorXd& lambda,
+                       Eigen::VectorXd* velocity_adjoint, Eigen::VectorXd* previous_adjoint,
+                       ParameterGradient* gradient);
+  // Per element the shear part of the stiffness, ElementStiffness(weights, h, 0, 1), without the
+  // stiffness field's scale: d K / d poisson_ratio needs it. Built on the first backward pass.
+  void BuildShearStiffness();
+  std::vector<Matrix24d, Eigen::aligned_allocator<Matrix24d>> element_shear_stiffness_;
+  std::vector<std::array<double, 8>> element_stiffness_weights_;
+  std::vector<double> element_scale_;  // stiffness field scale per element
   StepSummary NewtonSolve(Mode mode);
 
   PhysicalParameters parameters_;

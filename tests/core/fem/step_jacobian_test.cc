@@ -19,6 +19,7 @@ TEST(StepJacobian, MatchesFiniteDifferences) {
   p.mass_damping = 0.5;
   p.stiffness_damping = 0.02;
   p.friction_coefficient = 0.4;
+  p.contact_damping = 0.003;
   p.drag_linear = 0.3;
   p.drag_quadratic = 0.8;
   p.ground = GroundPlane{Eigen::Vector3d(0.1, 0.0, 1.0).normalized(), 0.0};

@@ -1,0 +1,265 @@
+// The discrete adjoint of Simulator::Step and Simulator::Reset (Weiss et al. 2020, Sec. 4.3), with
+// the derivatives of the step residual with respect to every physical parameter.
+//
+// Step n -> n+1 solves r(u', V(u', s), A(u', s); u, p) = 0 for u', where s = (u, v, a) is the
+// state at step n, V and A are the Newmark velocity and acceleration, and u enters r also through
+// the lagged friction normal force. With J = dr/du' (exact, total), the adjoint of u' is
+//   J^T lambda = u'_bar + (dV/du') v'_bar + (dA/du') a'_bar,
+// the parameters receive -lambda^T dr/dp, and the state s receives its explicit share through V,
+// A and the lagged force. See core/doc/notation.md for the symbols.
+#include <cmath>
+
+#include "core/common/check.h"
+#include "core/fem/corotation.h"
+#include "core/fem/hex_element.h"
+#include "core/fem/point_force_derivatives.h"
+#include "core/fem/simulator.h"
+
+namespace softid::fem {
+
+void Simulator::BuildShearStiffness() {
+  if (!element_shear_stiffness_.empty()) return;
+  const double h = mesh_.CellSize();
+  element_shear_stiffness_.resize(mesh_.NumElements());
+  for (int e = 0; e < mesh_.NumElements(); ++e)
+    element_shear_stiffness_[e] = ElementStiffness(element_stiffness_weights_[e], h, 0.0, 1.0);
+}
+
+void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd& v,
+                                const Eigen::VectorXd& a, const Eigen::VectorXd& u_previous,
+                                const Eigen::VectorXd& lambda, Eigen::VectorXd* velocity_adjoint,
+                                Eigen::VectorXd* previous_adjoint, ParameterGradient* gradient) {
+  BuildShearStiffness();
+  const PhysicalParameters& p = parameters_;
+  const double h = mesh_.CellSize();
+  const int n = mesh_.NumNodes();
+  velocity_adjoint->setZero(3 * n);
+  previous_adjoint->setZero(3 * n);
+
+  // Lame parameters and their derivatives with respect to the Poisson ratio.
+  const double nu = p.poisson_ratio;
+  const double lame_lambda = p.LameLambda();
+  const double lame_mu = p.LameMu();
+  const double dmu_dnu = -p.youngs_modulus / (2.0 * (1.0 + nu) * (1.0 + nu));
+  const double dlambda_dnu = p.youngs_modulus * (1.0 + 2.0 * nu * nu) /
+                             ((1.0 + nu) * (1.0 + nu) * (1.0 - 2.0 * nu) * (1.0 - 2.0 * nu));
+  const double beta_k = p.stiffness_damping;
+  const StiffnessField& field = p.stiffness_field;
+  if (field.kind == StiffnessField::Kind::kRegions)
+    gradient->stiffness_field.resize(field.regions.size(), 0.0);
+  if (field.kind == StiffnessField::Kind::kLinear) gradient->stiffness_field.resize(3, 0.0);
+
+  // Elements: r_e = R K_e l, l = R^T (x + beta_k v) - X, K_e = s (lambda K_lambda + mu K_mu).
+  const auto& centre_gradients = CentreGradientsUnitCell();
+  (void)centre_gradients;
+  std::array<Eigen::Vector3d, 8> x;
+  for (int e = 0; e < mesh_.NumElements(); ++e) {
+    const auto& nodes = mesh_.element_nodes[e];
+    Vector24d lambda_local, v_local, l;
+    for (int c = 0; c < 8; ++c) {
+      x[c] = mesh_.rest_positions[nodes[c]] + u.segment<3>(3 * nodes[c]);
+      lambda_local.segment<3>(3 * c) = lambda.segment<3>(3 * nodes[c]);
+    }
+    if (lambda_local.isZero(0.0)) continue;
+    const Eigen::Matrix3d r = PolarRotation(DeformationGradient(x, h));
+    const Eigen::Matrix3d rt = r.transpose();
+    Vector24d rotated_lambda;  // R^T lambda_e
+    for (int c = 0; c < 8; ++c) {
+      const Eigen::Vector3d vc = v.segment<3>(3 * nodes[c]);
+      v_local.segment<3>(3 * c).noalias() = rt * vc;
+      l.segment<3>(3 * c).noalias() = rt * (x[c] + beta_k * vc) - mesh_.rest_positions[nodes[c]];
+      rotated_lambda.segment<3>(3 * c).noalias() = rt * lambda_local.segment<3>(3 * c);
+    }
+    const Matrix24d& k = element_stiffness_[e];
+    const Vector24d sigma = k * l;
+    // lambda^T r_e = (R^T lambda)^T K l.
+    const double work = rotated_lambda.dot(sigma);
+    gradient->youngs_modulus -= work / p.youngs_modulus;
+    // d K / d nu l = (dlambda/lambda) K l + s (dmu - mu dlambda/lambda) K_mu l.
+    const double scale = element_scale_[e];
+    const Vector24d shear = element_shear_stiffness_[e] * l;
+    gradient->poisson_ratio -=
+        (dlambda_dnu / lame_lambda) * work +
+        scale * (dmu_dnu - lame_mu * dlambda_dnu / lame_lambda) * rotated_lambda.dot(shear);
+    // d r_e / d beta_k = R K R^T v.
+    const Vector24d k_rotated_lambda = k * rotated_lambda;
+    gradient->stiffness_damping -= k_rotated_lambda.dot(v_local);
+    // Velocity: d r_e / d v = beta_k R K R^T.
+    if (beta_k != 0.0) {
+      for (int c = 0; c < 8; ++c) {
+        velocity_adjoint->segment<3>(3 * nodes[c]).noalias() +=
+            beta_k * (r * k_rotated_lambda.segment<3>(3 * c));
+      }
+    }
+    // Stiffness field: r_e is proportional to the element's scale s.
+    if (field.kind == StiffnessField::Kind::kRegions) {
+      const Eigen::Vector3d centre = mesh_.ElementCentre(e);
+      int region = -1;
+      for (size_t i = 0; i < field.regions.size(); ++i) {
+        if (field.regions[i].box.contains(centre)) region = static_cast<int>(i);
+      }
+      if (region >= 0) gradient->stiffness_field[region] -= work / scale;
+    } else if (field.kind == StiffnessField::Kind::kLinear) {
+      const Eigen::Vector3d offset = mesh_.ElementCentre(e) - field.origin;
+      for (int i = 0; i < 3; ++i) gradient->stiffness_field[i] -= work * offset[i];
+    }
+  }
+
+  // Nodes: inertia, mass damping, gravity; r_i = m_i (a_i + alpha v_i - g).
+  for (int i = 0; i < n; ++i) {
+    if (fixed_[i]) continue;
+    const Eigen::Vector3d li = lambda.segment<3>(3 * i);
+    const Eigen::Vector3d vi = v.segment<3>(3 * i);
+    const Eigen::Vector3d inertial = a.segment<3>(3 * i) + p.mass_damping * vi - p.gravity;
+    gradient->density -= mass_[i] / p.density * li.dot(inertial);
+    gradient->mass_damping -= mass_[i] * li.dot(vi);
+    gradient->gravity += mass_[i] * li;
+    velocity_adjoint->segment<3>(3 * i) += p.mass_damping * mass_[i] * li;
+  }
+
+  // Surface points: r_i -= w_i f_p, so -lambda^T dr/dq = lambda_p . df_p/dq with
+  // lambda_p = sum_i w_i lambda_i.
+  double d_stiffness = 0.0;
+  for (int pt = 0; pt < force_embedding_.NumPoints(); ++pt) {
+    const Eigen::Vector3d lambda_p = force_embedding_.Interpolate(mesh_, lambda, pt);
+    if (lambda_p.isZero(0.0)) continue;
+    const Eigen::Vector3d vp = force_embedding_.Interpolate(mesh_, v, pt);
+    const double area = surface_areas_[pt];
+    Eigen::Vector3d velocity_part = Eigen::Vector3d::Zero();  // (df/dv)^T lambda_p
+    if (p.ground) {
+      const Eigen::Vector3d xp =
+          force_embedding_.rest_positions[pt] + force_embedding_.Interpolate(mesh_, u, pt);
+      const Eigen::Vector3d xp_previous =
+          force_embedding_.rest_positions[pt] + force_embedding_.Interpolate(mesh_, u_previous, pt);
+      const GroundForceDerivatives d =
+          GroundContactForceDerivatives(contact_, area, xp, vp, xp_previous);
+      gradient->ground_normal += d.d_normal.transpose() * lambda_p;
+      gradient->ground_offset += d.d_offset.dot(lambda_p);
+      d_stiffness += d.d_stiffness.dot(lambda_p);
+      gradient->contact_damping += d.d_damping.dot(lambda_p);
+      gradient->friction_coefficient += d.d_friction.dot(lambda_p);
+      velocity_part += d.d_velocity.transpose() * lambda_p;
+      const Eigen::Vector3d previous_part = d.d_previous_position.transpose() * lambda_p;
+      const auto& nodes = mesh_.element_nodes[force_embedding_.element[pt]];
+      const auto& w = force_embedding_.weights[pt];
+      for (int c = 0; c < 8; ++c)
+        previous_adjoint->segment<3>(3 * nodes[c]) += w[c] * previous_part;
+    }
+    // Drag f = -(A/4) (c1 + c2 |v|) v; its derivatives exist at c = 0 too (for screening).
+    const double projected = 0.25 * area;
+    const double speed = vp.norm();
+    gradient->drag_linear -= projected * vp.dot(lambda_p);
+    gradient->drag_quadratic -= projected * speed * vp.dot(lambda_p);
+    const PointForce drag = AirDragForce(p.drag_linear, p.drag_quadratic, area, vp);
+    velocity_part -= drag.damping.transpose() * lambda_p;
+    // -(dr/dv)^T lambda = (df/dv)^T lambda_p, spread back to the nodes.
+    const auto& nodes = mesh_.element_nodes[force_embedding_.element[pt]];
+    const auto& w = force_embedding_.weights[pt];
+    for (int c = 0; c < 8; ++c) velocity_adjoint->segment<3>(3 * nodes[c]) -= w[c] * velocity_part;
+  }
+  gradient->contact_stiffness += d_stiffness;
+  if (p.ground && p.contact_stiffness <= 0.0)
+    gradient->youngs_modulus += d_stiffness * 100.0 / length_;
+
+  for (int i = 0; i < n; ++i) {
+    if (!fixed_[i]) continue;
+    velocity_adjoint->segment<3>(3 * i).setZero();
+    previous_adjoint->segment<3>(3 * i).setZero();
+  }
+}
+
+Status Simulator::BackpropagateStep(const SimulationState& previous, const SimulationState& next,
+                                    StateAdjoint* adjoint, ParameterGradient* gradient) {
+  const int n = mesh_.NumNodes();
+  SOFTID_DEMAND(adjoint->u.size() == 3 * n && adjoint->v.size() == 3 * n &&
+                adjoint->a.size() == 3 * n);
+  const double dt = options_.time_step;
+  const double beta = options_.newmark_beta;
+  const double gamma = options_.newmark_gamma;
+  const double da_du = 1.0 / (beta * dt * dt);
+  const double dv_du = gamma / (beta * dt);
+
+  // Adjoint of u' through u', V(u') and A(u').
+  Eigen::VectorXd rhs = adjoint->u + dv_du * adjoint->v + da_du * adjoint->a;
+  for (int i = 0; i < n; ++i) {
+    if (fixed_[i]) rhs.segment<3>(3 * i).setZero();
+  }
+
+  // The exact Jacobian at the end of the step.
+  SetState(previous);
+  UpdateLaggedNormalForces();
+  exact_tangent_only_if_definite_ = false;
+  const Eigen::Matrix3d rotation = Assemble(Mode::kDynamic, next.u, next.v, next.a);
+  exact_tangent_only_if_definite_ = true;
+  const LinearSolver::Matrix transposed = assembler_.matrix().transpose();
+
+  Eigen::VectorXd lambda = Eigen::VectorXd::Zero(3 * n);
+  if (!rhs.isZero(0.0)) {
+    LinearSolver::Options linear;
+    linear.relative_tolerance = options_.adjoint_linear_tolerance;
+    linear.max_iterations = options_.max_linear_iterations;
+    LinearSolver::Summary solve = solver_.Solve(transposed, rhs, rotation, linear, &lambda);
+    if (!solve.converged) {
+      if (solver_.Factorize(transposed, rotation).ok()) {
+        lambda.setZero();
+        solve = solver_.Solve(transposed, rhs, rotation, linear, &lambda);
+      }
+      if (!solve.converged) {
+        return Status::Internal("adjoint solve at t = " + std::to_string(next.time) +
+                                " s did not converge (relative residual " +
+                                std::to_string(solve.relative_residual) + ")");
+      }
+    }
+  }
+
+  Eigen::VectorXd velocity_adjoint, previous_adjoint;
+  ResidualAdjoint(next.u, next.v, next.a, previous.u, lambda, &velocity_adjoint, &previous_adjoint,
+                  gradient);
+
+  // Explicit dependence of V and A on the previous state, with the residual's share
+  // (dr/dv)^T lambda and (dr/da)^T lambda = M lambda subtracted.
+  Eigen::VectorXd v_bar = adjoint->v - velocity_adjoint;
+  Eigen::VectorXd a_bar = adjoint->a;
+  for (int i = 0; i < n; ++i) a_bar.segment<3>(3 * i) -= mass_[i] * lambda.segment<3>(3 * i);
+  const Eigen::VectorXd w = a_bar + (gamma * dt) * v_bar;  // adjoint flowing into A
+  adjoint->u = previous_adjoint - da_du * w;
+  adjoint->v = v_bar - (dt * da_du) * w;
+  adjoint->a = (dt * (1.0 - gamma)) * v_bar - ((0.5 - beta) / beta) * w;
+  for (int i = 0; i < n; ++i) {
+    if (!fixed_[i]) continue;
+    adjoint->u.segment<3>(3 * i).setZero();
+    adjoint->v.segment<3>(3 * i).setZero();
+    adjoint->a.segment<3>(3 * i).setZero();
+  }
+  return Status::Ok();
+}
+
+void Simulator::BackpropagateInitialState(const SimulationState& initial,
+                                          const StateAdjoint& adjoint,
+                                          ParameterGradient* gradient) {
+  const int n = mesh_.NumNodes();
+  // a0 = -M^-1 r(0, v0, 0) at free nodes. With zeta = M^-1 a0_bar, d L = -zeta^T (dr + dM a0):
+  // the residual's adjoint evaluated at a = a0 supplies both terms.
+  Eigen::VectorXd zeta = Eigen::VectorXd::Zero(3 * n);
+  for (int i = 0; i < n; ++i) {
+    if (!fixed_[i]) zeta.segment<3>(3 * i) = adjoint.a.segment<3>(3 * i) / mass_[i];
+  }
+  SetState(initial);
+  Eigen::VectorXd velocity_adjoint, previous_adjoint;
+  ResidualAdjoint(initial.u, initial.v, initial.a, initial.u, zeta, &velocity_adjoint,
+                  &previous_adjoint, gradient);
+  const Eigen::VectorXd v_bar = adjoint.v - velocity_adjoint;
+
+  // v0_i = v_lin + omega x (X_i - com); the centre of mass does not depend on the density.
+  Eigen::Vector3d com = Eigen::Vector3d::Zero();
+  for (int i = 0; i < n; ++i) com += mass_[i] * mesh_.rest_positions[i];
+  com /= mass_.sum();
+  for (int i = 0; i < n; ++i) {
+    if (fixed_[i]) continue;
+    const Eigen::Vector3d vi = v_bar.segment<3>(3 * i);
+    gradient->initial_velocity += vi;
+    gradient->initial_angular_velocity += (mesh_.rest_positions[i] - com).cross(vi);
+  }
+}
+
+}  // namespace softid::fem
