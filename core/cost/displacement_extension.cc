@@ -1,0 +1,249 @@
+#include "core/cost/displacement_extension.h"
+
+#include <Eigen/SparseCholesky>
+#include <algorithm>
+#include <string>
+
+#include "core/common/check.h"
+
+namespace softid::cost {
+namespace {
+
+// Chebyshev dilation of `mask` by `radius` nodes, clipped at the grid: a max filter of width
+// 2 radius + 1 along each axis in turn (the Chebyshev ball is the product of 1-D intervals).
+std::vector<char> DilateChebyshev(const std::vector<char>& mask, const Eigen::Vector3i& n,
+                                  int radius) {
+  std::vector<char> current = mask, next(mask.size());
+  const int stride[3] = {1, n.x(), n.x() * n.y()};
+  for (int axis = 0; axis < 3; ++axis) {
+    const int len = n[axis];
+    for (int node = 0; node < static_cast<int>(mask.size()); ++node) {
+      const int coord = (node / stride[axis]) % len;
+      const int lo = std::max(0, coord - radius), hi = std::min(len - 1, coord + radius);
+      const int line_start = node - coord * stride[axis];
+      char value = 0;
+      for (int t = lo; t <= hi && !value; ++t) value = current[line_start + t * stride[axis]];
+      next[node] = value;
+    }
+    current.swap(next);
+  }
+  return current;
+}
+
+}  // namespace
+
+const char* ToString(ExtensionMode mode) {
+  switch (mode) {
+    case ExtensionMode::kHarmonic: return "harmonic";
+    case ExtensionMode::kAffinePlusHarmonic: return "affine_plus_harmonic";
+  }
+  return "unknown";
+}
+
+DisplacementExtension::DisplacementExtension(const fem::HexMesh& mesh, int band_cells,
+                                             ExtensionMode mode)
+    : band_cells_(band_cells), mode_(mode), num_fe_(mesh.NumNodes()) {
+  SOFTID_THROW_UNLESS(band_cells >= 1,
+                      "band_cells = " + std::to_string(band_cells) + ": must be >= 1");
+  SOFTID_THROW_UNLESS(num_fe_ > 0, "mesh: has no FE node");
+  const geometry::RegularGrid& grid = mesh.grid;
+  const Eigen::Vector3i n = grid.NumNodesPerAxis();
+  const int num_grid_nodes = grid.NumNodes();
+  SOFTID_DEMAND(static_cast<int>(mesh.grid_node_to_node.size()) == num_grid_nodes);
+
+  std::vector<char> is_fe(num_grid_nodes, 0);
+  for (int i = 0; i < num_fe_; ++i) {
+    is_fe[mesh.node_grid_index[i]] = 1;
+    const Eigen::Vector3i c = grid.NodeCoords(mesh.node_grid_index[i]);
+    for (int a = 0; a < 3; ++a) {
+      clipped_ |= c[a] < band_cells || c[a] > n[a] - 1 - band_cells;
+    }
+  }
+  const std::vector<char> in_domain = DilateChebyshev(is_fe, n, band_cells);
+
+  // Domain numbering: FE nodes keep their index, band nodes follow in grid order.
+  domain_grid_node_ = mesh.node_grid_index;
+  grid_to_domain_.assign(num_grid_nodes, -1);
+  for (int i = 0; i < num_fe_; ++i) grid_to_domain_[mesh.node_grid_index[i]] = i;
+  for (int g = 0; g < num_grid_nodes; ++g) {
+    if (in_domain[g] && !is_fe[g]) {
+      grid_to_domain_[g] = static_cast<int>(domain_grid_node_.size());
+      domain_grid_node_.push_back(g);
+    }
+  }
+
+  rest_.resize(domain_grid_node_.size());
+  for (size_t d = 0; d < rest_.size(); ++d) rest_[d] = grid.NodePosition(domain_grid_node_[d]);
+
+  const int num_band = num_band_nodes();
+  std::vector<Eigen::Triplet<double, int>> triplets;
+  triplets.reserve(7 * static_cast<size_t>(num_band));
+  fe_offsets_.assign(1, 0);
+  fe_offsets_.reserve(num_band + 1);
+  for (int b = 0; b < num_band; ++b) {
+    const int g = domain_grid_node_[num_fe_ + b];
+    const Eigen::Vector3i c = grid.NodeCoords(g);
+    int degree = 0;
+    for (int a = 0; a < 3; ++a) {
+      for (int step : {-1, 1}) {
+        Eigen::Vector3i nc = c;
+        nc[a] += step;
+        if (nc[a] < 0 || nc[a] >= n[a]) continue;
+        const int d = grid_to_domain_[grid.NodeIndex(nc.x(), nc.y(), nc.z())];
+        if (d < 0) continue;
+        ++degree;
+        if (d < num_fe_) {
+          fe_neighbours_.push_back(d);
+        } else if (d - num_fe_ > b) {  // lower triangle only, row > column
+          triplets.emplace_back(d - num_fe_, b, -1.0);
+        }
+      }
+    }
+    // Every band node has a domain neighbour: the path towards its nearest FE node stays in the
+    // Chebyshev ball around that node.
+    SOFTID_DEMAND(degree > 0);
+    triplets.emplace_back(b, b, static_cast<double>(degree));
+    fe_offsets_.push_back(static_cast<int>(fe_neighbours_.size()));
+  }
+  if (num_band == 0) return;
+
+  // The affine fit uses the FE nodes that feed the band (its Dirichlet data).
+  fit_nodes_ = fe_neighbours_;
+  std::sort(fit_nodes_.begin(), fit_nodes_.end());
+  fit_nodes_.erase(std::unique(fit_nodes_.begin(), fit_nodes_.end()), fit_nodes_.end());
+  fit_centre_.setZero();
+  for (int i : fit_nodes_) fit_centre_ += rest_[i];
+  fit_centre_ /= static_cast<double>(fit_nodes_.size());
+  Eigen::Matrix3d moment = Eigen::Matrix3d::Zero();
+  for (int i : fit_nodes_)
+    moment += (rest_[i] - fit_centre_) * (rest_[i] - fit_centre_).transpose();
+  // They are the nodes of whole grid cells, so never coplanar.
+  SOFTID_DEMAND(moment.determinant() > 0.0);
+  fit_inverse_moment_ = moment.inverse();
+
+  Eigen::SparseMatrix<double, Eigen::ColMajor, int> laplacian(num_band, num_band);
+  laplacian.setFromTriplets(triplets.begin(), triplets.end());
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double, Eigen::ColMajor, int>, Eigen::Lower,
+                        Eigen::AMDOrdering<int>>
+      ldlt(laplacian);
+  SOFTID_DEMAND(ldlt.info() == Eigen::Success);
+  // Keep only the factor's arrays: our own solve handles the 3 right-hand sides in one sweep and
+  // allocates nothing.
+  factor_l_ = ldlt.matrixL().nestedExpression();
+  factor_l_.prune([](int row, int col, double) { return row > col; });
+  factor_l_.makeCompressed();
+  const Eigen::VectorXd d = ldlt.vectorD();
+  SOFTID_DEMAND((d.array() > 0.0).all());
+  inverse_d_ = d.cwiseInverse();
+  permutation_ = ldlt.permutationP().indices();
+  scratch_.resize(3, num_band);
+  permuted_.resize(3, num_band);
+}
+
+void DisplacementExtension::SolveInPlace(Eigen::Matrix3Xd* x) {
+  const int num_band = num_band_nodes();
+  Eigen::Matrix3Xd& y = permuted_;
+  for (int i = 0; i < num_band; ++i) y.col(permutation_[i]) = x->col(i);
+  const int* outer = factor_l_.outerIndexPtr();
+  const int* inner = factor_l_.innerIndexPtr();
+  const double* value = factor_l_.valuePtr();
+  for (int j = 0; j < num_band; ++j) {  // L z = y
+    const Eigen::Vector3d yj = y.col(j);
+    for (int p = outer[j]; p < outer[j + 1]; ++p) y.col(inner[p]) -= value[p] * yj;
+  }
+  for (int j = 0; j < num_band; ++j) y.col(j) *= inverse_d_[j];
+  for (int j = num_band - 1; j >= 0; --j) {  // L^T w = z
+    Eigen::Vector3d yj = y.col(j);
+    for (int p = outer[j]; p < outer[j + 1]; ++p) yj -= value[p] * y.col(inner[p]);
+    y.col(j) = yj;
+  }
+  for (int i = 0; i < num_band; ++i) x->col(i) = y.col(permutation_[i]);
+}
+
+void DisplacementExtension::FitAffine(const Eigen::VectorXd& u_fe, Eigen::Vector3d* u_bar,
+                                      Eigen::Matrix3d* a) const {
+  // min sum_i |u_bar + A (X_i - c) - u_i|^2: u_bar = mean u_i and A = S M^-1 with
+  // S = sum u_i (X_i - c)^T (the u_bar term drops out since sum (X_i - c) = 0).
+  u_bar->setZero();
+  Eigen::Matrix3d s = Eigen::Matrix3d::Zero();
+  for (int i : fit_nodes_) {
+    const Eigen::Vector3d ui = u_fe.segment<3>(3 * i);
+    *u_bar += ui;
+    s += ui * (rest_[i] - fit_centre_).transpose();
+  }
+  *u_bar /= static_cast<double>(fit_nodes_.size());
+  *a = s * fit_inverse_moment_;
+}
+
+void DisplacementExtension::Extend(const Eigen::VectorXd& u_fe, Eigen::VectorXd* u_domain) {
+  SOFTID_DEMAND(u_fe.size() == 3 * num_fe_);
+  u_domain->resize(3 * num_domain_nodes());
+  u_domain->head(3 * num_fe_) = u_fe;
+  const int num_band = num_band_nodes();
+  if (num_band == 0) return;
+  const Eigen::Map<const Eigen::Matrix3Xd> fe(u_fe.data(), 3, num_fe_);
+  Eigen::Map<Eigen::Matrix3Xd> band(u_domain->data() + 3 * num_fe_, 3, num_band);
+  if (mode_ == ExtensionMode::kHarmonic) {
+    for (int b = 0; b < num_band; ++b) {
+      Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+      for (int p = fe_offsets_[b]; p < fe_offsets_[b + 1]; ++p) sum += fe.col(fe_neighbours_[p]);
+      scratch_.col(b) = sum;
+    }
+    SolveInPlace(&scratch_);
+    band = scratch_;
+    return;
+  }
+  Eigen::Vector3d u_bar;
+  Eigen::Matrix3d a;
+  FitAffine(u_fe, &u_bar, &a);
+  for (int b = 0; b < num_band; ++b) {
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (int p = fe_offsets_[b]; p < fe_offsets_[b + 1]; ++p) {
+      const int f = fe_neighbours_[p];
+      sum += fe.col(f) - u_bar - a * (rest_[f] - fit_centre_);
+    }
+    scratch_.col(b) = sum;
+  }
+  SolveInPlace(&scratch_);
+  for (int b = 0; b < num_band; ++b) {
+    band.col(b) = scratch_.col(b) + u_bar + a * (rest_[num_fe_ + b] - fit_centre_);
+  }
+}
+
+void DisplacementExtension::AccumulateAdjoint(const Eigen::VectorXd& grad_domain,
+                                              Eigen::VectorXd* grad_fe) {
+  SOFTID_DEMAND(grad_domain.size() == 3 * num_domain_nodes());
+  SOFTID_DEMAND(grad_fe->size() == 3 * num_fe_);
+  *grad_fe += grad_domain.head(3 * num_fe_);
+  const int num_band = num_band_nodes();
+  if (num_band == 0) return;
+  // Harmonic part: u_B = L_BB^-1 A_BF w_F, so dC/dw_F = A_BF^T y with y = L_BB^-1 dC/du_B
+  // (L_BB symmetric).
+  const Eigen::Map<const Eigen::Matrix3Xd> grad_band(grad_domain.data() + 3 * num_fe_, 3, num_band);
+  scratch_ = grad_band;
+  SolveInPlace(&scratch_);
+  Eigen::Map<Eigen::Matrix3Xd> fe(grad_fe->data(), 3, num_fe_);
+  for (int b = 0; b < num_band; ++b) {
+    for (int p = fe_offsets_[b]; p < fe_offsets_[b + 1]; ++p) {
+      fe.col(fe_neighbours_[p]) += scratch_.col(b);
+    }
+  }
+  if (mode_ == ExtensionMode::kHarmonic) return;
+  // Affine part: u_bar and A enter through a(X_B) (added) and a(X_F) (subtracted from the
+  // Dirichlet data), then go back through the linear fit.
+  Eigen::Vector3d grad_u_bar = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d grad_a = Eigen::Matrix3d::Zero();
+  for (int b = 0; b < num_band; ++b) {
+    grad_u_bar += grad_band.col(b);
+    grad_a += grad_band.col(b) * (rest_[num_fe_ + b] - fit_centre_).transpose();
+    for (int p = fe_offsets_[b]; p < fe_offsets_[b + 1]; ++p) {
+      grad_u_bar -= scratch_.col(b);
+      grad_a -= scratch_.col(b) * (rest_[fe_neighbours_[p]] - fit_centre_).transpose();
+    }
+  }
+  const Eigen::Vector3d per_node = grad_u_bar / static_cast<double>(fit_nodes_.size());
+  const Eigen::Matrix3d grad_s = grad_a * fit_inverse_moment_;  // M symmetric
+  for (int i : fit_nodes_) fe.col(i) += per_node + grad_s * (rest_[i] - fit_centre_);
+}
+
+}  // namespace softid::cost
