@@ -1,0 +1,558 @@
+#include "core/inverse/job_config.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <initializer_list>
+#include <limits>
+#include <sstream>
+#include <system_error>
+
+#include "core/common/check.h"
+#include "core/common/json_fields.h"
+
+namespace softid::inverse {
+namespace {
+
+using Json = nlohmann::json;
+
+constexpr std::string_view kGroundAlias = "ground";
+constexpr std::string_view kGroundPlane = "ground_plane";
+
+// The keys of the top-level object.
+constexpr auto kJobConfigKeys = std::to_array<std::string_view>({
+    "fit",
+    "initial",
+    "fixed",
+    "cells",
+    "cell_size",
+    "substeps",
+    "frames",
+    "heldout_every",
+    "starts",
+    "threads",
+    "seed",
+    "max_iterations",
+    "function_tolerance",
+    "gradient_tolerance",
+    "parameter_tolerance",
+    "gradient",
+    "finite_difference_step",
+    "cost",
+    "diagnose",
+});
+
+std::string Join(const std::vector<std::string>& names) {
+  std::string out;
+  for (const std::string& name : names) out += (out.empty() ? "" : ", ") + name;
+  return out;
+}
+
+std::string KnownFittable() {
+  return "unknown parameter (known: " +
+         Join(std::vector<std::string>(kFittableParameters.begin(), kFittableParameters.end())) +
+         "; \"ground\" is an alias of ground_plane)";
+}
+
+// The public PhysicalParameters keys, taken from fem::ToJson so they cannot drift.
+std::vector<std::string> PhysicalKeys() {
+  std::vector<std::string> keys;
+  // Named: items() of a temporary would dangle.
+  const Json defaults = fem::ToJson(fem::PhysicalParameters{});
+  for (const auto& item : defaults.items()) keys.push_back(item.key());
+  return keys;
+}
+
+bool IsPhysicalKey(const std::string& key) {
+  const std::vector<std::string> keys = PhysicalKeys();
+  return std::find(keys.begin(), keys.end(), key) != keys.end();
+}
+
+Status UnknownKey(const std::string& object, const std::string& key) {
+  return Status::InvalidArgument(object + ": unknown key \"" + key + "\"");
+}
+
+// Rejects keys of `object` that are not in `known`, naming `object_name`.
+template <typename Names>
+Status CheckKeys(const Json& object, const std::string& object_name, const Names& known) {
+  for (const auto& item : object.items()) {
+    if (std::find(std::begin(known), std::end(known), item.key()) == std::end(known)) {
+      return UnknownKey(object_name, item.key());
+    }
+  }
+  return Status::Ok();
+}
+
+// An integer in [min, INT_MAX]; anything else (other types too) fails with `requirement`, so the
+// message always states what is expected.
+Result<int> ReadInt(const Json& value, const std::string& field, int min,
+                    const std::string& requirement) {
+  if (!value.is_number_integer()) return json::Invalid(field, value, requirement);
+  constexpr std::int64_t kMax = std::numeric_limits<int>::max();
+  if (value.is_number_unsigned() && value.get<std::uint64_t>() > static_cast<std::uint64_t>(kMax)) {
+    return json::Invalid(field, value, requirement);
+  }
+  const auto x = value.get<std::int64_t>();
+  if (x < min || x > kMax) return json::Invalid(field, value, requirement);
+  return static_cast<int>(x);
+}
+
+Result<int> ReadIntAtLeast(const Json& value, const std::string& field, int min) {
+  return ReadInt(value, field, min, "must be an integer >= " + std::to_string(min));
+}
+
+// A finite number > 0.
+Result<double> ReadPositive(const Json& value, const std::string& field) {
+  if (!value.is_number() || !std::isfinite(value.get<double>()) || !(value.get<double>() > 0.0)) {
+    return json::Invalid(field, value, "must be a finite number > 0");
+  }
+  return value.get<double>();
+}
+
+// Replaces the leading field path `key` of a fem error ("ground.normal = ...") by `field`
+// ("initial.ground_plane.normal = ..."), so errors name the path the user wrote.
+Status Reroot(const Status& status, const std::string& key, const std::string& field) {
+  const std::string& message = status.message();
+  if (message.compare(0, key.size(), key) == 0 && message.size() > key.size() &&
+      (message[key.size()] == ' ' || message[key.size()] == '.' || message[key.size()] == '[')) {
+    return Status(status.code(), field + message.substr(key.size()));
+  }
+  return status.WithContext(field);
+}
+
+// Parses one parameter value in its public JSON form under the PhysicalParameters key `key`, with
+// the rules of fem::PhysicalParametersFromJson; returns the normalised form fem::ToJson writes.
+Result<Json> NormalisedParameterValue(const std::string& key, const Json& value,
+                                      const std::string& field) {
+  const Result<fem::PhysicalParameters> parsed =
+      fem::PhysicalParametersFromJson(Json::object({{key, value}}));
+  if (!parsed.ok()) return Reroot(parsed.status(), key, field);
+  Json normalised = fem::ToJson(*parsed)[key];
+  if (key == kGroundAlias && !normalised.is_null()) {
+    // Dividing a unit normal by its norm again can change its last bits, which would break the
+    // exact ToJson round trip; a normal that is unit to rounding is kept as written.
+    const Result<Eigen::Vector3d> written = json::ToVector3(value["normal"], field + ".normal");
+    if (written.ok() && std::abs(written->norm() - 1.0) <= 1e-12) {
+      normalised["normal"] = json::FromVector3(*written);
+    }
+  }
+  return normalised;
+}
+
+Result<std::vector<std::string>> ParseFit(const Json& value) {
+  if (!value.is_array()) return json::Invalid("fit", value, "must be an array of parameter names");
+  if (value.empty()) return json::Invalid("fit", value, "must name at least one parameter");
+  std::vector<std::string> fit;
+  for (size_t i = 0; i < value.size(); ++i) {
+    const std::string field = "fit[" + std::to_string(i) + "]";
+    if (!value[i].is_string()) return json::Invalid(field, value[i], "must be a parameter name");
+    const std::optional<std::string_view> name = CanonicalFittableName(value[i].get<std::string>());
+    if (!name) return json::Invalid(field, value[i], KnownFittable());
+    const auto previous = std::find(fit.begin(), fit.end(), *name);
+    if (previous != fit.end()) {
+      return json::Invalid(
+          field, value[i],
+          "is listed twice (also fit[" + std::to_string(previous - fit.begin()) + "])");
+    }
+    fit.emplace_back(*name);
+  }
+  return fit;
+}
+
+// One entry of "initial": `key` as written, `fit` already parsed.
+Result<InitialValue> ParseInitialValue(const std::string& key, const Json& value,
+                                       const std::vector<std::string>& fit) {
+  const std::string field = "initial." + key;
+  const std::optional<std::string_view> name = CanonicalFittableName(key);
+  if (!name) return json::Invalid(field, value, KnownFittable());
+  if (std::find(fit.begin(), fit.end(), *name) == fit.end()) {
+    return json::Invalid(field, value,
+                         std::string(*name) +
+                             " is not in \"fit\"; put the value of a parameter that is not "
+                             "fitted in \"fixed\"");
+  }
+  const std::string physical_key(PhysicalParameterKey(*name));
+  const ParameterShape shape = ShapeOf(*name);
+  InitialValue initial;
+  if (value.is_object() &&
+      (shape == ParameterShape::kScalar || value.contains("min") || value.contains("max"))) {
+    if (shape != ParameterShape::kScalar) {
+      return json::Invalid(field, value,
+                           "a {\"min\": a, \"max\": b} range is only allowed for scalar "
+                           "parameters; give one start value");
+    }
+    SOFTID_RETURN_IF_ERROR(CheckKeys(value, field, std::array<std::string_view, 2>{"min", "max"}));
+    if (!value.contains("min") || !value.contains("max")) {
+      return json::Invalid(field, value, "a range needs both \"min\" and \"max\"");
+    }
+    SOFTID_ASSIGN_OR_RETURN(const Json min,
+                            NormalisedParameterValue(physical_key, value["min"], field + ".min"));
+    SOFTID_ASSIGN_OR_RETURN(const Json max,
+                            NormalisedParameterValue(physical_key, value["max"], field + ".max"));
+    ScalarRange range{min.get<double>(), max.get<double>()};
+    if (!(range.min < range.max)) {
+      return json::Invalid(field + ".min", value["min"],
+                           "must be below max (" + json::Brief(value["max"]) + ")");
+    }
+    initial.range = range;
+    return initial;
+  }
+  if (shape == ParameterShape::kScalar && !value.is_number()) {
+    return json::Invalid(field, value, "must be a number or a range {\"min\": a, \"max\": b}");
+  }
+  if (shape == ParameterShape::kPlane && value.is_null()) {
+    // PhysicalParameters reads null as "no ground"; a fitted plane needs a start plane.
+    return json::Invalid(field, value, "must be {\"normal\": [x, y, z], \"offset\": d}");
+  }
+  SOFTID_ASSIGN_OR_RETURN(initial.value, NormalisedParameterValue(physical_key, value, field));
+  return initial;
+}
+
+Result<std::map<std::string, InitialValue>> ParseInitial(const Json& value,
+                                                         const std::vector<std::string>& fit) {
+  if (!value.is_object()) {
+    return json::Invalid("initial", value, "must be an object {\"<parameter>\": <start>}");
+  }
+  std::map<std::string, InitialValue> initial;
+  std::map<std::string, std::string> written_as;  // canonical name -> key as written
+  for (const auto& item : value.items()) {
+    SOFTID_ASSIGN_OR_RETURN(InitialValue start, ParseInitialValue(item.key(), item.value(), fit));
+    const std::string name(*CanonicalFittableName(item.key()));
+    if (auto it = written_as.find(name); it != written_as.end()) {
+      return json::Invalid("initial." + item.key(), item.value(),
+                           "duplicate of initial." + it->second);
+    }
+    written_as[name] = item.key();
+    initial[name] = std::move(start);
+  }
+  return initial;
+}
+
+Result<Json> ParseFixed(const Json& value, const std::vector<std::string>& fit) {
+  if (!value.is_object()) {
+    return json::Invalid("fixed", value, "must be an object {\"<parameter>\": <value>}");
+  }
+  Json fixed = Json::object();
+  std::map<std::string, std::string> written_as;  // PhysicalParameters key -> key as written
+  for (const auto& item : value.items()) {
+    const std::string field = "fixed." + item.key();
+    const std::string key = item.key() == kGroundPlane ? std::string(kGroundAlias) : item.key();
+    if (!IsPhysicalKey(key)) {
+      return json::Invalid(field, item.value(),
+                           "unknown parameter (known: " + Join(PhysicalKeys()) +
+                               "; \"ground_plane\" is an alias of ground)");
+    }
+    if (auto it = written_as.find(key); it != written_as.end()) {
+      return json::Invalid(field, item.value(), "duplicate of fixed." + it->second);
+    }
+    written_as[key] = item.key();
+    const std::optional<std::string_view> fittable = CanonicalFittableName(key);
+    if (fittable && std::find(fit.begin(), fit.end(), *fittable) != fit.end()) {
+      return json::Invalid(
+          field, item.value(),
+          std::string(*fittable) + " is also in \"fit\"; a parameter is either fitted or fixed");
+    }
+    SOFTID_ASSIGN_OR_RETURN(fixed[key], NormalisedParameterValue(key, item.value(), field));
+  }
+  return fixed;
+}
+
+Result<FrameRange> ParseFrames(const Json& value) {
+  if (!value.is_object()) {
+    return json::Invalid("frames", value, "must be an object {\"first\": f, \"last\": l}");
+  }
+  SOFTID_RETURN_IF_ERROR(
+      CheckKeys(value, "frames", std::array<std::string_view, 2>{"first", "last"}));
+  FrameRange frames;
+  if (value.contains("first")) {
+    SOFTID_ASSIGN_OR_RETURN(frames.first, ReadIntAtLeast(value["first"], "frames.first", 0));
+  }
+  if (value.contains("last")) {
+    const std::string requirement =
+        "must be -1 (the capture's last frame) or an integer >= " + std::string("frames.first (") +
+        std::to_string(frames.first) + ")";
+    SOFTID_ASSIGN_OR_RETURN(frames.last, ReadInt(value["last"], "frames.last", -1, requirement));
+    if (frames.last != -1 && frames.last < frames.first) {
+      return json::Invalid("frames.last", value["last"], requirement);
+    }
+  }
+  return frames;
+}
+
+Result<CostSettings> ParseCost(const Json& value) {
+  if (!value.is_object()) {
+    return json::Invalid("cost", value,
+                         "must be an object {\"band_cells\": n, \"truncation_cells\": x}");
+  }
+  SOFTID_RETURN_IF_ERROR(
+      CheckKeys(value, "cost", std::array<std::string_view, 2>{"band_cells", "truncation_cells"}));
+  CostSettings cost;
+  if (value.contains("band_cells")) {
+    SOFTID_ASSIGN_OR_RETURN(cost.band_cells,
+                            ReadIntAtLeast(value["band_cells"], "cost.band_cells", 1));
+  }
+  if (value.contains("truncation_cells")) {
+    SOFTID_ASSIGN_OR_RETURN(cost.truncation_cells,
+                            ReadPositive(value["truncation_cells"], "cost.truncation_cells"));
+  }
+  return cost;
+}
+
+Result<GradientMethod> ParseGradient(const Json& value) {
+  for (GradientMethod method : {GradientMethod::kAdjoint, GradientMethod::kFiniteDifference}) {
+    if (value.is_string() && value.get<std::string>() == ToString(method)) return method;
+  }
+  return json::Invalid("gradient", value, "must be \"adjoint\" or \"finite_difference\"");
+}
+
+}  // namespace
+
+bool IsFittable(std::string_view name) {
+  return std::find(kFittableParameters.begin(), kFittableParameters.end(), name) !=
+         kFittableParameters.end();
+}
+
+std::optional<std::string_view> CanonicalFittableName(std::string_view name) {
+  if (name == kGroundAlias) return kGroundPlane;
+  const auto it = std::find(kFittableParameters.begin(), kFittableParameters.end(), name);
+  if (it == kFittableParameters.end()) return std::nullopt;
+  return *it;
+}
+
+std::string_view PhysicalParameterKey(std::string_view fittable_name) {
+  SOFTID_THROW_UNLESS(IsFittable(fittable_name),
+                      "not a fittable parameter: " + std::string(fittable_name));
+  return fittable_name == kGroundPlane ? kGroundAlias : fittable_name;
+}
+
+ParameterShape ShapeOf(std::string_view fittable_name) {
+  const std::optional<std::string_view> name = CanonicalFittableName(fittable_name);
+  SOFTID_THROW_UNLESS(name.has_value(), "not a fittable parameter: " + std::string(fittable_name));
+  if (*name == "gravity" || *name == "initial_velocity" || *name == "initial_angular_velocity") {
+    return ParameterShape::kVector3;
+  }
+  if (*name == kGroundPlane) return ParameterShape::kPlane;
+  if (*name == "stiffness_field") return ParameterShape::kStiffnessField;
+  return ParameterShape::kScalar;
+}
+
+const char* ToString(GradientMethod method) {
+  switch (method) {
+    case GradientMethod::kAdjoint: return "adjoint";
+    case GradientMethod::kFiniteDifference: return "finite_difference";
+  }
+  return "invalid";  // a value cast from an out-of-range integer; Validate rejects it
+}
+
+bool JobConfig::IsFitted(std::string_view fittable_name) const {
+  return std::find(fit.begin(), fit.end(), fittable_name) != fit.end();
+}
+
+bool JobConfig::IsHeldOut(int frame) const {
+  return heldout_every > 0 && frame >= frames.first &&
+         (frame - frames.first) % heldout_every == heldout_every - 1;
+}
+
+Status JobConfig::Validate() const {
+  // Checks JSON cannot express (canonical names, one of value/range) come first; the rest runs
+  // the parser on ToJson, so code-built and JSON configs obey exactly the same rules.
+  for (size_t i = 0; i < fit.size(); ++i) {
+    if (fit[i] == kGroundAlias) {
+      return json::Invalid("fit[" + std::to_string(i) + "]", fit[i],
+                           "must be \"ground_plane\" (the alias is resolved only in JSON)");
+    }
+  }
+  for (const auto& [name, start] : initial) {
+    if (name == kGroundAlias) {
+      return Status::InvalidArgument(
+          "initial.ground: must be keyed \"ground_plane\" (the alias is resolved only in JSON)");
+    }
+    if (start.value.has_value() == start.range.has_value()) {
+      return Status::InvalidArgument("initial." + name +
+                                     ": exactly one of value and range must be set");
+    }
+  }
+  if (fixed.is_object() && fixed.contains(kGroundPlane)) {
+    return Status::InvalidArgument(
+        "fixed.ground_plane: must be keyed \"ground\" (the alias is resolved only in JSON)");
+  }
+  return JobConfigFromJson(ToJson(*this)).status();
+}
+
+Result<JobConfig> JobConfigFromJson(const Json& j) {
+  if (!j.is_object()) return json::Invalid("job config", j, "must be a JSON object");
+  for (const auto& item : j.items()) {
+    if (std::find(kJobConfigKeys.begin(), kJobConfigKeys.end(), item.key()) ==
+        kJobConfigKeys.end()) {
+      return UnknownKey("job config", item.key());
+    }
+  }
+  JobConfig config;
+  // "initial" and "fixed" refer to "fit", so it is read first whatever the key order.
+  if (j.contains("fit")) {
+    SOFTID_ASSIGN_OR_RETURN(config.fit, ParseFit(j["fit"]));
+  }
+  if (j.contains("initial")) {
+    SOFTID_ASSIGN_OR_RETURN(config.initial, ParseInitial(j["initial"], config.fit));
+  }
+  if (j.contains("fixed")) {
+    SOFTID_ASSIGN_OR_RETURN(config.fixed, ParseFixed(j["fixed"], config.fit));
+  }
+
+  if (j.contains("cells")) {
+    SOFTID_ASSIGN_OR_RETURN(config.cells, ReadIntAtLeast(j["cells"], "cells", 2));
+  }
+  if (j.contains("cell_size")) {
+    SOFTID_ASSIGN_OR_RETURN(config.cell_size, ReadPositive(j["cell_size"], "cell_size"));
+  }
+  if (j.contains("substeps")) {
+    SOFTID_ASSIGN_OR_RETURN(config.substeps, ReadIntAtLeast(j["substeps"], "substeps", 1));
+  }
+  if (j.contains("frames")) {
+    SOFTID_ASSIGN_OR_RETURN(config.frames, ParseFrames(j["frames"]));
+  }
+  if (j.contains("heldout_every")) {
+    SOFTID_ASSIGN_OR_RETURN(
+        config.heldout_every,
+        ReadInt(j["heldout_every"], "heldout_every", 0,
+                "must be 0 (none) or an integer >= 2 (1 would hold out every frame)"));
+    if (config.heldout_every == 1) {
+      return json::Invalid("heldout_every", j["heldout_every"],
+                           "must be 0 (none) or an integer >= 2 (1 would hold out every frame)");
+    }
+  }
+
+  if (j.contains("starts")) {
+    SOFTID_ASSIGN_OR_RETURN(config.starts, ReadIntAtLeast(j["starts"], "starts", 1));
+  }
+  if (j.contains("threads")) {
+    SOFTID_ASSIGN_OR_RETURN(config.threads, ReadIntAtLeast(j["threads"], "threads", 0));
+  }
+  if (j.contains("seed")) {
+    const Json& seed = j["seed"];
+    if (!seed.is_number_unsigned() &&
+        !(seed.is_number_integer() && seed.get<std::int64_t>() >= 0)) {
+      return json::Invalid("seed", seed, "must be an integer >= 0");
+    }
+    config.seed = seed.get<std::uint64_t>();
+  }
+
+  if (j.contains("max_iterations")) {
+    SOFTID_ASSIGN_OR_RETURN(config.max_iterations,
+                            ReadIntAtLeast(j["max_iterations"], "max_iterations", 1));
+  }
+  for (auto [key, target] : {std::pair{"function_tolerance", &config.function_tolerance},
+                             std::pair{"gradient_tolerance", &config.gradient_tolerance},
+                             std::pair{"parameter_tolerance", &config.parameter_tolerance},
+                             std::pair{"finite_difference_step", &config.finite_difference_step}}) {
+    if (j.contains(key)) {
+      SOFTID_ASSIGN_OR_RETURN(*target, ReadPositive(j[key], key));
+    }
+  }
+  if (j.contains("gradient")) {
+    SOFTID_ASSIGN_OR_RETURN(config.gradient, ParseGradient(j["gradient"]));
+  }
+  if (j.contains("cost")) {
+    SOFTID_ASSIGN_OR_RETURN(config.cost, ParseCost(j["cost"]));
+  }
+  if (j.contains("diagnose")) {
+    if (!j["diagnose"].is_boolean()) {
+      return json::Invalid("diagnose", j["diagnose"], "must be true or false");
+    }
+    config.diagnose = j["diagnose"].get<bool>();
+  }
+  return config;
+}
+
+Result<JobConfig> JobConfigFromString(std::string_view text, std::string_view source) {
+  Json j;
+  try {
+    j = Json::parse(text);
+  } catch (const Json::exception& e) {
+    // parse_error, or out_of_range for numbers like 1e400. what() is "[json.exception.parse_
+    // error.101] parse error at line 3, column 7: ..."; the bracketed id means nothing to users.
+    std::string what = e.what();
+    if (const size_t end = what.find("] ");
+        what.rfind("[json.exception", 0) == 0 && end != std::string::npos) {
+      what = what.substr(end + 2);
+    }
+    return Status::InvalidArgument(std::string(source) + ": invalid JSON: " + what);
+  }
+  Result<JobConfig> config = JobConfigFromJson(j);
+  if (!config.ok()) return config.status().WithContext(std::string(source));
+  return config;
+}
+
+Result<JobConfig> ReadJobConfig(const std::filesystem::path& file) {
+  std::error_code error;
+  if (!std::filesystem::exists(file, error)) {
+    return Status::NotFound(file.string() + ": job config not found");
+  }
+  if (std::filesystem::is_directory(file, error)) {
+    return Status::InvalidArgument(file.string() + ": is a folder, not a job config file");
+  }
+  std::ifstream stream(file, std::ios::binary);
+  if (!stream) return Status::IoError(file.string() + ": cannot open file");
+  std::ostringstream text;
+  text << stream.rdbuf();
+  if (stream.bad()) return Status::IoError(file.string() + ": read error");
+  return JobConfigFromString(text.str(), file.string());
+}
+
+Json ToJson(const JobConfig& config) {
+  Json initial = Json::object();
+  for (const auto& [name, start] : config.initial) {
+    if (start.value) {
+      initial[name] = *start.value;
+    } else if (start.range) {
+      initial[name] = {{"min", start.range->min}, {"max", start.range->max}};
+    }
+  }
+  Json j = {
+      {"fit", config.fit},
+      {"initial", initial},
+      {"fixed", config.fixed},
+      {"cells", config.cells},
+      {"substeps", config.substeps},
+      {"frames", {{"first", config.frames.first}, {"last", config.frames.last}}},
+      {"heldout_every", config.heldout_every},
+      {"starts", config.starts},
+      {"threads", config.threads},
+      {"seed", config.seed},
+      {"max_iterations", config.max_iterations},
+      {"function_tolerance", config.function_tolerance},
+      {"gradient_tolerance", config.gradient_tolerance},
+      {"parameter_tolerance", config.parameter_tolerance},
+      {"gradient", ToString(config.gradient)},
+      {"finite_difference_step", config.finite_difference_step},
+      {"cost",
+       {{"band_cells", config.cost.band_cells},
+        {"truncation_cells", config.cost.truncation_cells}}},
+      {"diagnose", config.diagnose},
+  };
+  // 0 means "absent" (use cells); written only when set so the round trip keeps it absent.
+  if (config.cell_size != 0.0) j["cell_size"] = config.cell_size;
+  return j;
+}
+
+Result<fem::PhysicalParameters> ApplyToParameters(const JobConfig& config,
+                                                  const fem::PhysicalParameters& base) {
+  SOFTID_RETURN_IF_ERROR(config.Validate());
+  SOFTID_RETURN_IF_ERROR(base.Validate().WithContext("base parameters"));
+  Json overrides = config.fixed;
+  for (const auto& [name, start] : config.initial) {
+    if (start.value) overrides[std::string(PhysicalParameterKey(name))] = *start.value;
+  }
+  // Kept in the Result (no SOFTID_ASSIGN_OR_RETURN): moving the optional ground out of it trips a
+  // GCC -Wmaybe-uninitialized false positive.
+  Result<fem::PhysicalParameters> parameters = fem::PhysicalParametersFromJson(overrides, base);
+  if (!parameters.ok()) return parameters;
+  if (config.IsFitted(kGroundPlane) && !parameters->ground.has_value()) {
+    return Status::InvalidArgument(
+        "initial.ground_plane: ground_plane is fitted but neither \"initial\" nor the base "
+        "parameters give a start plane");
+  }
+  return parameters;
+}
+
+}  // namespace softid::inverse

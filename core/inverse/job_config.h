@@ -1,0 +1,205 @@
+// The job configuration: which material parameters an identification job fits, where the fit
+// starts, what stays fixed, and the numerical settings of the simulation, the cost and the
+// optimiser.
+//
+// The JSON form is a public contract that capture stations and the gRPC service send; every key is
+// optional (defaults below), unknown keys are rejected by name:
+//   {
+//     "fit": ["youngs_modulus", "poisson_ratio"],   // unique fittable names (kFittableParameters);
+//                                                   // "ground" is an alias of "ground_plane"
+//     "initial": {                                  // start values of fitted parameters only
+//       "youngs_modulus": {"min": 1e4, "max": 1e6}, // scalars: a range for random starts ...
+//       "poisson_ratio": 0.35,                      // ... or one value in the public JSON form
+//       "ground_plane": {"normal": [0, 0.2, 1], "offset": 0.0}  // any non-zero normal
+//     },
+//     "fixed": {"density": 950, "gravity": [0, 0, -9.81]},  // PhysicalParameters public keys
+//     "cells": 16,               // cells along the longest side of the mesh, >= 2
+//     "cell_size": 0.005,        // [m] > 0; overrides "cells" when present
+//     "substeps": 2,             // simulation steps per camera frame, >= 1
+//     "frames": {"first": 0, "last": -1},  // capture frames fitted; last -1 = the capture's last
+//     "heldout_every": 0,        // every k-th frame is held out for validation; 0 = none
+//     "starts": 4, "threads": 0, "seed": 1,
+//     "max_iterations": 50, "function_tolerance": 1e-6, "gradient_tolerance": 1e-10,
+//     "parameter_tolerance": 1e-8,
+//     "gradient": "adjoint",     // or "finite_difference"
+//     "finite_difference_step": 1e-4,
+//     "cost": {"band_cells": 3, "truncation_cells": 2.0},
+//     "diagnose": false
+//   }
+// Malformed input is rejected with InvalidArgument "<field path> = <value>: <reason>", e.g.
+//   fit[1] = "youngs_modulo": unknown parameter (known: youngs_modulus, poisson_ratio, ...)
+//   initial.poisson_ratio = 0.7: must lie in (0, 0.5)
+// and unknown keys with "job config: unknown key \"fits\"" (or "frames: ...", "cost: ...", and
+// "initial.<name>: ..." inside a range). Parameter values follow the rules of
+// fem::PhysicalParameters::Validate and fem::PhysicalParametersFromJson.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <filesystem>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/fem/physical_parameters.h"
+
+namespace softid::inverse {
+
+// Names of the parameters a job can fit, in the order reports list them. They equal the public
+// PhysicalParameters names except "ground_plane" (PhysicalParameters: "ground"), which is spelled
+// out because "ground" alone reads like a switch rather than a plane to fit.
+inline constexpr std::array<std::string_view, 15> kFittableParameters = {
+    "youngs_modulus",    "poisson_ratio",
+    "density",           "mass_damping",
+    "stiffness_damping", "gravity",
+    "initial_velocity",  "initial_angular_velocity",
+    "ground_plane",      "friction_coefficient",
+    "drag_linear",       "drag_quadratic",
+    "stiffness_field",   "contact_stiffness",
+    "contact_damping",
+};
+
+// Whether `name` is in kFittableParameters (canonical names only: not the alias "ground").
+bool IsFittable(std::string_view name);
+// The canonical fittable name of `name` ("ground" -> "ground_plane"), or nullopt when `name` is
+// neither a fittable name nor an alias of one.
+std::optional<std::string_view> CanonicalFittableName(std::string_view name);
+// The PhysicalParameters public key of a fittable name ("ground_plane" -> "ground"; others are
+// unchanged). Throws std::invalid_argument for a name that is not fittable.
+std::string_view PhysicalParameterKey(std::string_view fittable_name);
+
+// Whether the parameter is a scalar, a 3-vector, the ground plane or the stiffness field.
+enum class ParameterShape { kScalar, kVector3, kPlane, kStiffnessField };
+// Shape of a fittable name (or the alias "ground"); throws std::invalid_argument otherwise.
+ParameterShape ShapeOf(std::string_view fittable_name);
+
+// A range of start values of a scalar parameter; random starts are drawn from it.
+struct ScalarRange {
+  double min = 0.0;  // both valid values of the parameter, min < max
+  double max = 0.0;
+  friend bool operator==(const ScalarRange&, const ScalarRange&) = default;
+};
+
+// The start of one fitted parameter: exactly one of `value` and `range` is set.
+struct InitialValue {
+  // The value in its public JSON form, normalised as fem::ToJson writes it: numbers are doubles,
+  // the ground normal has unit length, the stiffness field is in canonical form.
+  std::optional<nlohmann::json> value;
+  std::optional<ScalarRange> range;  // scalar parameters only
+  friend bool operator==(const InitialValue&, const InitialValue&) = default;
+};
+
+// The capture frames a job fits (indices into the capture, both inclusive).
+struct FrameRange {
+  int first = 0;  // >= 0
+  int last = -1;  // -1: the capture's last frame; otherwise >= first
+  friend bool operator==(const FrameRange&, const FrameRange&) = default;
+};
+
+// How the optimiser obtains the gradient of the cost.
+enum class GradientMethod {
+  kAdjoint,           // exact, one backward pass through the simulation per evaluation
+  kFiniteDifference,  // forward differences, one extra simulation per parameter; a cross-check
+};
+// "adjoint" | "finite_difference" (the JSON names).
+const char* ToString(GradientMethod method);
+
+// Settings of the depth cost (core/cost). Lengths are in grid cells h so that they follow the
+// resolution of the simulation.
+struct CostSettings {
+  // Half-width of the narrow band around the simulated surface in which the cost's distance
+  // field is computed [cells]; wider bands cost time, narrower ones lose points that are far off.
+  int band_cells = 3;  // >= 1
+  // Distances of observed points to the simulated surface are truncated at this many cells, so
+  // outliers (background, sensor noise, missing geometry) cost a bounded amount instead of
+  // dragging the fit [cells].
+  double truncation_cells = 2.0;  // > 0
+  friend bool operator==(const CostSettings&, const CostSettings&) = default;
+};
+
+struct JobConfig {
+  // Parameters to optimise: unique canonical fittable names (the alias "ground" is resolved to
+  // "ground_plane" when parsing JSON), at least one.
+  std::vector<std::string> fit = {"youngs_modulus"};
+  // Start values of fitted parameters, keyed by canonical fittable name; every key is in `fit`.
+  // Fitted parameters without an entry start from the base parameters (ApplyToParameters).
+  std::map<std::string, InitialValue> initial;
+  // Values of parameters held fixed, as a PhysicalParameters JSON object (public keys, "ground"
+  // not "ground_plane"; "ground": null is free flight), normalised like InitialValue::value. No
+  // key names a fitted parameter. Parameters neither fitted nor fixed keep the base values.
+  nlohmann::json fixed = nlohmann::json::object();
+
+  // Grid resolution: cells along the longest side of the rest mesh's bounds, unless cell_size > 0.
+  int cells = 16;          // [-], >= 2
+  double cell_size = 0.0;  // h [m]; > 0 overrides `cells`, 0 = absent (not written to JSON)
+  // Simulation steps per camera frame: dt = 1 / (fps * substeps). More substeps keep stiff or
+  // fast objects stable at the cost of time.
+  int substeps = 2;   // [-], >= 1
+  FrameRange frames;  // all frames by default
+  // Every k-th fitted frame (frames.first + k - 1, frames.first + 2k - 1, ...) is held out of the
+  // fit and only reported, to validate the result on data it did not see. 0 = none; 1 is
+  // rejected because it would hold out every frame.
+  int heldout_every = 0;  // [-], 0 or >= 2
+
+  // Independent optimisations from random starts (drawn from the initial ranges); the best result
+  // wins. Contact-rich fits have local minima, so one start is rarely enough.
+  int starts = 4;  // [-], >= 1
+  // Worker threads running starts in parallel; 0 = std::thread::hardware_concurrency().
+  int threads = 0;  // [-], >= 0
+  // Seed of the random starts: the same seed and config give the same starts.
+  std::uint64_t seed = 1;  // >= 0
+
+  // Stopping criteria of the optimiser, with the meanings of Ceres' Solver::Options.
+  int max_iterations = 50;            // [-], >= 1
+  double function_tolerance = 1e-6;   // |cost change| / cost [-], > 0
+  double gradient_tolerance = 1e-10;  // max-norm of the projected gradient [-], > 0
+  double parameter_tolerance = 1e-8;  // |step| / (|x| + tolerance) [-], > 0
+  GradientMethod gradient = GradientMethod::kAdjoint;
+  // Step of finite differences, relative, in the optimiser's (log) parameters: 1e-4 changes a
+  // positive parameter by 0.01 %, above simulation noise yet small against its curvature.
+  double finite_difference_step = 1e-4;  // [-], > 0
+
+  CostSettings cost;
+  // Asks the job to record diagnostics of the fit (e.g. per-iteration cost terms and gradients)
+  // besides the result; off by default because they are large.
+  bool diagnose = false;
+
+  // Whether `fittable_name` (canonical) is in `fit`.
+  bool IsFitted(std::string_view fittable_name) const;
+  // Whether capture frame `frame` is held out of the fit (see heldout_every).
+  bool IsHeldOut(int frame) const;
+
+  // Checks everything JobConfigFromJson checks, for configs built in code too, plus that names
+  // are canonical ("ground_plane" in fit/initial, "ground" in fixed) and that every InitialValue
+  // has exactly one of value and range. The first problem is named like the JSON errors.
+  Status Validate() const;
+
+  friend bool operator==(const JobConfig&, const JobConfig&) = default;
+};
+
+// Parses and validates a job config JSON object (see the top of this file). Aliases are resolved,
+// values normalised. Errors are InvalidArgument "<field path> = <value>: <reason>".
+Result<JobConfig> JobConfigFromJson(const nlohmann::json& json);
+// Parses JSON text with JobConfigFromJson; errors are InvalidArgument "<source>: ...", JSON syntax
+// errors "<source>: invalid JSON: parse error at line L, column C: ...".
+Result<JobConfig> JobConfigFromString(std::string_view text, std::string_view source);
+// Reads a job config file with JobConfigFromString. NotFound "<file>: job config not found" when
+// the file does not exist; IoError when it cannot be read.
+Result<JobConfig> ReadJobConfig(const std::filesystem::path& file);
+
+// The JSON form with every key written out (cell_size only when > 0). Round-trips:
+// JobConfigFromJson(ToJson(c)) == c for every config JobConfigFromJson returns.
+nlohmann::json ToJson(const JobConfig& config);
+
+// The starting parameters of a job: `base` (e.g. the scene's or the capture's defaults) with
+// config.fixed and the plain initial values applied. Ranged parameters keep the base value (the
+// caller draws starts from the range). InvalidArgument when the config or base is invalid, or
+// when ground_plane is fitted but neither the initial values nor base give a ground plane.
+Result<fem::PhysicalParameters> ApplyToParameters(const JobConfig& config,
+                                                  const fem::PhysicalParameters& base);
+
+}  // namespace softid::inverse
