@@ -14,7 +14,7 @@ packages=(
   # images: 16-bit PNG depth frames and plots
   libopencv-core-dev libopencv-imgcodecs-dev libopencv-imgproc-dev
   # service: gRPC, Protobuf, SQLite
-  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libsqlite3-dev
+  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libsqlite3-dev libssl-dev
   # utilities
   libspdlog-dev libfmt-dev nlohmann-json3-dev libcli11-dev
   # tests and benchmarks

@@ -1,0 +1,140 @@
+// The durable job store's contract: captures, jobs, their progress history and checkpoints.
+// SqliteJobStore is the embedded single-node implementation; a PostgreSQL store (claiming with
+// SELECT ... FOR UPDATE SKIP LOCKED) is meant to implement the same interface and pass the same
+// conformance tests (tests/server/job_store_conformance_test.cc).
+//
+// Contract shared by every implementation:
+//  - Every call is atomic: it commits entirely or not at all. Every state transition is checked
+//    against the job's current state inside that transaction (see job.h for the life cycle); an
+//    illegal one fails with FailedPrecondition naming the job and its state.
+//  - Ids are random (resource_id.h). A malformed id is InvalidArgument, an unknown one NotFound.
+//  - `request_id` makes creation idempotent: repeating a create with the same request_id returns
+//    the resource created the first time; reusing it with different arguments fails with
+//    FailedPrecondition (the API layer reports it as ALREADY_EXISTS). An empty request_id means
+//    none.
+//  - Safe to call from several threads; calls may block while another process holds the lock.
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "server/store/capture.h"
+#include "server/store/job.h"
+#include "server/store/progress_event.h"
+
+namespace softid::server::store {
+
+struct ListJobsRequest {
+  static constexpr int kDefaultPageSize = 50;
+  static constexpr int kMaxPageSize = 1000;
+
+  std::optional<JobState> state = std::nullopt;  // only jobs in this state; all when empty
+  // 0 means kDefaultPageSize; larger than kMaxPageSize is lowered to it (AIP-158); negative is
+  // InvalidArgument.
+  int page_size = 0;
+  std::string page_token =
+      "";  // empty for the first page; else a next_page_token from the last call
+};
+
+// Jobs in creation order (created_at, then id).
+struct JobPage {
+  std::vector<Job> jobs;
+  std::string next_page_token;  // empty when this is the last page
+};
+
+// Which RUNNING jobs RecoverAfterCrash treats as lost.
+enum class RecoveryScope {
+  // Every RUNNING job. Right at start-up of a single-node server: no worker of this process is
+  // running yet, so nothing can still be working on them.
+  kAllRunning,
+  // Only RUNNING jobs whose lease expired. Right for a periodic sweep, or at start-up when several
+  // nodes share the store and other nodes' workers may still be running.
+  kExpiredLeasesOnly,
+};
+
+struct RecoverySummary {
+  int num_requeued = 0;   // back to QUEUED for another attempt
+  int num_failed = 0;     // FAILED: they had used up max_attempts
+  int num_cancelled = 0;  // CANCELLED: a cancel had been requested before the worker was lost
+
+  int total() const { return num_requeued + num_failed + num_cancelled; }
+};
+
+class JobStore {
+ public:
+  virtual ~JobStore() = default;
+
+  // --- Captures -----------------------------------------------------------------------------
+
+  // Records an uploaded capture whose blobs are already stored (BlobStore::Put returned).
+  // InvalidArgument for an invalid manifest (see ValidateManifest).
+  virtual Result<Capture> CreateCapture(const std::vector<ManifestEntry>& manifest,
+                                        const std::string& request_id) = 0;
+  virtual Result<Capture> GetCapture(const std::string& capture_id) = 0;
+
+  // --- Jobs: API side -------------------------------------------------------------------------
+
+  // A new QUEUED job. NotFound naming the capture if it does not exist; InvalidArgument unless
+  // `config` is a JSON object.
+  virtual Result<Job> CreateJob(const std::string& capture_id, const nlohmann::json& config,
+                                const std::string& request_id) = 0;
+  virtual Result<Job> GetJob(const std::string& job_id) = 0;
+  virtual Result<JobPage> ListJobs(const ListJobsRequest& request) = 0;
+  // Jobs in `state`, or all jobs; used to bound the queue before CreateJob.
+  virtual Result<int64_t> CountJobs(std::optional<JobState> state) = 0;
+  // QUEUED: CANCELLED at once. RUNNING: sets cancel_requested (the worker stops at its next check
+  // and calls MarkCancelled); repeating it is harmless. Terminal: FailedPrecondition.
+  // Returns the job after the change.
+  virtual Result<Job> RequestCancel(const std::string& job_id) = 0;
+  // Deletes the job with its progress and checkpoint. FailedPrecondition while RUNNING (cancel it
+  // first). Captures are kept: other jobs may use them.
+  virtual Status DeleteJob(const std::string& job_id) = 0;
+
+  // --- Jobs: worker side ----------------------------------------------------------------------
+
+  // Atomically moves the oldest QUEUED job to RUNNING for `worker_id`: attempts + 1, started_at =
+  // now, lease until now + `lease`. Two workers never claim the same job. Returns nullopt when no
+  // job is queued.
+  virtual Result<std::optional<Job>> ClaimNextJob(const std::string& worker_id,
+                                                  std::chrono::milliseconds lease) = 0;
+  // Extends the lease to now + `lease`. FailedPrecondition when the job is no longer RUNNING or is
+  // leased to another worker: the caller has lost the job and must stop working on it.
+  virtual Status RenewLease(const std::string& job_id, const std::string& worker_id,
+                            std::chrono::milliseconds lease) = 0;
+  // Appends to the job's history and returns the event's seq. Iteration events only while
+  // RUNNING (FailedPrecondition otherwise); fields the store assigns are ignored (see
+  // ProgressEvent).
+  virtual Result<int64_t> AppendProgress(const std::string& job_id, const ProgressEvent& event) = 0;
+  // Events with iteration >= from_iteration, in the order they were written.
+  virtual Result<std::vector<ProgressEvent>> ListProgress(const std::string& job_id,
+                                                          int from_iteration) = 0;
+  // Replaces the job's checkpoint (whatever the worker needs to resume). Only while RUNNING.
+  virtual Status SaveCheckpoint(const std::string& job_id, const nlohmann::json& checkpoint) = 0;
+  // The last checkpoint saved, or nullopt when none was.
+  virtual Result<std::optional<nlohmann::json>> LoadCheckpoint(const std::string& job_id) = 0;
+  // RUNNING -> SUCCEEDED with `result`.
+  virtual Status CompleteJob(const std::string& job_id, const nlohmann::json& result) = 0;
+  // RUNNING -> FAILED with `error` (a failed optimisation, a bad capture, ...).
+  virtual Status FailJob(const std::string& job_id, const std::string& error) = 0;
+  // True when the worker should stop: a cancel was requested, or the job is already CANCELLED.
+  virtual Result<bool> IsCancelRequested(const std::string& job_id) = 0;
+  // RUNNING with cancel_requested -> CANCELLED: the worker acknowledges the cancel.
+  virtual Status MarkCancelled(const std::string& job_id) = 0;
+
+  // --- Maintenance --------------------------------------------------------------------------
+
+  // Jobs left RUNNING by lost workers (see RecoveryScope) go back to QUEUED, or to FAILED with an
+  // error saying so once they were claimed `max_attempts` times (>= 1), or to CANCELLED if a
+  // cancel was pending.
+  virtual Result<RecoverySummary> RecoverAfterCrash(int max_attempts, RecoveryScope scope) = 0;
+
+  // Releases the connection(s). Later calls fail with FailedPrecondition. Idempotent.
+  virtual Status Close() = 0;
+};
+
+}  // namespace softid::server::store

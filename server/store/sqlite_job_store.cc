@@ -1,0 +1,747 @@
+#include "server/store/sqlite_job_store.h"
+
+#include <cmath>
+#include <utility>
+
+#include "core/common/json_fields.h"
+#include "server/store/page_token.h"
+#include "server/store/resource_id.h"
+#include "server/store/sqlite_schema.h"
+
+namespace softid::server::store {
+namespace {
+
+// Long enough for a UUID or any reasonable client key, short enough to keep the index small.
+constexpr size_t kMaxRequestIdLength = 256;
+
+constexpr std::string_view kJobColumns =
+    "id, request_id, capture_id, config, state, cancel_requested, attempts, error, created_at, "
+    "started_at, finished_at, lease_owner, lease_expires_at, result";
+
+constexpr std::string_view kProgressColumns =
+    "seq, attempt, event, iteration, cost, gradient_norm, parameters, elapsed_s, state, message, "
+    "created_at";
+
+// Never throws: strings that are not valid UTF-8 are stored with U+FFFD in place of the bad bytes
+// rather than failing the call (SQLite's json_valid would reject invalid text anyway).
+std::string DumpJson(const nlohmann::json& value) {
+  return value.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
+}
+
+Result<nlohmann::json> ParseStoredJson(const std::string& text, std::string_view what) {
+  nlohmann::json value = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
+  if (value.is_discarded()) {
+    return Status::Internal("corrupt " + std::string(what) + " in the database: not JSON");
+  }
+  return value;
+}
+
+std::optional<Timestamp> OptionalTimestamp(const std::optional<int64_t>& us) {
+  if (!us.has_value()) return std::nullopt;
+  return FromUnixMicros(*us);
+}
+
+std::optional<std::string> NullIfEmpty(const std::string& text) {
+  if (text.empty()) return std::nullopt;
+  return text;
+}
+
+// Reads a row selected with kJobColumns.
+Result<Job> ReadJob(const SqliteStatement& row) {
+  Job job;
+  job.id = row.ColumnText(0);
+  job.request_id = row.ColumnText(1);
+  job.capture_id = row.ColumnText(2);
+  SOFTID_ASSIGN_OR_RETURN(job.config, ParseStoredJson(row.ColumnText(3), "jobs.config"));
+  SOFTID_ASSIGN_OR_RETURN(job.state, JobStateFromString(row.ColumnText(4)));
+  job.cancel_requested = row.ColumnInt64(5) != 0;
+  job.attempts = static_cast<int>(row.ColumnInt64(6));
+  job.error = row.ColumnText(7);
+  job.created_at = FromUnixMicros(row.ColumnInt64(8));
+  job.started_at = OptionalTimestamp(row.ColumnOptionalInt64(9));
+  job.finished_at = OptionalTimestamp(row.ColumnOptionalInt64(10));
+  job.lease_owner = row.ColumnText(11);
+  job.lease_expires_at = OptionalTimestamp(row.ColumnOptionalInt64(12));
+  if (!row.IsNull(13)) {
+    SOFTID_ASSIGN_OR_RETURN(job.result, ParseStoredJson(row.ColumnText(13), "jobs.result"));
+  }
+  return job;
+}
+
+// Reads a row selected with kProgressColumns.
+Result<ProgressEvent> ReadProgress(const SqliteStatement& row) {
+  ProgressEvent event;
+  event.seq = row.ColumnInt64(0);
+  event.attempt = static_cast<int>(row.ColumnInt64(1));
+  SOFTID_ASSIGN_OR_RETURN(event.kind, ProgressKindFromString(row.ColumnText(2)));
+  event.iteration = static_cast<int>(row.ColumnInt64(3));
+  event.cost = row.ColumnDouble(4);
+  event.gradient_norm = row.ColumnDouble(5);
+  if (!row.IsNull(6)) {
+    SOFTID_ASSIGN_OR_RETURN(event.parameters,
+                            ParseStoredJson(row.ColumnText(6), "progress.parameters"));
+  }
+  event.elapsed_s = row.ColumnDouble(7);
+  if (!row.IsNull(8)) {
+    SOFTID_ASSIGN_OR_RETURN(event.state, JobStateFromString(row.ColumnText(8)));
+  }
+  event.message = row.ColumnText(9);
+  event.created_at = FromUnixMicros(row.ColumnInt64(10));
+  return event;
+}
+
+Status CheckJobId(const std::string& job_id) {
+  return CheckResourceId(job_id, kJobIdPrefix, "job id");
+}
+
+Status CheckRequestId(const std::string& request_id) {
+  if (request_id.size() > kMaxRequestIdLength) {
+    return json::Invalid("request_id", request_id,
+                         "must be at most " + std::to_string(kMaxRequestIdLength) + " characters");
+  }
+  return Status::Ok();
+}
+
+Status CheckLease(std::chrono::milliseconds lease) {
+  if (lease.count() <= 0) {
+    return Status::InvalidArgument("lease = " + std::to_string(lease.count()) +
+                                   " ms: must be positive");
+  }
+  return Status::Ok();
+}
+
+Status CheckWorkerId(const std::string& worker_id) {
+  if (worker_id.empty()) return Status::InvalidArgument("worker_id = '': must not be empty");
+  return Status::Ok();
+}
+
+// "job job-... is SUCCEEDED: <requirement>" for a transition the job's state does not allow.
+Status WrongState(const Job& job, const std::string& requirement) {
+  return Status::FailedPrecondition("job " + job.id + " is " + ToString(job.state) + ": " +
+                                    requirement);
+}
+
+// Seconds the current attempt has been running, for state events; 0 before the first claim.
+double ElapsedSeconds(const Job& job, Timestamp now) {
+  if (!job.started_at.has_value()) return 0.0;
+  return std::chrono::duration<double>(now - *job.started_at).count();
+}
+
+}  // namespace
+
+// --- Opening and plumbing ------------------------------------------------------------------------
+
+Result<std::unique_ptr<SqliteJobStore>> SqliteJobStore::Open(const std::filesystem::path& path,
+                                                             const SqliteJobStoreOptions& options) {
+  SqliteOptions db_options;
+  db_options.sync_mode = options.sync_mode;
+  db_options.busy_timeout = options.busy_timeout;
+  db_options.logger = options.logger;
+  SOFTID_ASSIGN_OR_RETURN(SqliteDatabase db, SqliteDatabase::Open(path, db_options));
+  SOFTID_RETURN_IF_ERROR(MigrateSqliteSchema(db));
+  Clock clock =
+      options.clock ? options.clock : Clock([] { return std::chrono::system_clock::now(); });
+  return std::unique_ptr<SqliteJobStore>(new SqliteJobStore(std::move(db), std::move(clock)));
+}
+
+SqliteJobStore::SqliteJobStore(SqliteDatabase db, Clock clock)
+    : db_(std::move(db)), clock_(std::move(clock)) {}
+
+Timestamp SqliteJobStore::Now() const {
+  return ToTimestamp(clock_());
+}
+
+template <typename Fn>
+auto SqliteJobStore::Write(Fn&& fn) -> decltype(fn()) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!db_.is_open()) return Status::FailedPrecondition(db_.path().string() + ": store is closed");
+  SOFTID_ASSIGN_OR_RETURN(SqliteTransaction transaction,
+                          SqliteTransaction::Begin(db_, TransactionMode::kImmediate));
+  auto result = fn();
+  if (!result.ok()) return result;  // the transaction's destructor rolls back
+  SOFTID_RETURN_IF_ERROR(transaction.Commit());
+  return result;
+}
+
+template <typename Fn>
+auto SqliteJobStore::Read(Fn&& fn) -> decltype(fn()) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!db_.is_open()) return Status::FailedPrecondition(db_.path().string() + ": store is closed");
+  SOFTID_ASSIGN_OR_RETURN(SqliteTransaction transaction,
+                          SqliteTransaction::Begin(db_, TransactionMode::kReadOnly));
+  auto result = fn();
+  if (!result.ok()) return result;
+  SOFTID_RETURN_IF_ERROR(transaction.Commit());
+  return result;
+}
+
+Status SqliteJobStore::Close() {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return db_.Close();
+}
+
+Status SqliteJobStore::Backup(const std::filesystem::path& destination) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  if (!db_.is_open()) return Status::FailedPrecondition(db_.path().string() + ": store is closed");
+  SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare("VACUUM INTO ?1"));
+  SOFTID_RETURN_IF_ERROR(stmt.Bind(destination.string()));
+  return stmt.Run().WithContext("backup to " + destination.string());
+}
+
+// --- Helpers used inside transactions ------------------------------------------------------------
+
+Result<Job> SqliteJobStore::LoadJob(const std::string& job_id) {
+  SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare("SELECT " + std::string(kJobColumns) +
+                                                            " FROM jobs WHERE id = ?1"));
+  SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id));
+  SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
+  if (!found) return Status::NotFound("job " + job_id + " not found");
+  return ReadJob(stmt);
+}
+
+Result<std::optional<Capture>> SqliteJobStore::FindCaptureByRequestId(
+    const std::string& request_id) {
+  SOFTID_ASSIGN_OR_RETURN(
+      SqliteStatement stmt,
+      db_.Prepare("SELECT id, manifest, created_at FROM captures WHERE request_id = ?1"));
+  SOFTID_RETURN_IF_ERROR(stmt.Bind(request_id));
+  SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
+  if (!found) return std::optional<Capture>();
+  Capture capture;
+  capture.id = stmt.ColumnText(0);
+  capture.request_id = request_id;
+  SOFTID_ASSIGN_OR_RETURN(const nlohmann::json manifest,
+                          ParseStoredJson(stmt.ColumnText(1), "captures.manifest"));
+  SOFTID_ASSIGN_OR_RETURN(capture.manifest, ManifestFromJson(manifest));
+  capture.created_at = FromUnixMicros(stmt.ColumnInt64(2));
+  return std::optional<Capture>(std::move(capture));
+}
+
+Result<std::optional<Job>> SqliteJobStore::FindJobByRequestId(const std::string& request_id) {
+  SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare("SELECT " + std::string(kJobColumns) +
+                                                            " FROM jobs WHERE request_id = ?1"));
+  SOFTID_RETURN_IF_ERROR(stmt.Bind(request_id));
+  SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
+  if (!found) return std::optional<Job>();
+  SOFTID_ASSIGN_OR_RETURN(Job job, ReadJob(stmt));
+  return std::optional<Job>(std::move(job));
+}
+
+Result<int64_t> SqliteJobStore::AppendStateEvent(const Job& job, const std::string& message,
+                                                 Timestamp now) {
+  // seq continues the job's history; iteration repeats the latest iteration event's, so that
+  // ListProgress(from_iteration = N) includes the state changes that followed iteration N.
+  SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+      INSERT INTO progress (job_id, seq, attempt, event, iteration, elapsed_s, state, message,
+                            created_at)
+      VALUES (?1,
+              (SELECT COALESCE(MAX(seq), 0) + 1 FROM progress WHERE job_id = ?1),
+              ?2, 'state',
+              COALESCE((SELECT iteration FROM progress WHERE job_id = ?1 AND event = 'iteration'
+                        ORDER BY seq DESC LIMIT 1), 0),
+              ?3, ?4, ?5, ?6)
+      RETURNING seq)sql"));
+  SOFTID_RETURN_IF_ERROR(stmt.Bind(job.id, job.attempts, ElapsedSeconds(job, now),
+                                   ToString(job.state), message, ToUnixMicros(now)));
+  SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+  if (!has_row) return Status::Internal("INSERT ... RETURNING seq returned no row");
+  const int64_t seq = stmt.ColumnInt64(0);
+  SOFTID_ASSIGN_OR_RETURN(const bool more, stmt.Step());
+  (void)more;
+  return seq;
+}
+
+// --- Captures ------------------------------------------------------------------------------------
+
+Result<Capture> SqliteJobStore::CreateCapture(const std::vector<ManifestEntry>& manifest,
+                                              const std::string& request_id) {
+  SOFTID_RETURN_IF_ERROR(ValidateManifest(manifest));
+  SOFTID_RETURN_IF_ERROR(CheckRequestId(request_id));
+  return Write([&]() -> Result<Capture> {
+    if (!request_id.empty()) {
+      SOFTID_ASSIGN_OR_RETURN(std::optional<Capture> existing, FindCaptureByRequestId(request_id));
+      if (existing.has_value()) {
+        if (existing->manifest != manifest) {
+          return Status::FailedPrecondition("request_id '" + request_id +
+                                            "' was already used to create capture " + existing->id +
+                                            " with a different manifest");
+        }
+        return *std::move(existing);
+      }
+    }
+    Capture capture;
+    capture.id = NewResourceId(kCaptureIdPrefix);
+    capture.request_id = request_id;
+    capture.manifest = manifest;
+    capture.created_at = Now();
+    SOFTID_ASSIGN_OR_RETURN(
+        SqliteStatement stmt,
+        db_.Prepare("INSERT INTO captures (id, request_id, manifest, created_at) "
+                    "VALUES (?1, ?2, ?3, ?4)"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(capture.id, NullIfEmpty(request_id),
+                                     DumpJson(ManifestToJson(manifest)),
+                                     ToUnixMicros(capture.created_at)));
+    SOFTID_RETURN_IF_ERROR(stmt.Run());
+    return capture;
+  });
+}
+
+Result<Capture> SqliteJobStore::GetCapture(const std::string& capture_id) {
+  SOFTID_RETURN_IF_ERROR(CheckResourceId(capture_id, kCaptureIdPrefix, "capture id"));
+  return Read([&]() -> Result<Capture> {
+    SOFTID_ASSIGN_OR_RETURN(
+        SqliteStatement stmt,
+        db_.Prepare("SELECT request_id, manifest, created_at FROM captures WHERE id = ?1"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(capture_id));
+    SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
+    if (!found) return Status::NotFound("capture " + capture_id + " not found");
+    Capture capture;
+    capture.id = capture_id;
+    capture.request_id = stmt.ColumnText(0);
+    SOFTID_ASSIGN_OR_RETURN(const nlohmann::json manifest,
+                            ParseStoredJson(stmt.ColumnText(1), "captures.manifest"));
+    SOFTID_ASSIGN_OR_RETURN(capture.manifest, ManifestFromJson(manifest));
+    capture.created_at = FromUnixMicros(stmt.ColumnInt64(2));
+    return capture;
+  });
+}
+
+// --- Jobs: API side ------------------------------------------------------------------------------
+
+Result<Job> SqliteJobStore::CreateJob(const std::string& capture_id, const nlohmann::json& config,
+                                      const std::string& request_id) {
+  SOFTID_RETURN_IF_ERROR(CheckResourceId(capture_id, kCaptureIdPrefix, "capture id"));
+  if (!config.is_object()) return json::Invalid("config", config, "must be a JSON object");
+  SOFTID_RETURN_IF_ERROR(CheckRequestId(request_id));
+  return Write([&]() -> Result<Job> {
+    if (!request_id.empty()) {
+      SOFTID_ASSIGN_OR_RETURN(std::optional<Job> existing, FindJobByRequestId(request_id));
+      if (existing.has_value()) {
+        if (existing->capture_id != capture_id || existing->config != config) {
+          return Status::FailedPrecondition(
+              "request_id '" + request_id + "' was already used to create job " + existing->id +
+              " with a different " + (existing->capture_id != capture_id ? "capture" : "config"));
+        }
+        return *std::move(existing);
+      }
+    }
+    {
+      SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                              db_.Prepare("SELECT 1 FROM captures WHERE id = ?1"));
+      SOFTID_RETURN_IF_ERROR(stmt.Bind(capture_id));
+      SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
+      if (!found) return Status::NotFound("capture " + capture_id + " not found");
+    }
+    Job job;
+    job.id = NewResourceId(kJobIdPrefix);
+    job.request_id = request_id;
+    job.capture_id = capture_id;
+    job.config = config;
+    job.state = JobState::kQueued;
+    job.created_at = Now();
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        INSERT INTO jobs (id, request_id, capture_id, config, state, created_at)
+        VALUES (?1, ?2, ?3, ?4, 'QUEUED', ?5))sql"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job.id, NullIfEmpty(request_id), capture_id, DumpJson(config),
+                                     ToUnixMicros(job.created_at)));
+    SOFTID_RETURN_IF_ERROR(stmt.Run());
+    SOFTID_RETURN_IF_ERROR(AppendStateEvent(job, "created", job.created_at).status());
+    return job;
+  });
+}
+
+Result<Job> SqliteJobStore::GetJob(const std::string& job_id) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Read([&] { return LoadJob(job_id); });
+}
+
+Result<JobPage> SqliteJobStore::ListJobs(const ListJobsRequest& request) {
+  if (request.page_size < 0) {
+    return Status::InvalidArgument("page_size = " + std::to_string(request.page_size) +
+                                   ": must not be negative");
+  }
+  int page_size = request.page_size == 0 ? ListJobsRequest::kDefaultPageSize : request.page_size;
+  page_size = std::min(page_size, ListJobsRequest::kMaxPageSize);
+  const std::string filter =
+      request.state.has_value() ? std::string("state=") + ToString(*request.state) : "";
+  std::optional<PageCursor> after;
+  if (!request.page_token.empty()) {
+    SOFTID_ASSIGN_OR_RETURN(after, DecodePageToken(request.page_token, filter));
+  }
+
+  // Separate SQL per case (rather than "?1 IS NULL OR state = ?1") so the planner can seek the
+  // matching index: jobs_by_state with a filter, jobs_by_creation without.
+  std::string sql = "SELECT " + std::string(kJobColumns) + " FROM jobs WHERE 1";
+  if (request.state.has_value()) sql += " AND state = ?1";
+  if (after.has_value()) sql += " AND (created_at, id) > (?2, ?3)";
+  sql += " ORDER BY created_at, id LIMIT ?4";
+
+  return Read([&]() -> Result<JobPage> {
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(sql));
+    std::optional<std::string> state_text;
+    if (request.state.has_value()) state_text = ToString(*request.state);
+    std::optional<int64_t> after_created;
+    std::optional<std::string> after_id;
+    if (after.has_value()) {
+      after_created = ToUnixMicros(after->created_at);
+      after_id = after->id;
+    }
+    // One row more than the page tells whether another page follows, so the last page never
+    // hands out a token that leads to an empty page.
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(state_text, after_created, after_id, page_size + 1));
+    JobPage page;
+    while (true) {
+      SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+      if (!has_row) break;
+      SOFTID_ASSIGN_OR_RETURN(Job job, ReadJob(stmt));
+      page.jobs.push_back(std::move(job));
+    }
+    if (static_cast<int>(page.jobs.size()) > page_size) {
+      page.jobs.pop_back();
+      const Job& last = page.jobs.back();
+      page.next_page_token = EncodePageToken(PageCursor{last.created_at, last.id}, filter);
+    }
+    return page;
+  });
+}
+
+Result<int64_t> SqliteJobStore::CountJobs(std::optional<JobState> state) {
+  return Read([&]() -> Result<int64_t> {
+    SOFTID_ASSIGN_OR_RETURN(
+        SqliteStatement stmt,
+        db_.Prepare(state.has_value() ? "SELECT count(*) FROM jobs WHERE state = ?1"
+                                      : "SELECT count(*) FROM jobs"));
+    if (state.has_value()) SOFTID_RETURN_IF_ERROR(stmt.Bind(ToString(*state)));
+    SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+    if (!has_row) return Status::Internal("count(*) returned no row");
+    return stmt.ColumnInt64(0);
+  });
+}
+
+Result<Job> SqliteJobStore::RequestCancel(const std::string& job_id) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Write([&]() -> Result<Job> {
+    SOFTID_ASSIGN_OR_RETURN(Job job, LoadJob(job_id));
+    const Timestamp now = Now();
+    switch (job.state) {
+      case JobState::kQueued: {
+        SOFTID_ASSIGN_OR_RETURN(
+            SqliteStatement stmt,
+            db_.Prepare("UPDATE jobs SET state = 'CANCELLED', finished_at = ?2 WHERE id = ?1"));
+        SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, ToUnixMicros(now)));
+        SOFTID_RETURN_IF_ERROR(stmt.Run());
+        job.state = JobState::kCancelled;
+        job.finished_at = now;
+        SOFTID_RETURN_IF_ERROR(AppendStateEvent(job, "cancelled while queued", now).status());
+        return job;
+      }
+      case JobState::kRunning: {
+        if (job.cancel_requested) return job;  // asked before: nothing new to record
+        SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                                db_.Prepare("UPDATE jobs SET cancel_requested = 1 WHERE id = ?1"));
+        SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id));
+        SOFTID_RETURN_IF_ERROR(stmt.Run());
+        job.cancel_requested = true;
+        SOFTID_RETURN_IF_ERROR(AppendStateEvent(job, "cancel requested", now).status());
+        return job;
+      }
+      case JobState::kSucceeded:
+      case JobState::kFailed:
+      case JobState::kCancelled: break;
+    }
+    return WrongState(job, "a finished job cannot be cancelled");
+  });
+}
+
+Status SqliteJobStore::DeleteJob(const std::string& job_id) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(job_id));
+    if (job.state == JobState::kRunning) {
+      return WrongState(job, "cancel it and wait until it stops before deleting it");
+    }
+    // progress and checkpoints go with it (ON DELETE CASCADE).
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare("DELETE FROM jobs WHERE id = ?1"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id));
+    return stmt.Run();
+  });
+}
+
+// --- Jobs: worker side ---------------------------------------------------------------------------
+
+Result<std::optional<Job>> SqliteJobStore::ClaimNextJob(const std::string& worker_id,
+                                                        std::chrono::milliseconds lease) {
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  SOFTID_RETURN_IF_ERROR(CheckLease(lease));
+  return Write([&]() -> Result<std::optional<Job>> {
+    const Timestamp now = Now();
+    // One statement picks and takes the job; under BEGIN IMMEDIATE no other connection can take
+    // the same one in between.
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        UPDATE jobs
+        SET state = 'RUNNING', attempts = attempts + 1, started_at = ?1, lease_owner = ?2,
+            lease_expires_at = ?3
+        WHERE id = (SELECT id FROM jobs WHERE state = 'QUEUED' ORDER BY created_at, id LIMIT 1)
+        RETURNING )sql" + std::string(kJobColumns)));
+    const Timestamp expires = now + std::chrono::duration_cast<std::chrono::microseconds>(lease);
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(ToUnixMicros(now), worker_id, ToUnixMicros(expires)));
+    SOFTID_ASSIGN_OR_RETURN(const bool claimed, stmt.Step());
+    if (!claimed) return std::optional<Job>();
+    SOFTID_ASSIGN_OR_RETURN(Job job, ReadJob(stmt));
+    SOFTID_ASSIGN_OR_RETURN(const bool more, stmt.Step());  // runs the statement to completion
+    if (more) return Status::Internal("claim updated more than one job");
+    SOFTID_RETURN_IF_ERROR(
+        AppendStateEvent(
+            job, "claimed by " + worker_id + " (attempt " + std::to_string(job.attempts) + ")", now)
+            .status());
+    return std::optional<Job>(std::move(job));
+  });
+}
+
+Status SqliteJobStore::RenewLease(const std::string& job_id, const std::string& worker_id,
+                                  std::chrono::milliseconds lease) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  SOFTID_RETURN_IF_ERROR(CheckLease(lease));
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(job_id));
+    if (job.state != JobState::kRunning) return WrongState(job, "only a RUNNING job has a lease");
+    if (job.lease_owner != worker_id) {
+      return Status::FailedPrecondition("job " + job_id + " is leased to " + job.lease_owner +
+                                        ", not " + worker_id);
+    }
+    const Timestamp expires = Now() + std::chrono::duration_cast<std::chrono::microseconds>(lease);
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                            db_.Prepare("UPDATE jobs SET lease_expires_at = ?2 WHERE id = ?1"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, ToUnixMicros(expires)));
+    return stmt.Run();
+  });
+}
+
+Result<int64_t> SqliteJobStore::AppendProgress(const std::string& job_id,
+                                               const ProgressEvent& event) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  if (event.kind == ProgressKind::kIteration && event.iteration < 0) {
+    return Status::InvalidArgument("iteration = " + std::to_string(event.iteration) +
+                                   ": must not be negative");
+  }
+  if (!std::isfinite(event.elapsed_s) || event.elapsed_s < 0) {
+    return Status::InvalidArgument("elapsed_s = " + std::to_string(event.elapsed_s) +
+                                   ": must be finite and non-negative");
+  }
+  return Write([&]() -> Result<int64_t> {
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(job_id));
+    const Timestamp now = Now();
+    if (event.kind == ProgressKind::kState) return AppendStateEvent(job, event.message, now);
+    if (job.state != JobState::kRunning) {
+      return WrongState(job, "iteration progress is only accepted while RUNNING");
+    }
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        INSERT INTO progress (job_id, seq, attempt, event, iteration, cost, gradient_norm,
+                              parameters, elapsed_s, message, created_at)
+        VALUES (?1, (SELECT COALESCE(MAX(seq), 0) + 1 FROM progress WHERE job_id = ?1),
+                ?2, 'iteration', ?3, ?4, ?5, ?6, ?7, ?8, ?9)
+        RETURNING seq)sql"));
+    std::optional<std::string> parameters;
+    if (!event.parameters.is_null()) parameters = DumpJson(event.parameters);
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, job.attempts, event.iteration, event.cost,
+                                     event.gradient_norm, parameters, event.elapsed_s,
+                                     event.message, ToUnixMicros(now)));
+    SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+    if (!has_row) return Status::Internal("INSERT ... RETURNING seq returned no row");
+    const int64_t seq = stmt.ColumnInt64(0);
+    SOFTID_ASSIGN_OR_RETURN(const bool more, stmt.Step());
+    (void)more;
+    return seq;
+  });
+}
+
+Result<std::vector<ProgressEvent>> SqliteJobStore::ListProgress(const std::string& job_id,
+                                                                int from_iteration) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Read([&]() -> Result<std::vector<ProgressEvent>> {
+    SOFTID_RETURN_IF_ERROR(LoadJob(job_id).status());
+    SOFTID_ASSIGN_OR_RETURN(
+        SqliteStatement stmt,
+        db_.Prepare("SELECT " + std::string(kProgressColumns) +
+                    " FROM progress WHERE job_id = ?1 AND iteration >= ?2 ORDER BY seq"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, from_iteration));
+    std::vector<ProgressEvent> events;
+    while (true) {
+      SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+      if (!has_row) break;
+      SOFTID_ASSIGN_OR_RETURN(ProgressEvent event, ReadProgress(stmt));
+      events.push_back(std::move(event));
+    }
+    return events;
+  });
+}
+
+Status SqliteJobStore::SaveCheckpoint(const std::string& job_id, const nlohmann::json& checkpoint) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(job_id));
+    if (job.state != JobState::kRunning) {
+      return WrongState(job, "checkpoints are only accepted while RUNNING");
+    }
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        INSERT INTO checkpoints (job_id, attempt, data, updated_at) VALUES (?1, ?2, ?3, ?4)
+        ON CONFLICT (job_id) DO UPDATE
+        SET attempt = excluded.attempt, data = excluded.data,
+            updated_at = excluded.updated_at)sql"));
+    SOFTID_RETURN_IF_ERROR(
+        stmt.Bind(job_id, job.attempts, DumpJson(checkpoint), ToUnixMicros(Now())));
+    return stmt.Run();
+  });
+}
+
+Result<std::optional<nlohmann::json>> SqliteJobStore::LoadCheckpoint(const std::string& job_id) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Read([&]() -> Result<std::optional<nlohmann::json>> {
+    SOFTID_RETURN_IF_ERROR(LoadJob(job_id).status());
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                            db_.Prepare("SELECT data FROM checkpoints WHERE job_id = ?1"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id));
+    SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
+    if (!found) return std::optional<nlohmann::json>();
+    SOFTID_ASSIGN_OR_RETURN(nlohmann::json data,
+                            ParseStoredJson(stmt.ColumnText(0), "checkpoints.data"));
+    return std::optional<nlohmann::json>(std::move(data));
+  });
+}
+
+Status SqliteJobStore::CompleteJob(const std::string& job_id, const nlohmann::json& result) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(Job job, LoadJob(job_id));
+    if (job.state != JobState::kRunning) {
+      return WrongState(job, "only a RUNNING job can be completed");
+    }
+    const Timestamp now = Now();
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        UPDATE jobs SET state = 'SUCCEEDED', finished_at = ?2, result = ?3, lease_owner = NULL,
+                        lease_expires_at = NULL
+        WHERE id = ?1)sql"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, ToUnixMicros(now), DumpJson(result)));
+    SOFTID_RETURN_IF_ERROR(stmt.Run());
+    job.state = JobState::kSucceeded;
+    return AppendStateEvent(job, "succeeded", now).status();
+  });
+}
+
+Status SqliteJobStore::FailJob(const std::string& job_id, const std::string& error) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  if (error.empty()) return Status::InvalidArgument("error = '': a failed job needs a reason");
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(Job job, LoadJob(job_id));
+    if (job.state != JobState::kRunning) return WrongState(job, "only a RUNNING job can fail");
+    const Timestamp now = Now();
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        UPDATE jobs SET state = 'FAILED', finished_at = ?2, error = ?3, lease_owner = NULL,
+                        lease_expires_at = NULL
+        WHERE id = ?1)sql"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, ToUnixMicros(now), error));
+    SOFTID_RETURN_IF_ERROR(stmt.Run());
+    job.state = JobState::kFailed;
+    return AppendStateEvent(job, error, now).status();
+  });
+}
+
+Result<bool> SqliteJobStore::IsCancelRequested(const std::string& job_id) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Read([&]() -> Result<bool> {
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(job_id));
+    return job.cancel_requested || job.state == JobState::kCancelled;
+  });
+}
+
+Status SqliteJobStore::MarkCancelled(const std::string& job_id) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(Job job, LoadJob(job_id));
+    if (job.state != JobState::kRunning) {
+      return WrongState(job, "only a RUNNING job can acknowledge a cancel");
+    }
+    if (!job.cancel_requested) {
+      return WrongState(job, "no cancel was requested (use FailJob to stop for another reason)");
+    }
+    const Timestamp now = Now();
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        UPDATE jobs SET state = 'CANCELLED', finished_at = ?2, lease_owner = NULL,
+                        lease_expires_at = NULL
+        WHERE id = ?1)sql"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, ToUnixMicros(now)));
+    SOFTID_RETURN_IF_ERROR(stmt.Run());
+    job.state = JobState::kCancelled;
+    return AppendStateEvent(job, "cancelled", now).status();
+  });
+}
+
+// --- Maintenance ---------------------------------------------------------------------------------
+
+Result<RecoverySummary> SqliteJobStore::RecoverAfterCrash(int max_attempts, RecoveryScope scope) {
+  if (max_attempts < 1) {
+    return Status::InvalidArgument("max_attempts = " + std::to_string(max_attempts) +
+                                   ": must be at least 1");
+  }
+  return Write([&]() -> Result<RecoverySummary> {
+    const Timestamp now = Now();
+    std::vector<Job> lost;
+    {
+      std::string sql = "SELECT " + std::string(kJobColumns) + " FROM jobs WHERE state = 'RUNNING'";
+      if (scope == RecoveryScope::kExpiredLeasesOnly) sql += " AND lease_expires_at <= ?1";
+      sql += " ORDER BY created_at, id";
+      SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(sql));
+      if (scope == RecoveryScope::kExpiredLeasesOnly) {
+        SOFTID_RETURN_IF_ERROR(stmt.Bind(ToUnixMicros(now)));
+      }
+      while (true) {
+        SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+        if (!has_row) break;
+        SOFTID_ASSIGN_OR_RETURN(Job job, ReadJob(stmt));
+        lost.push_back(std::move(job));
+      }
+    }
+
+    RecoverySummary summary;
+    for (Job& job : lost) {
+      const std::string cause = scope == RecoveryScope::kAllRunning
+                                    ? "its worker was lost (the server restarted)"
+                                    : "its worker's lease expired";
+      std::string message;
+      std::string sql;
+      if (job.cancel_requested) {
+        job.state = JobState::kCancelled;
+        message = "cancelled: " + cause + " after the cancel was requested";
+        sql = "UPDATE jobs SET state = 'CANCELLED', finished_at = ?2";
+        ++summary.num_cancelled;
+      } else if (job.attempts >= max_attempts) {
+        job.state = JobState::kFailed;
+        job.error = "gave up after " + std::to_string(job.attempts) + " attempt(s) (max_attempts " +
+                    std::to_string(max_attempts) + "): " + cause + " while RUNNING";
+        message = job.error;
+        sql = "UPDATE jobs SET state = 'FAILED', finished_at = ?2, error = ?3";
+        ++summary.num_failed;
+      } else {
+        job.state = JobState::kQueued;
+        message = "requeued: " + cause + " during attempt " + std::to_string(job.attempts);
+        sql = "UPDATE jobs SET state = 'QUEUED'";
+        ++summary.num_requeued;
+      }
+      sql += ", lease_owner = NULL, lease_expires_at = NULL WHERE id = ?1";
+      SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(sql));
+      if (job.state == JobState::kQueued) {
+        SOFTID_RETURN_IF_ERROR(stmt.Bind(job.id));
+      } else if (job.state == JobState::kCancelled) {
+        SOFTID_RETURN_IF_ERROR(stmt.Bind(job.id, ToUnixMicros(now)));
+      } else {
+        SOFTID_RETURN_IF_ERROR(stmt.Bind(job.id, ToUnixMicros(now), job.error));
+      }
+      SOFTID_RETURN_IF_ERROR(stmt.Run());
+      SOFTID_RETURN_IF_ERROR(AppendStateEvent(job, message, now).status());
+    }
+    return summary;
+  });
+}
+
+}  // namespace softid::server::store

@@ -1,0 +1,129 @@
+#include "server/store/sqlite_schema.h"
+
+#include <array>
+#include <string>
+#include <string_view>
+
+namespace softid::server::store {
+namespace {
+
+// kMigrations[v] takes the schema from version v to v + 1. Never edit a released entry: add one.
+//
+// Conventions: STRICT tables; timestamps are INTEGER microseconds since the Unix epoch (UTC); JSON
+// columns are TEXT checked with json_valid; enumerations are TEXT with a CHECK listing the values,
+// so that the database stays readable with the sqlite3 shell.
+constexpr std::array<std::string_view, kSqliteSchemaVersion> kMigrations = {
+    // 0 -> 1: the initial schema.
+    R"sql(
+CREATE TABLE captures (
+  id          TEXT PRIMARY KEY NOT NULL,
+  request_id  TEXT UNIQUE,  -- NULL when the client gave none; UNIQUE ignores NULLs
+  manifest    TEXT NOT NULL CHECK (json_valid(manifest)),  -- [{path, sha256, size}]
+  created_at  INTEGER NOT NULL
+) STRICT;
+
+CREATE TABLE jobs (
+  id                TEXT PRIMARY KEY NOT NULL,
+  request_id        TEXT UNIQUE,
+  capture_id        TEXT NOT NULL REFERENCES captures (id),
+  config            TEXT NOT NULL CHECK (json_valid(config)),
+  state             TEXT NOT NULL
+                    CHECK (state IN ('QUEUED', 'RUNNING', 'SUCCEEDED', 'FAILED', 'CANCELLED')),
+  cancel_requested  INTEGER NOT NULL DEFAULT 0 CHECK (cancel_requested IN (0, 1)),
+  attempts          INTEGER NOT NULL DEFAULT 0 CHECK (attempts >= 0),
+  error             TEXT NOT NULL DEFAULT '',
+  created_at        INTEGER NOT NULL,
+  started_at        INTEGER,
+  finished_at       INTEGER,
+  lease_owner       TEXT,
+  lease_expires_at  INTEGER,
+  result            TEXT CHECK (result IS NULL OR json_valid(result)),
+  -- A RUNNING job always has a lease; no other state has one.
+  CHECK ((state = 'RUNNING') = (lease_owner IS NOT NULL AND lease_expires_at IS NOT NULL))
+) STRICT;
+-- Claiming (oldest QUEUED first) and listing by state both walk this index in order.
+CREATE INDEX jobs_by_state ON jobs (state, created_at, id);
+-- Listing all jobs in creation order (the keyset pagination key).
+CREATE INDEX jobs_by_creation ON jobs (created_at, id);
+-- Foreign keys need an index on the child column, or deleting a capture scans jobs.
+CREATE INDEX jobs_by_capture ON jobs (capture_id);
+
+CREATE TABLE progress (
+  job_id         TEXT NOT NULL REFERENCES jobs (id) ON DELETE CASCADE,
+  seq            INTEGER NOT NULL CHECK (seq >= 1),  -- 1, 2, 3, ... per job
+  attempt        INTEGER NOT NULL,
+  event          TEXT NOT NULL CHECK (event IN ('iteration', 'state')),
+  iteration      INTEGER NOT NULL CHECK (iteration >= 0),
+  cost           REAL,           -- NULL when not available (NaN)
+  gradient_norm  REAL,
+  parameters     TEXT CHECK (parameters IS NULL OR json_valid(parameters)),
+  elapsed_s      REAL NOT NULL,  -- seconds since the attempt started
+  state          TEXT CHECK (state IN ('QUEUED', 'RUNNING', 'SUCCEEDED', 'FAILED', 'CANCELLED')),
+  message        TEXT NOT NULL DEFAULT '',
+  created_at     INTEGER NOT NULL,
+  PRIMARY KEY (job_id, seq)
+) STRICT, WITHOUT ROWID;
+
+CREATE TABLE checkpoints (
+  job_id      TEXT PRIMARY KEY NOT NULL REFERENCES jobs (id) ON DELETE CASCADE,
+  attempt     INTEGER NOT NULL,
+  data        TEXT NOT NULL CHECK (json_valid(data)),
+  updated_at  INTEGER NOT NULL
+) STRICT;
+)sql",
+};
+
+Result<int64_t> ReadPragma(SqliteDatabase& db, std::string_view pragma) {
+  SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db.Prepare("PRAGMA " + std::string(pragma)));
+  SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+  if (!has_row) return Status::Internal("PRAGMA " + std::string(pragma) + " returned no row");
+  return stmt.ColumnInt64(0);
+}
+
+}  // namespace
+
+Result<int> ReadSchemaVersion(SqliteDatabase& db) {
+  SOFTID_ASSIGN_OR_RETURN(const int64_t version, ReadPragma(db, "user_version"));
+  return static_cast<int>(version);
+}
+
+Status MigrateSqliteSchema(SqliteDatabase& db) {
+  const std::string where = db.path().string();
+  SOFTID_ASSIGN_OR_RETURN(SqliteTransaction transaction, SqliteTransaction::Begin(db));
+  SOFTID_ASSIGN_OR_RETURN(const int version, ReadSchemaVersion(db));
+  SOFTID_ASSIGN_OR_RETURN(const int64_t application_id, ReadPragma(db, "application_id"));
+
+  if (version > kSqliteSchemaVersion) {
+    return Status::FailedPrecondition(
+        where + ": database schema version " + std::to_string(version) +
+        " is newer than this build supports (" + std::to_string(kSqliteSchemaVersion) +
+        "); it was written by a newer softid. Refusing to open it; run a newer softid-server");
+  }
+  if (application_id != 0 && application_id != kSqliteApplicationId) {
+    return Status::FailedPrecondition(where + ": not a softid job store (application_id " +
+                                      std::to_string(application_id) + ")");
+  }
+  if (version == 0) {
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement objects,
+                            db.Prepare("SELECT count(*) FROM sqlite_schema"));
+    SOFTID_ASSIGN_OR_RETURN(const bool has_row, objects.Step());
+    if (has_row && objects.ColumnInt64(0) > 0) {
+      return Status::FailedPrecondition(
+          where + ": not a softid job store (it has tables but no schema version)");
+    }
+  }
+  for (int v = version; v < kSqliteSchemaVersion; ++v) {
+    SOFTID_RETURN_IF_ERROR(
+        db.Exec(kMigrations[static_cast<size_t>(v)])
+            .WithContext("migrating schema to version " + std::to_string(v + 1)));
+  }
+  if (version != kSqliteSchemaVersion) {
+    SOFTID_RETURN_IF_ERROR(
+        db.Exec("PRAGMA user_version = " + std::to_string(kSqliteSchemaVersion)));
+    SOFTID_RETURN_IF_ERROR(
+        db.Exec("PRAGMA application_id = " + std::to_string(kSqliteApplicationId)));
+  }
+  return transaction.Commit();
+}
+
+}  // namespace softid::server::store
