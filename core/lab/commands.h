@@ -17,5 +17,6 @@ inline constexpr int kExitInvalidInput = 2;
 Command RegisterSynth(CLI::App* app);
 Command RegisterSimulate(CLI::App* app);
 Command RegisterBench(CLI::App* app);
+Command RegisterFit(CLI::App* app);
 
 }  // namespace softid::lab

@@ -11,7 +11,8 @@ int main(int argc, char** argv) {
   spdlog::set_default_logger(logger);
   spdlog::set_pattern("[%H:%M:%S.%e] [%^%l%$] %v");
 
-  CLI::App app{"softid-lab: simulate soft bodies, synthesise depth captures, benchmark"};
+  CLI::App app{
+      "softid-lab: simulate soft bodies, synthesise depth captures, fit parameters, benchmark"};
   app.require_subcommand(1);
   bool verbose = false;
   app.add_flag("-v,--verbose", verbose, "debug logging");
@@ -25,6 +26,8 @@ int main(int argc, char** argv) {
   add("simulate", "simulate a scene and write the deformed surface per frame (PLY)",
       softid::lab::RegisterSimulate);
   add("bench", "time simulation steps at several grid sizes", softid::lab::RegisterBench);
+  add("fit", "recover physical parameters from a capture (writes result.json)",
+      softid::lab::RegisterFit);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

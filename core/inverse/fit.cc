@@ -1,0 +1,453 @@
+#include "core/inverse/fit.h"
+
+#include <ceres/ceres.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <random>
+#include <thread>
+
+#include "core/capture/capture.h"
+#include "core/common/json_fields.h"
+#include "core/inverse/parameter_space.h"
+#include "core/inverse/trajectory_objective.h"
+
+namespace softid::inverse {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+// The minimised function in the optimiser's variables: cost / phi_max^2 (dimensionless, so the
+// tolerances mean the same for every object size and grid).
+class CeresObjective : public ceres::FirstOrderFunction {
+ public:
+  CeresObjective(TrajectoryObjective* objective, const ParameterSpace* space,
+                 const fem::PhysicalParameters* base, const JobConfig* config, double scale,
+                 StartResult* stats)
+      : objective_(objective),
+        space_(space),
+        base_(base),
+        config_(config),
+        scale_(scale),
+        stats_(stats) {}
+
+  int NumParameters() const override { return space_->NumVariables(); }
+
+  bool Evaluate(const double* x, double* cost, double* gradient) const override {
+    const bool adjoint = config_->gradient == GradientMethod::kAdjoint;
+    std::optional<double> value = EvaluateAt(x, gradient != nullptr && adjoint, gradient);
+    if (!value) return false;
+    *cost = *value;
+    if (gradient != nullptr && !adjoint) {
+      // Forward differences in the optimiser's variables (the Table 1 comparison row).
+      const double step = config_->finite_difference_step;
+      std::vector<double> shifted(x, x + NumParameters());
+      for (int i = 0; i < NumParameters(); ++i) {
+        shifted[i] = x[i] + step;
+        std::optional<double> moved = EvaluateAt(shifted.data(), false, nullptr);
+        shifted[i] = x[i];
+        if (!moved) return false;
+        gradient[i] = (*moved - *value) / step;
+      }
+    }
+    return true;
+  }
+
+ private:
+  std::optional<double> EvaluateAt(const double* x, bool with_gradient, double* gradient) const {
+    const fem::PhysicalParameters p = space_->ToParameters(x, *base_);
+    ++stats_->evaluations;
+    if (!p.Validate().ok()) {
+      ++stats_->failed_evaluations;
+      return std::nullopt;
+    }
+    Result<ObjectiveEvaluation> evaluation = objective_->Evaluate(p, with_gradient);
+    if (!evaluation.ok() || evaluation->diverged) {
+      ++stats_->failed_evaluations;
+      return std::nullopt;
+    }
+    stats_->forward_seconds += evaluation->forward_seconds;
+    stats_->backward_seconds += evaluation->backward_seconds;
+    stats_->steps += evaluation->steps;
+    if (with_gradient) {
+      space_->ChainGradient(evaluation->gradient, x, gradient);
+      for (int i = 0; i < NumParameters(); ++i) gradient[i] /= scale_;
+    }
+    return evaluation->cost / scale_;
+  }
+
+  TrajectoryObjective* objective_;
+  const ParameterSpace* space_;
+  const fem::PhysicalParameters* base_;
+  const JobConfig* config_;
+  double scale_;
+  StartResult* stats_;
+};
+
+// Shared progress of all starts: serialises the user's callback and estimates the time left.
+class ProgressBoard {
+ public:
+  ProgressBoard(const FitOptions& options, const JobConfig& config, int num_starts, int threads)
+      : options_(options),
+        max_iterations_(config.max_iterations),
+        num_starts_(num_starts),
+        threads_(threads),
+        begin_(Clock::now()) {}
+
+  void StartBegins() {
+    std::lock_guard lock(mutex_);
+    ++begun_;
+  }
+
+  void Report(int start, int iteration, double cost, double gradient_norm,
+              const fem::PhysicalParameters& parameters) {
+    std::lock_guard lock(mutex_);
+    ++iterations_done_;
+    const double elapsed = SecondsSince(begin_);
+    if (!options_.on_progress) return;
+    FitProgress progress;
+    progress.start = start;
+    progress.num_starts = num_starts_;
+    progress.iteration = iteration;
+    progress.max_iterations = max_iterations_;
+    progress.cost = cost;
+    progress.gradient_norm = gradient_norm;
+    progress.parameters = parameters;
+    progress.elapsed_seconds = elapsed;
+    // Pessimistic: every running start uses all its iterations, pending ones too.
+    const double per_iteration = elapsed / std::max(1, iterations_done_) * threads_;
+    const int pending = num_starts_ - begun_;
+    const double left_iterations =
+        std::max(0, max_iterations_ - iteration) + double(pending) * max_iterations_ / threads_;
+    progress.remaining_seconds = per_iteration * left_iterations;
+    options_.on_progress(progress);
+  }
+
+ private:
+  const FitOptions& options_;
+  int max_iterations_, num_starts_, threads_;
+  Clock::time_point begin_;
+  std::mutex mutex_;
+  int begun_ = 0;
+  int iterations_done_ = 0;
+};
+
+class IterationReporter : public ceres::IterationCallback {
+ public:
+  IterationReporter(int start, const double* x, const ParameterSpace* space,
+                    const fem::PhysicalParameters* base, double scale, ProgressBoard* board,
+                    const std::atomic<bool>* cancel, StartResult* stats)
+      : start_(start),
+        x_(x),
+        space_(space),
+        base_(base),
+        scale_(scale),
+        board_(board),
+        cancel_(cancel),
+        stats_(stats) {}
+
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
+    const double cost = summary.cost * scale_;
+    stats_->cost_history.push_back(cost);
+    board_->Report(start_, summary.iteration, cost, summary.gradient_max_norm,
+                   space_->ToParameters(x_, *base_));
+    if (cancel_ != nullptr && cancel_->load()) return ceres::SOLVER_ABORT;
+    return ceres::SOLVER_CONTINUE;
+  }
+
+ private:
+  int start_;
+  const double* x_;
+  const ParameterSpace* space_;
+  const fem::PhysicalParameters* base_;
+  double scale_;
+  ProgressBoard* board_;
+  const std::atomic<bool>* cancel_;
+  StartResult* stats_;
+};
+
+// Starting parameters: start s draws every ranged parameter (log-uniform for positive
+// quantities, uniform otherwise) from a generator seeded by (seed, s). Without ranges all starts
+// would coincide, so there is one.
+std::vector<fem::PhysicalParameters> DrawStarts(const JobConfig& config,
+                                                const fem::PhysicalParameters& base) {
+  bool any_range = false;
+  for (const auto& [name, initial] : config.initial) any_range |= initial.range.has_value();
+  const int count = any_range ? config.starts : 1;
+  std::vector<fem::PhysicalParameters> starts;
+  for (int s = 0; s < count; ++s) {
+    std::seed_seq seq{static_cast<unsigned>(config.seed), static_cast<unsigned>(config.seed >> 32),
+                      static_cast<unsigned>(s)};
+    std::mt19937_64 rng(seq);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    fem::PhysicalParameters p = base;
+    for (const auto& [name, initial] : config.initial) {
+      if (!initial.range) continue;
+      double* value = ScalarParameter(p, name);
+      if (value == nullptr) continue;
+      const double t = unit(rng);
+      const double lo = initial.range->min, hi = initial.range->max;
+      *value = IsLogParameter(name) && lo > 0.0 ? lo * std::pow(hi / lo, t) : lo + t * (hi - lo);
+    }
+    starts.push_back(p);
+  }
+  return starts;
+}
+
+void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjective& objective,
+              const ParameterSpace& space, const fem::PhysicalParameters& base,
+              const JobConfig& config, const FitOptions& options, ProgressBoard& board,
+              StartResult* result) {
+  const auto begin = Clock::now();
+  result->index = index;
+  result->initial = start;
+  const double h = objective.simulator().hex_mesh().CellSize();
+  const double phi_max = config.cost.truncation_cells * h;
+  const double scale = phi_max * phi_max;
+  std::vector<double> x = space.ToVariables(start);
+  result->initial = space.ToParameters(x.data(), base);
+
+  auto* function = new CeresObjective(&objective, &space, &base, &config, scale, result);
+  ceres::GradientProblem problem(function);  // takes ownership
+  IterationReporter reporter(index, x.data(), &space, &base, scale, &board, options.cancel, result);
+  ceres::GradientProblemSolver::Options solver;
+  solver.line_search_direction_type = ceres::LBFGS;
+  solver.line_search_type = ceres::WOLFE;
+  solver.max_num_iterations = config.max_iterations;
+  solver.function_tolerance = config.function_tolerance;
+  solver.gradient_tolerance = config.gradient_tolerance;
+  solver.parameter_tolerance = config.parameter_tolerance;
+  solver.logging_type = ceres::SILENT;
+  solver.update_state_every_iteration = true;
+  solver.callbacks.push_back(&reporter);
+  ceres::GradientProblemSolver::Summary summary;
+  ceres::Solve(solver, problem, x.data(), &summary);
+
+  result->final = space.ToParameters(x.data(), base);
+  result->iterations = std::max(0, static_cast<int>(summary.iterations.size()) - 1);
+  result->converged = summary.termination_type == ceres::CONVERGENCE;
+  result->termination = summary.message;
+  result->failed = summary.iterations.empty() || !std::isfinite(summary.initial_cost) ||
+                   summary.termination_type == ceres::FAILURE;
+  result->initial_cost = summary.initial_cost * scale;
+  result->final_cost = summary.final_cost * scale;
+  if (result->cost_history.size() > 1)
+    result->cost_history.erase(result->cost_history.begin());  // iteration 0 = initial cost
+  // Held-out frames: the costs they did not help to fit.
+  const bool any_heldout = std::any_of(objective.frames().begin(), objective.frames().end(),
+                                       [](const ObservedFrame& f) { return f.heldout; });
+  if (any_heldout && !result->failed) {
+    Result<ObjectiveEvaluation> before = objective.Evaluate(result->initial, false);
+    Result<ObjectiveEvaluation> after = objective.Evaluate(result->final, false);
+    if (before.ok() && !before->diverged) result->initial_heldout_cost = before->heldout_cost;
+    if (after.ok() && !after->diverged) result->final_heldout_cost = after->heldout_cost;
+  }
+  result->seconds = SecondsSince(begin);
+}
+
+nlohmann::json CostJson(double initial, double final) {
+  return {{"initial", initial}, {"final", final}};
+}
+
+}  // namespace
+
+Result<fem::PhysicalParameters> BaseParameters(const capture::Capture& capture,
+                                               const geometry::TriangleMesh& mesh,
+                                               const std::vector<ObservedFrame>& frames,
+                                               const JobConfig& config) {
+  fem::PhysicalParameters base;
+  if (capture.mass_kg) {
+    if (config.IsFitted("density")) {
+      return json::Invalid(
+          "fit", "density",
+          "cannot be fitted: the capture gives mass_kg = " + std::to_string(*capture.mass_kg));
+    }
+    if (config.fixed.contains("density")) {
+      return json::Invalid(
+          "fixed.density", config.fixed["density"],
+          "conflicts with the capture's mass_kg = " + std::to_string(*capture.mass_kg));
+    }
+    const double volume = std::abs(geometry::SignedVolume(mesh));
+    if (!(volume > 0.0)) {
+      return Status::InvalidArgument("capture mesh encloses no volume: cannot turn mass_kg = " +
+                                     std::to_string(*capture.mass_kg) + " into a density");
+    }
+    base.density = *capture.mass_kg / volume;
+  }
+  // A fitted ground plane without a start: normal against gravity, through the lowest point the
+  // cameras saw.
+  const bool ground_given =
+      config.fixed.contains("ground") || (config.initial.count("ground_plane") > 0 &&
+                                          config.initial.at("ground_plane").value.has_value());
+  if (config.IsFitted("ground_plane") && !ground_given) {
+    const Eigen::Vector3d normal = -base.gravity.normalized();
+    double lowest = std::numeric_limits<double>::infinity();
+    for (const ObservedFrame& frame : frames) {
+      for (const Eigen::Vector3d& p : frame.points) lowest = std::min(lowest, normal.dot(p));
+    }
+    for (const Eigen::Vector3d& v : mesh.vertices) lowest = std::min(lowest, normal.dot(v));
+    base.ground = fem::GroundPlane{normal, lowest};
+  }
+  return ApplyToParameters(config, base);
+}
+
+Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
+                      const FitOptions& options) {
+  const auto begin = Clock::now();
+  SOFTID_RETURN_IF_ERROR(config.Validate());
+  SOFTID_ASSIGN_OR_RETURN(geometry::TriangleMesh mesh, capture::LoadCaptureMesh(capture));
+  SOFTID_ASSIGN_OR_RETURN(std::vector<ObservedFrame> loaded,
+                          LoadObservedFrames(capture, config.frames.first, config.frames.last));
+  for (ObservedFrame& frame : loaded) frame.heldout = config.IsHeldOut(frame.frame);
+  auto frames = std::make_shared<const std::vector<ObservedFrame>>(std::move(loaded));
+
+  FitResult result;
+  result.fitted = config.fit;
+  SOFTID_ASSIGN_OR_RETURN(result.base, BaseParameters(capture, mesh, *frames, config));
+  const double length = mesh.Bounds().sizes().maxCoeff();
+  SOFTID_ASSIGN_OR_RETURN(ParameterSpace space,
+                          ParameterSpace::Create(config.fit, result.base, length));
+  const std::vector<fem::PhysicalParameters> starts = DrawStarts(config, result.base);
+  result.starts.resize(starts.size());
+
+  int threads =
+      config.threads > 0 ? config.threads : static_cast<int>(std::thread::hardware_concurrency());
+  threads = std::clamp(threads, 1, static_cast<int>(starts.size()));
+  fem::SimulationOptions simulation;
+  simulation.cells_along_longest_side = config.cells;
+  simulation.cell_size = config.cell_size;
+  simulation.padding_cells = std::max(
+      simulation.padding_cells, static_cast<int>(std::ceil(config.cost.truncation_cells)) + 1);
+  cost::SurfaceCostOptions cost_options;
+  cost_options.band_cells = config.cost.band_cells;
+  cost_options.truncation_cells = config.cost.truncation_cells;
+  simulation.padding_cells = std::max(simulation.padding_cells, cost_options.band_cells);
+
+  ProgressBoard board(options, config, static_cast<int>(starts.size()), threads);
+  std::atomic<int> next_start{0};
+  std::mutex error_mutex;
+  Status error;
+  auto worker = [&]() {
+    std::unique_ptr<TrajectoryObjective> objective;
+    try {
+      objective =
+          std::make_unique<TrajectoryObjective>(mesh, capture.fixed_region, starts[0], simulation,
+                                                cost_options, frames, capture.fps, config.substeps);
+    } catch (const std::invalid_argument& e) {
+      std::lock_guard lock(error_mutex);
+      error = Status::InvalidArgument(e.what());
+      return;
+    }
+    for (int s = next_start++; s < static_cast<int>(starts.size()); s = next_start++) {
+      if (options.cancel != nullptr && options.cancel->load()) break;
+      board.StartBegins();
+      RunStart(s, starts[s], *objective, space, result.base, config, options, board,
+               &result.starts[s]);
+    }
+  };
+  {
+    std::vector<std::jthread> pool;
+    for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
+    worker();
+  }
+  SOFTID_RETURN_IF_ERROR(error);
+  result.cancelled = options.cancel != nullptr && options.cancel->load();
+  for (size_t s = 0; s < result.starts.size(); ++s) {
+    const StartResult& start = result.starts[s];
+    if (start.failed || start.evaluations == 0) continue;
+    if (result.best < 0 || start.final_cost < result.starts[result.best].final_cost)
+      result.best = static_cast<int>(s);
+  }
+  result.total_seconds = SecondsSince(begin);
+  if (result.best < 0) {
+    if (result.cancelled) return Status::FailedPrecondition("the fit was cancelled");
+    std::string why = result.starts.empty() ? "no start" : result.starts[0].termination;
+    return Status::FailedPrecondition(
+        "every start failed: the simulation diverged or could not be evaluated at the starting "
+        "values (first start: " +
+        why + ")");
+  }
+  return result;
+}
+
+nlohmann::json ParameterValueJson(const fem::PhysicalParameters& p_in, const std::string& name) {
+  fem::PhysicalParameters p = p_in;
+  if (double* value = ScalarParameter(p, name)) return *value;
+  if (name == "gravity") return json::FromVector3(p.gravity);
+  if (name == "initial_velocity") return json::FromVector3(p.initial_velocity);
+  if (name == "initial_angular_velocity") return json::FromVector3(p.initial_angular_velocity);
+  if (name == "ground_plane" || name == "ground")
+    return p.ground ? fem::ToJson(*p.ground) : nlohmann::json(nullptr);
+  if (name == "stiffness_field") return fem::ToJson(p.stiffness_field);
+  return nullptr;
+}
+
+nlohmann::json ToJson(const FitResult& result) {
+  auto parameters_json = [&](const StartResult& start) {
+    nlohmann::json out = nlohmann::json::object();
+    for (const std::string& name : result.fitted) {
+      out[name] = {{"value", ParameterValueJson(start.final, name)},
+                   {"unit", fem::ParameterUnit(name)},
+                   {"initial", ParameterValueJson(start.initial, name)}};
+    }
+    return out;
+  };
+  auto start_json = [&](const StartResult& start) {
+    nlohmann::json cost = CostJson(start.initial_cost, start.final_cost);
+    cost["heldout_initial"] = start.initial_heldout_cost;
+    cost["heldout_final"] = start.final_heldout_cost;
+    return nlohmann::json{{"index", start.index},
+                          {"parameters", parameters_json(start)},
+                          {"cost", cost},
+                          {"iterations", start.iterations},
+                          {"converged", start.converged},
+                          {"failed", start.failed},
+                          {"termination", start.termination},
+                          {"evaluations", start.evaluations},
+                          {"failed_evaluations", start.failed_evaluations},
+                          {"seconds", start.seconds}};
+  };
+  const StartResult& best = result.Best();
+  nlohmann::json out;
+  out["format"] = "softid-result/1";
+  out["parameters"] = parameters_json(best);
+  out["cost"] = start_json(best)["cost"];
+  out["iterations"] = best.iterations;
+  out["converged"] = best.converged;
+  out["termination"] = best.termination;
+  out["cancelled"] = result.cancelled;
+  out["best_start"] = best.index;
+  out["starts"] = nlohmann::json::array();
+  for (const StartResult& start : result.starts) out["starts"].push_back(start_json(start));
+  out["cost_history"] = best.cost_history;
+  nlohmann::json fixed = fem::ToJson(result.base);
+  for (const std::string& name : result.fitted)
+    fixed.erase(name == "ground_plane" ? std::string("ground") : name);
+  out["fixed"] = fixed;
+  int evaluations = 0;
+  long long steps = 0;
+  double forward = 0.0, backward = 0.0;
+  for (const StartResult& start : result.starts) {
+    evaluations += start.evaluations;
+    steps += start.steps;
+    forward += start.forward_seconds;
+    backward += start.backward_seconds;
+  }
+  out["timing"] = {
+      {"total_seconds", result.total_seconds},
+      {"evaluations", evaluations},
+      {"simulated_steps", steps},
+      {"forward_seconds", forward},
+      {"backward_seconds", backward},
+      {"ms_per_forward_adjoint_step", steps > 0 ? 1e3 * (forward + backward) / steps : 0.0},
+  };
+  return out;
+}
+
+}  // namespace softid::inverse

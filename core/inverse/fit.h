@@ -1,0 +1,97 @@
+// Fitting physical parameters to a capture: several starts of Ceres' line-search minimiser
+// (L-BFGS, Wolfe line search) over the ParameterSpace variables, each minimising a
+// TrajectoryObjective, run in parallel; the best start is the result and every start is kept.
+//
+// The result's JSON (`ToJson(FitResult)`) is the public result.json schema, also returned by the
+// service:
+//   {"format": "softid-result/1",
+//    "parameters": {"youngs_modulus": {"value": 2.1e4, "unit": "Pa", "initial": 1e4}, ...},
+//    "cost": {"initial": .., "final": .., "heldout_initial": .., "heldout_final": ..},
+//    "iterations": .., "converged": .., "termination": "..",
+//    "starts": [{"index": 0, "parameters": {..}, "cost": {..}, "iterations": .., ...}, ...],
+//    "cost_history": [..],           // best start: cost after each iteration
+//    "fixed": {..},                  // every parameter the fit did not change, public JSON
+//    "timing": {"total_seconds": .., "evaluations": .., "ms_per_forward_adjoint_step": .., ..}}
+// Vectors are arrays and the ground plane is {"normal": [..], "offset": ..}.
+#pragma once
+
+#include <atomic>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "core/capture/capture.h"
+#include "core/common/status.h"
+#include "core/fem/physical_parameters.h"
+#include "core/geometry/triangle_mesh.h"
+#include "core/inverse/job_config.h"
+#include "core/inverse/observed_frames.h"
+
+namespace softid::inverse {
+
+// One line of live progress (called from the worker threads, serialised by the fit).
+struct FitProgress {
+  int start = 0;  // index of the start reporting
+  int num_starts = 1;
+  int iteration = 0;  // completed iterations of this start
+  int max_iterations = 0;
+  double cost = 0.0;                   // [m^2]
+  double gradient_norm = 0.0;          // max norm, optimiser variables
+  fem::PhysicalParameters parameters;  // current values
+  double elapsed_seconds = 0.0;        // since the fit began
+  double remaining_seconds = 0.0;      // estimate for the whole fit
+};
+
+struct FitOptions {
+  std::function<void(const FitProgress&)> on_progress;  // optional
+  // Checked every iteration; a set flag stops every start (the result then says "cancelled").
+  const std::atomic<bool>* cancel = nullptr;
+};
+
+struct StartResult {
+  int index = 0;
+  fem::PhysicalParameters initial, final;
+  double initial_cost = 0.0, final_cost = 0.0;                  // [m^2]
+  double initial_heldout_cost = 0.0, final_heldout_cost = 0.0;  // [m^2]
+  int iterations = 0;
+  bool converged = false;
+  std::string termination;  // Ceres' message, or why the start failed
+  bool failed = false;      // the start could not be evaluated at all (e.g. diverged at the start)
+  std::vector<double> cost_history;  // after each iteration [m^2]
+  int evaluations = 0, failed_evaluations = 0;
+  double seconds = 0.0, forward_seconds = 0.0, backward_seconds = 0.0;
+  long long steps = 0;  // simulation steps run, over all evaluations
+};
+
+struct FitResult {
+  std::vector<std::string> fitted;  // canonical names
+  fem::PhysicalParameters base;     // fixed values and defaults
+  std::vector<StartResult> starts;
+  int best = -1;  // index into starts
+  bool cancelled = false;
+  double total_seconds = 0.0;
+
+  const StartResult& Best() const { return starts.at(best); }
+};
+
+// The starting parameters of a capture under a config: defaults, density = mass / volume when the
+// capture gives the mass, then config.fixed and plain initial values; a fitted ground plane
+// without a start lies under the lowest observed point, normal against gravity.
+Result<fem::PhysicalParameters> BaseParameters(const capture::Capture& capture,
+                                               const geometry::TriangleMesh& mesh,
+                                               const std::vector<ObservedFrame>& frames,
+                                               const JobConfig& config);
+
+// Runs the fit. InvalidArgument naming the field for a config that does not fit the capture
+// (frame range, density fitted although the capture gives the mass, ...). A start whose
+// simulation diverges at its initial values is reported as failed; if every start fails the fit
+// fails (FailedPrecondition).
+Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
+                      const FitOptions& options = {});
+
+// Public JSON of a parameter value: number, array, {"normal", "offset"} or the stiffness field.
+nlohmann::json ParameterValueJson(const fem::PhysicalParameters& p, const std::string& name);
+nlohmann::json ToJson(const FitResult& result);
+
+}  // namespace softid::inverse

@@ -1,0 +1,67 @@
+// The optimiser's variables: the fitted physical parameters mapped to an unconstrained vector x,
+// so that no step of the line search can leave the valid range and steps have comparable scales.
+//   positive quantities (youngs_modulus, density, damping, drag, contact stiffness and damping,
+//     stiffness field region scales): x = log(p)
+//   poisson_ratio in (0, 0.5): p = 0.5 logistic(x)
+//   friction_coefficient >= 0: p = softplus(x) (reaches 0 smoothly, unbounded above)
+//   gravity [m/s^2], initial_velocity [m/s], initial_angular_velocity [rad/s]: x = p
+//   ground_plane: n = normalise(n0 + x0 t1 + x1 t2) around the starting normal n0 (no pole
+//     singularity), offset = x2 * L / 10 (L the body size)
+//   stiffness_field (linear): log_gradient = x / L
+#pragma once
+
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/fem/parameter_gradient.h"
+#include "core/fem/physical_parameters.h"
+
+namespace softid::inverse {
+
+// The scalar field of `p` named `name` (a public name), or null when it is not a scalar.
+double* ScalarParameter(fem::PhysicalParameters& p, std::string_view name);
+// Whether the optimiser works with log(value) for this parameter (positive quantities).
+bool IsLogParameter(std::string_view name);
+
+class ParameterSpace {
+ public:
+  // @param names fittable parameter names (see job_config.h); each at most once.
+  // @param reference the starting parameters: they fix the ground plane's tangent basis and the
+  //   size of a stiffness field's coefficient vector. The ground plane must be set when fitted.
+  // @param length_scale L [m], the body's size.
+  static Result<ParameterSpace> Create(const std::vector<std::string>& names,
+                                       const fem::PhysicalParameters& reference,
+                                       double length_scale);
+
+  int NumVariables() const { return static_cast<int>(variable_names_.size()); }
+  // "youngs_modulus", "gravity[2]", "ground_plane.tilt[0]", ...
+  const std::vector<std::string>& variable_names() const { return variable_names_; }
+  const std::vector<std::string>& names() const { return names_; }
+
+  // x for parameters p (fitted entries only). Values at the edge of a transform's range (a zero
+  // damping or friction) are moved just inside it: kMinimumStart below.
+  std::vector<double> ToVariables(const fem::PhysicalParameters& p) const;
+  // `base` with the fitted entries replaced by those encoded in x.
+  fem::PhysicalParameters ToParameters(const double* x, const fem::PhysicalParameters& base) const;
+  // d cost / d x from d cost / d p, at x.
+  void ChainGradient(const fem::ParameterGradient& gradient, const double* x,
+                     double* gradient_x) const;
+
+ private:
+  struct Entry {
+    std::string name;
+    int offset = 0;  // first variable
+    int size = 1;
+  };
+  std::vector<Entry> entries_;
+  std::vector<std::string> names_;
+  std::vector<std::string> variable_names_;
+  Eigen::Vector3d ground_normal_ = Eigen::Vector3d::UnitZ();
+  Eigen::Vector3d ground_tangent_[2];
+  fem::StiffnessField::Kind field_kind_ = fem::StiffnessField::Kind::kUniform;
+  double length_scale_ = 1.0;
+};
+
+}  // namespace softid::inverse

@@ -1,0 +1,112 @@
+#include "core/inverse/trajectory_objective.h"
+
+#include <chrono>
+
+#include "core/common/check.h"
+
+namespace softid::inverse {
+namespace {
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+}  // namespace
+
+TrajectoryObjective::TrajectoryObjective(const geometry::TriangleMesh& rest_mesh,
+                                         const std::optional<Eigen::AlignedBox3d>& fixed_region,
+                                         const fem::PhysicalParameters& initial_parameters,
+                                         fem::SimulationOptions options,
+                                         const cost::SurfaceCostOptions& cost_options,
+                                         std::shared_ptr<const std::vector<ObservedFrame>> frames,
+                                         double fps, int substeps)
+    : frames_(std::move(frames)), substeps_(substeps) {
+  SOFTID_THROW_UNLESS(fps > 0.0, "fps must be positive");
+  SOFTID_THROW_UNLESS(substeps >= 1, "substeps must be at least 1");
+  SOFTID_THROW_UNLESS(frames_ != nullptr && !frames_->empty(), "no observed frames");
+  options.time_step = 1.0 / (fps * substeps);
+  simulator_ =
+      std::make_unique<fem::Simulator>(rest_mesh, initial_parameters, options, fixed_region);
+  cost_ = std::make_unique<cost::SparseSurfaceCost>(simulator_->hex_mesh(),
+                                                    simulator_->signed_distance(), cost_options);
+}
+
+Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalParameters& parameters,
+                                                          bool with_gradient) {
+  ObjectiveEvaluation out;
+  const auto forward_start = std::chrono::steady_clock::now();
+  fem::Simulator& sim = *simulator_;
+  try {
+    sim.SetParameters(parameters);
+  } catch (const std::invalid_argument& error) {
+    return Status::InvalidArgument(error.what());
+  }
+  const std::vector<ObservedFrame>& frames = *frames_;
+  const int last_step = frames.back().frame * substeps_;
+  states_.resize(last_step + 1);
+  states_[0] = sim.state();
+  for (int step = 1; step <= last_step; ++step) {
+    const fem::StepSummary summary = sim.Step();
+    if (summary.diverged || !sim.state().u.allFinite()) {
+      out.diverged = true;
+      out.steps = step;
+      return out;
+    }
+    states_[step] = sim.state();
+  }
+  out.steps = last_step;
+
+  int fitted = 0, heldout = 0;
+  for (const ObservedFrame& frame : frames) (frame.heldout ? heldout : fitted) += 1;
+  SOFTID_THROW_UNLESS(fitted > 0, "every observed frame is held out");
+  out.frame_costs.resize(frames.size());
+  for (size_t k = 0; k < frames.size(); ++k) {
+    const double c =
+        cost_->Evaluate(states_[frames[k].frame * substeps_].u, frames[k].points, nullptr);
+    out.frame_costs[k] = c;
+    if (frames[k].heldout)
+      out.heldout_cost += c / heldout;
+    else
+      out.cost += c / fitted;
+  }
+  out.forward_seconds = SecondsSince(forward_start);
+  if (!with_gradient) return out;
+
+  // Backward: the cost's gradient enters at the state of each fitted frame.
+  const auto backward_start = std::chrono::steady_clock::now();
+  const int size = static_cast<int>(states_[0].u.size());
+  fem::StateAdjoint adjoint{Eigen::VectorXd::Zero(size), Eigen::VectorXd::Zero(size),
+                            Eigen::VectorXd::Zero(size)};
+  int next_frame = static_cast<int>(frames.size()) - 1;
+  auto add_frame_gradient = [&](int step) {
+    while (next_frame >= 0 && frames[next_frame].frame * substeps_ > step) --next_frame;
+    if (next_frame >= 0 && frames[next_frame].frame * substeps_ == step &&
+        !frames[next_frame].heldout) {
+      cost_->Evaluate(states_[step].u, frames[next_frame].points, &frame_gradient_);
+      adjoint.u += frame_gradient_ / fitted;
+    }
+  };
+  for (int step = last_step; step >= 1; --step) {
+    add_frame_gradient(step);
+    SOFTID_RETURN_IF_ERROR(
+        sim.BackpropagateStep(states_[step - 1], states_[step], &adjoint, &out.gradient));
+  }
+  add_frame_gradient(0);
+  sim.BackpropagateInitialState(states_[0], adjoint, &out.gradient);
+  out.backward_seconds = SecondsSince(backward_start);
+  return out;
+}
+
+Result<std::vector<std::vector<cost::PointMatch>>> TrajectoryObjective::MatchPoints(
+    const fem::PhysicalParameters& parameters) {
+  SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation, Evaluate(parameters, false));
+  if (evaluation.diverged) return Status::FailedPrecondition("the simulation diverged");
+  std::vector<std::vector<cost::PointMatch>> matches(frames_->size());
+  for (size_t k = 0; k < frames_->size(); ++k) {
+    const ObservedFrame& frame = (*frames_)[k];
+    cost_->Evaluate(states_[frame.frame * substeps_].u, frame.points, nullptr, &matches[k]);
+  }
+  return matches;
+}
+
+}  // namespace softid::inverse

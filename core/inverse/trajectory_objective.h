@@ -1,0 +1,77 @@
+// The function the optimiser minimises: simulate from t = 0 with given parameters, compare every
+// fitted frame with what the cameras saw through the sparse-surface-constraint cost, and get the
+// gradient with respect to every parameter by one adjoint pass backwards through the states.
+//
+//   cost = (1 / F) sum over the F fitted frames k of C_k(u(t_k))   [m^2]
+//
+// C_k is the per-frame SSC cost (mean truncated squared distance of the frame's points); frame k
+// is compared with the state after k * substeps steps. Held-out frames are evaluated (for
+// validation) but do not enter the cost or the gradient.
+//
+// Memory: the states (u, v, a) of every step, nothing else; matrices are re-assembled backwards.
+// Thread-compatibility: one instance per thread (it owns a Simulator and a cost).
+#pragma once
+
+#include <Eigen/Geometry>
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/cost/sparse_surface_cost.h"
+#include "core/fem/parameter_gradient.h"
+#include "core/fem/physical_parameters.h"
+#include "core/fem/simulation_options.h"
+#include "core/fem/simulator.h"
+#include "core/geometry/triangle_mesh.h"
+#include "core/inverse/observed_frames.h"
+
+namespace softid::inverse {
+
+struct ObjectiveEvaluation {
+  bool diverged = false;            // the forward run failed: no cost, the parameters are unusable
+  double cost = 0.0;                // mean over fitted frames [m^2]
+  double heldout_cost = 0.0;        // mean over held-out frames [m^2] (0 without any)
+  std::vector<double> frame_costs;  // per observed frame (fitted and held out) [m^2]
+  fem::ParameterGradient gradient;  // d cost / d parameters (when requested)
+  int steps = 0;
+  double forward_seconds = 0.0, backward_seconds = 0.0;
+};
+
+class TrajectoryObjective {
+ public:
+  // @param frames observed frames, ascending, shared read-only between objectives (starts).
+  // @param options simulation options; time_step is replaced by 1 / (fps * substeps).
+  // @throws std::invalid_argument naming the field for invalid options (as Simulator).
+  TrajectoryObjective(const geometry::TriangleMesh& rest_mesh,
+                      const std::optional<Eigen::AlignedBox3d>& fixed_region,
+                      const fem::PhysicalParameters& initial_parameters,
+                      fem::SimulationOptions options, const cost::SurfaceCostOptions& cost_options,
+                      std::shared_ptr<const std::vector<ObservedFrame>> frames, double fps,
+                      int substeps);
+
+  // Forward run, cost and (if with_gradient) the adjoint gradient. A diverging forward run is
+  // reported as diverged (never as a shorter run with a lower cost). Internal error when an
+  // adjoint solve fails.
+  Result<ObjectiveEvaluation> Evaluate(const fem::PhysicalParameters& parameters,
+                                       bool with_gradient);
+
+  // Per observed frame, the point matches at the given parameters (diagnosis); runs forward only.
+  Result<std::vector<std::vector<cost::PointMatch>>> MatchPoints(
+      const fem::PhysicalParameters& parameters);
+
+  fem::Simulator& simulator() { return *simulator_; }
+  const std::vector<ObservedFrame>& frames() const { return *frames_; }
+  int substeps() const { return substeps_; }
+  double characteristic_length() const { return simulator_->characteristic_length(); }
+
+ private:
+  std::unique_ptr<fem::Simulator> simulator_;
+  std::unique_ptr<cost::SparseSurfaceCost> cost_;
+  std::shared_ptr<const std::vector<ObservedFrame>> frames_;
+  int substeps_ = 1;
+  std::vector<fem::SimulationState> states_;  // per step, reused across evaluations
+  Eigen::VectorXd frame_gradient_;
+};
+
+}  // namespace softid::inverse

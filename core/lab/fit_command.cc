@@ -1,0 +1,77 @@
+// softid-lab fit: recover physical parameters from a capture (see core/inverse/fit.h).
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "core/capture/capture.h"
+#include "core/inverse/fit.h"
+#include "core/inverse/job_config.h"
+#include "core/lab/commands.h"
+#include "core/lab/result_report.h"
+
+namespace softid::lab {
+namespace {
+
+struct FitFlags {
+  std::string capture;
+  std::string config;
+  std::string out = "result.json";
+};
+
+int RunFit(const FitFlags& flags) {
+  Result<capture::Capture> capture =
+      capture::ReadCapture(flags.capture, capture::ReadCaptureOptions{.decode_frames = false});
+  if (!capture.ok()) {
+    spdlog::error("{}", capture.status().message());
+    return capture.status().code() == StatusCode::kNotFound ? kExitFailure : kExitInvalidInput;
+  }
+  inverse::JobConfig config;
+  if (!flags.config.empty()) {
+    Result<inverse::JobConfig> read = inverse::ReadJobConfig(flags.config);
+    if (!read.ok()) {
+      spdlog::error("{}", read.status().message());
+      return kExitInvalidInput;
+    }
+    config = *read;
+  }
+  spdlog::info("fit: {} ({} frames, {} camera(s)); fitting {}; {} start(s), {} iterations max",
+               flags.capture, capture->NumFrames(), capture->NumCameras(),
+               fmt::join(config.fit, ", "), config.starts, config.max_iterations);
+
+  inverse::FitOptions options;
+  options.on_progress = [&](const inverse::FitProgress& p) {
+    spdlog::info("start {}/{} it {:>3}/{} cost {:.4e} |g| {:.2e} {} | {:.0f} s, ~{:.0f} s left",
+                 p.start + 1, p.num_starts, p.iteration, p.max_iterations, p.cost, p.gradient_norm,
+                 FormatParameters(p.parameters, config.fit), p.elapsed_seconds,
+                 p.remaining_seconds);
+  };
+  Result<inverse::FitResult> result = inverse::Fit(*capture, config, options);
+  if (!result.ok()) {
+    spdlog::error("{}", result.status().message());
+    return result.status().code() == StatusCode::kInvalidArgument ? kExitInvalidInput
+                                                                  : kExitFailure;
+  }
+  const nlohmann::json json = inverse::ToJson(*result);
+  const Status written = WriteJsonFile(flags.out, json);
+  if (!written.ok()) {
+    spdlog::error("{}", written.message());
+    return kExitFailure;
+  }
+  PrintResultTable(json, std::filesystem::path(flags.capture) / "truth.json");
+  std::printf("result written to %s\n", flags.out.c_str());
+  return kExitOk;
+}
+
+}  // namespace
+
+Command RegisterFit(CLI::App* app) {
+  auto flags = std::make_shared<FitFlags>();
+  app->add_option("capture", flags->capture, "capture folder (with capture.json)")->required();
+  app->add_option("-c,--config", flags->config, "job config JSON (default: fit youngs_modulus)");
+  app->add_option("-o,--out", flags->out, "result JSON to write")->capture_default_str();
+  return [flags] { return RunFit(*flags); };
+}
+
+}  // namespace softid::lab

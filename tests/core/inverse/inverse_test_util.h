@@ -1,0 +1,78 @@
+// A small synthetic capture written to a temporary folder, loaded back as the fit sees it.
+#pragma once
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "core/capture/capture.h"
+#include "core/inverse/observed_frames.h"
+#include "core/scenes/scene.h"
+#include "core/scenes/synthesize.h"
+
+namespace softid::inverse::testing {
+
+struct SmallCapture {
+  bool ok = false;
+  std::string error;
+  std::filesystem::path directory;
+  capture::Capture capture;
+  geometry::TriangleMesh mesh;
+  fem::PhysicalParameters truth;
+  std::shared_ptr<const std::vector<ObservedFrame>> frames;
+
+  ~SmallCapture() {
+    std::error_code ignored;
+    if (!directory.empty()) std::filesystem::remove_all(directory, ignored);
+  }
+};
+
+// Scene `name` simulated for `duration` seconds at 60 fps with 2 substeps on an 8-cell grid, seen
+// by 2 noise-free 40x40 cameras.
+inline SmallCapture MakeSmallCapture(const std::string& name, double duration, int cameras = 2,
+                                     int cells = 8) {
+  SmallCapture out;
+  Result<scenes::Scene> scene = scenes::MakeBuiltinScene(name);
+  if (!scene.ok()) {
+    out.error = scene.status().ToString();
+    return out;
+  }
+  const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+  out.directory = std::filesystem::temp_directory_path() /
+                  ("softid_inverse_" + std::string(info ? info->name() : "none") + "_" +
+                   std::to_string(::getpid()));
+  std::filesystem::remove_all(out.directory);
+  scenes::SynthesisOptions options;
+  options.run.duration = duration;
+  options.run.substeps_per_frame = 2;
+  options.run.simulation.cells_along_longest_side = cells;
+  options.cameras.count = cameras;
+  options.cameras.width = 40;
+  options.cameras.height = 40;
+  Result<scenes::SynthesisSummary> summary = scenes::Synthesize(*scene, options, out.directory);
+  if (!summary.ok()) {
+    out.error = summary.status().ToString();
+    return out;
+  }
+  Result<capture::Capture> capture = capture::ReadCapture(out.directory);
+  if (!capture.ok()) {
+    out.error = capture.status().ToString();
+    return out;
+  }
+  out.capture = *capture;
+  out.mesh = *capture::LoadCaptureMesh(out.capture);
+  out.truth = scene->parameters;
+  Result<std::vector<ObservedFrame>> frames = LoadObservedFrames(out.capture, 0, -1);
+  if (!frames.ok()) {
+    out.error = frames.status().ToString();
+    return out;
+  }
+  out.frames = std::make_shared<const std::vector<ObservedFrame>>(std::move(*frames));
+  out.ok = true;
+  return out;
+}
+
+}  // namespace softid::inverse::testing
