@@ -1,0 +1,85 @@
+// The whole fit on a small synthetic capture: Young's modulus from random starts, the result
+// schema, and configs that do not fit the capture.
+#include "core/inverse/fit.h"
+
+#include <gtest/gtest.h>
+
+#include "tests/core/inverse/inverse_test_util.h"
+
+namespace softid::inverse {
+namespace {
+
+JobConfig YoungsModulusConfig(const fem::PhysicalParameters& truth) {
+  JobConfig config;
+  config.fit = {"youngs_modulus"};
+  config.initial["youngs_modulus"].range =
+      ScalarRange{0.3 * truth.youngs_modulus, 3.0 * truth.youngs_modulus};
+  config.fixed = fem::ToJson(truth);
+  config.fixed.erase("youngs_modulus");
+  config.fixed.erase("density");  // from the capture's mass
+  config.cells = 8;
+  config.substeps = 2;
+  config.starts = 2;
+  config.max_iterations = 20;
+  return config;
+}
+
+TEST(Fit, RecoversYoungsModulusFromRandomStarts) {
+  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.35);
+  ASSERT_TRUE(small.ok) << small.error;
+  const JobConfig config = YoungsModulusConfig(small.truth);
+  int progress_lines = 0;
+  FitOptions options;
+  options.on_progress = [&](const FitProgress& p) {
+    ++progress_lines;
+    EXPECT_GE(p.remaining_seconds, 0.0);
+    EXPECT_EQ(p.max_iterations, 20);
+  };
+  Result<FitResult> result = Fit(small.capture, config, options);
+  ASSERT_TRUE(result.ok()) << result.status().ToString();
+  ASSERT_EQ(result->starts.size(), 2u);
+  EXPECT_GT(progress_lines, 2);
+  const double truth = small.truth.youngs_modulus;
+  for (const StartResult& start : result->starts) {
+    SCOPED_TRACE("start " + std::to_string(start.index));
+    EXPECT_FALSE(start.failed) << start.termination;
+    EXPECT_LT(start.final_cost, start.initial_cost);
+    // Both starts find the same minimum, close to the truth (the remaining offset is the cost's
+    // discretisation on this coarse 8-cell grid).
+    EXPECT_NEAR(start.final.youngs_modulus, result->Best().final.youngs_modulus, 0.01 * truth);
+    EXPECT_NEAR(start.final.youngs_modulus, truth, 0.15 * truth);
+  }
+  const nlohmann::json json = ToJson(*result);
+  EXPECT_EQ(json["parameters"]["youngs_modulus"]["unit"], "Pa");
+  EXPECT_DOUBLE_EQ(json["parameters"]["youngs_modulus"]["value"].get<double>(),
+                   result->Best().final.youngs_modulus);
+  EXPECT_TRUE(json["parameters"]["youngs_modulus"].contains("initial"));
+  EXPECT_LT(json["cost"]["final"].get<double>(), json["cost"]["initial"].get<double>());
+  EXPECT_EQ(json["starts"].size(), 2u);
+  EXPECT_GT(json["timing"]["ms_per_forward_adjoint_step"].get<double>(), 0.0);
+  EXPECT_FALSE(json["fixed"].contains("youngs_modulus"));
+  EXPECT_TRUE(json["fixed"].contains("ground"));
+}
+
+TEST(Fit, RejectsConfigsThatDoNotFitTheCapture) {
+  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.1);
+  ASSERT_TRUE(small.ok) << small.error;
+  JobConfig config = YoungsModulusConfig(small.truth);
+  config.fit = {"density"};
+  config.initial.clear();
+  Result<FitResult> density = Fit(small.capture, config);
+  ASSERT_FALSE(density.ok());
+  EXPECT_EQ(density.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(density.status().message().find("density"), std::string::npos);
+  EXPECT_NE(density.status().message().find("mass_kg"), std::string::npos);
+
+  config = YoungsModulusConfig(small.truth);
+  config.frames.last = 500;
+  Result<FitResult> frames = Fit(small.capture, config);
+  ASSERT_FALSE(frames.ok());
+  EXPECT_NE(frames.status().message().find("frames.last = 500"), std::string::npos)
+      << frames.status().message();
+}
+
+}  // namespace
+}  // namespace softid::inverse
