@@ -1,0 +1,93 @@
+#include "client/capture_files.h"
+
+#include <openssl/evp.h>
+
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <set>
+#include <sstream>
+#include <vector>
+
+namespace softid::client {
+
+bool Sha256OfFile(const std::filesystem::path& file, std::string* hex, int64_t* size_bytes) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) return false;
+  std::unique_ptr<EVP_MD_CTX, decltype(&EVP_MD_CTX_free)> ctx(EVP_MD_CTX_new(), EVP_MD_CTX_free);
+  if (!ctx || EVP_DigestInit_ex(ctx.get(), EVP_sha256(), nullptr) != 1) return false;
+  std::vector<char> buffer(1 << 20);
+  int64_t size = 0;
+  while (in) {
+    in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+    const std::streamsize got = in.gcount();
+    if (got > 0) {
+      EVP_DigestUpdate(ctx.get(), buffer.data(), static_cast<size_t>(got));
+      size += got;
+    }
+  }
+  if (in.bad()) return false;
+  unsigned char digest[EVP_MAX_MD_SIZE];
+  unsigned int length = 0;
+  EVP_DigestFinal_ex(ctx.get(), digest, &length);
+  static const char* kHex = "0123456789abcdef";
+  hex->clear();
+  for (unsigned int i = 0; i < length; ++i) {
+    hex->push_back(kHex[digest[i] >> 4]);
+    hex->push_back(kHex[digest[i] & 15]);
+  }
+  *size_bytes = size;
+  return true;
+}
+
+bool ReadCaptureFiles(const std::filesystem::path& directory, CaptureFiles* out,
+                      std::string* error) {
+  const std::filesystem::path json_path = directory / "capture.json";
+  std::ifstream in(json_path, std::ios::binary);
+  if (!in) {
+    *error = json_path.string() + ": not found (is " + directory.string() + " a capture folder?)";
+    return false;
+  }
+  std::stringstream text;
+  text << in.rdbuf();
+  out->directory = directory;
+  out->capture_json = text.str();
+  const nlohmann::json json = nlohmann::json::parse(out->capture_json, nullptr, false);
+  if (json.is_discarded() || !json.is_object()) {
+    *error = json_path.string() + ": not a JSON object";
+    return false;
+  }
+  // Only the names are read here; their meaning is checked by the server.
+  std::vector<std::string> paths;
+  if (auto mesh = json.find("mesh"); mesh != json.end() && mesh->is_string()) {
+    paths.push_back(mesh->get<std::string>());
+  }
+  if (auto cameras = json.find("cameras"); cameras != json.end() && cameras->is_array()) {
+    for (const nlohmann::json& camera : *cameras) {
+      if (!camera.is_object()) continue;
+      auto frames = camera.find("frames");
+      if (frames == camera.end() || !frames->is_array()) continue;
+      for (const nlohmann::json& frame : *frames) {
+        if (frame.is_string()) paths.push_back(frame.get<std::string>());
+      }
+    }
+  }
+  std::set<std::string> seen;
+  for (const std::string& path : paths) {
+    if (!seen.insert(path).second) continue;
+    v1::CaptureFile file;
+    file.set_path(path);
+    std::string hex;
+    int64_t size = 0;
+    if (!Sha256OfFile(directory / path, &hex, &size)) {
+      *error = (directory / path).string() + ": cannot read (named in capture.json)";
+      return false;
+    }
+    file.set_sha256(hex);
+    file.set_size_bytes(size);
+    out->files.push_back(std::move(file));
+  }
+  return true;
+}
+
+}  // namespace softid::client

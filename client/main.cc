@@ -1,0 +1,337 @@
+// softid: the command-line client of the softid job server. Talks only gRPC.
+//
+// Exit codes: 0 ok, 2 invalid input (INVALID_ARGUMENT, ALREADY_EXISTS, bad local files or flags),
+// 3 not found, 4 server unreachable (UNAVAILABLE or deadline exceeded after retries), 1 anything
+// else (including a job that ended FAILED or CANCELLED under --wait).
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
+
+#include <CLI/CLI.hpp>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iostream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+
+#include "client/capture_files.h"
+#include "client/reconstruction_client.h"
+
+namespace {
+
+using softid::client::ReconstructionClient;
+namespace v1 = softid::v1;
+
+constexpr int kExitOk = 0;
+constexpr int kExitFailure = 1;
+constexpr int kExitInvalidInput = 2;
+constexpr int kExitNotFound = 3;
+constexpr int kExitUnreachable = 4;
+
+struct GlobalFlags {
+  std::string server;
+  bool json = false;
+  double timeout_s = 10.0;
+  double retry_for_s = 30.0;
+};
+
+int ExitCodeOf(const grpc::Status& status) {
+  switch (status.error_code()) {
+    case grpc::StatusCode::OK: return kExitOk;
+    case grpc::StatusCode::INVALID_ARGUMENT:
+    case grpc::StatusCode::ALREADY_EXISTS:
+    case grpc::StatusCode::OUT_OF_RANGE: return kExitInvalidInput;
+    case grpc::StatusCode::NOT_FOUND: return kExitNotFound;
+    case grpc::StatusCode::UNAVAILABLE:
+    case grpc::StatusCode::DEADLINE_EXCEEDED: return kExitUnreachable;
+    default: return kExitFailure;
+  }
+}
+
+int Report(const grpc::Status& status, const GlobalFlags& flags) {
+  static const char* kCodes[] = {"OK",
+                                 "CANCELLED",
+                                 "UNKNOWN",
+                                 "INVALID_ARGUMENT",
+                                 "DEADLINE_EXCEEDED",
+                                 "NOT_FOUND",
+                                 "ALREADY_EXISTS",
+                                 "PERMISSION_DENIED",
+                                 "RESOURCE_EXHAUSTED",
+                                 "FAILED_PRECONDITION",
+                                 "ABORTED",
+                                 "OUT_OF_RANGE",
+                                 "UNIMPLEMENTED",
+                                 "INTERNAL",
+                                 "UNAVAILABLE",
+                                 "DATA_LOSS",
+                                 "UNAUTHENTICATED"};
+  const int code = static_cast<int>(status.error_code());
+  const char* name = code >= 0 && code <= 16 ? kCodes[code] : "UNKNOWN";
+  std::string message = status.error_message();
+  if (status.error_code() == grpc::StatusCode::UNAVAILABLE) {
+    message = "cannot reach " + flags.server + ": " + message;
+  }
+  std::fprintf(stderr, "softid: %s: %s\n", name, message.c_str());
+  return ExitCodeOf(status);
+}
+
+std::string StateName(v1::JobState state) {
+  return v1::JobState_Name(state);
+}
+
+bool IsTerminal(v1::JobState state) {
+  return state == v1::SUCCEEDED || state == v1::FAILED || state == v1::CANCELLED;
+}
+
+nlohmann::json JobJson(const v1::Job& job) {
+  nlohmann::json out = {{"id", job.id()},
+                        {"capture_id", job.capture_id()},
+                        {"state", StateName(job.state())},
+                        {"attempts", job.attempts()},
+                        {"cancel_requested", job.cancel_requested()},
+                        {"config", nlohmann::json::parse(job.config_json(), nullptr, false)},
+                        {"create_time_s", job.create_time().seconds()}};
+  if (!job.request_id().empty()) out["request_id"] = job.request_id();
+  if (!job.error().empty()) out["error"] = job.error();
+  return out;
+}
+
+void PrintJob(const v1::Job& job, const GlobalFlags& flags) {
+  if (flags.json) {
+    std::cout << JobJson(job).dump() << "\n";
+    return;
+  }
+  std::cout << job.id() << "  " << StateName(job.state()) << "  capture " << job.capture_id()
+            << "  attempts " << job.attempts();
+  if (job.cancel_requested() && !IsTerminal(job.state())) std::cout << "  (cancel requested)";
+  if (!job.error().empty()) std::cout << "\n  error: " << job.error();
+  std::cout << "\n";
+}
+
+// One live line per event: iteration of max, cost, estimated time left.
+class ProgressPrinter {
+ public:
+  explicit ProgressPrinter(bool json) : json_(json) {}
+  void operator()(const v1::JobEvent& event) {
+    if (json_) {
+      nlohmann::json line = {{"seq", event.seq()},
+                             {"kind", v1::JobEvent::Kind_Name(event.kind())},
+                             {"iteration", event.iteration()},
+                             {"state", StateName(event.state())},
+                             {"elapsed_seconds", event.elapsed_seconds()},
+                             {"message", event.message()}};
+      if (std::isfinite(event.cost())) line["cost"] = event.cost();
+      if (!event.parameters_json().empty()) {
+        line["parameters"] = nlohmann::json::parse(event.parameters_json(), nullptr, false);
+      }
+      std::cout << line.dump() << std::endl;
+      return;
+    }
+    if (event.kind() == v1::JobEvent::STATE_CHANGE) {
+      if (on_line_) std::cout << "\n";
+      on_line_ = false;
+      std::cout << StateName(event.state());
+      if (!event.message().empty()) std::cout << ": " << event.message();
+      std::cout << std::endl;
+      return;
+    }
+    const int max = std::max(1, event.max_iterations());
+    const double per_iteration =
+        event.iteration() > 0 ? event.elapsed_seconds() / event.iteration() : 0.0;
+    const double left = per_iteration * std::max(0, max - event.iteration());
+    const int width = 30;
+    const int filled = std::min(width, width * event.iteration() / max);
+    std::printf("\r[%s%s] %d/%d  cost %.4e  %s  ~%.0f s left   ", std::string(filled, '#').c_str(),
+                std::string(width - filled, ' ').c_str(), event.iteration(), max, event.cost(),
+                event.parameters_json().c_str(), left);
+    std::fflush(stdout);
+    on_line_ = true;
+  }
+
+ private:
+  bool json_;
+  bool on_line_ = false;
+};
+
+ReconstructionClient MakeClient(const GlobalFlags& flags) {
+  softid::client::ClientOptions options;
+  options.call_timeout =
+      std::chrono::milliseconds(static_cast<int64_t>(std::max(0.001, flags.timeout_s) * 1000));
+  options.retry_budget = std::chrono::milliseconds(static_cast<int64_t>(flags.retry_for_s * 1000));
+  return ReconstructionClient(grpc::CreateChannel(flags.server, grpc::InsecureChannelCredentials()),
+                              options);
+}
+
+int WatchUntilDone(ReconstructionClient& client, const std::string& job_id,
+                   const GlobalFlags& flags) {
+  ProgressPrinter printer(flags.json);
+  grpc::Status status = client.WatchJob(job_id, 0, [&](const v1::JobEvent& e) { printer(e); });
+  if (!status.ok()) return Report(status, flags);
+  v1::Job job;
+  status = client.GetJob(job_id, &job);
+  if (!status.ok()) return Report(status, flags);
+  if (!flags.json) PrintJob(job, flags);
+  return job.state() == v1::SUCCEEDED ? kExitOk : kExitFailure;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  GlobalFlags flags;
+  const char* env_server = std::getenv("SOFTID_SERVER");
+  flags.server = env_server != nullptr && *env_server != '\0' ? env_server : "localhost:50051";
+
+  CLI::App app{"softid: submit captures to a softid server and follow their jobs"};
+  app.require_subcommand(1);
+  app.add_option("--server", flags.server, "server address host:port (env SOFTID_SERVER)")
+      ->capture_default_str();
+  app.add_flag("--json", flags.json, "machine-readable output");
+  app.add_option("--timeout", flags.timeout_s, "deadline of each call, seconds")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--retry-for", flags.retry_for_s,
+                 "keep retrying this long while the server is unavailable, seconds")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
+
+  std::string capture_dir, config_file, request_id, job_id, out_file, state;
+  bool wait = false;
+  CLI::App* submit = app.add_subcommand("submit", "upload a capture folder and queue a job");
+  submit->add_option("capture_dir", capture_dir, "capture folder (with capture.json)")->required();
+  submit->add_option("-c,--config", config_file, "job config JSON (default: fit youngs_modulus)");
+  submit->add_option("--request-id", request_id, "idempotency key for retried submissions");
+  submit->add_flag("--wait", wait, "watch the job until it ends");
+  CLI::App* status = app.add_subcommand("status", "show a job");
+  status->add_option("job", job_id)->required();
+  CLI::App* watch = app.add_subcommand("watch", "follow a job's progress until it ends");
+  watch->add_option("job", job_id)->required();
+  CLI::App* result = app.add_subcommand("result", "print or save the result of a job");
+  result->add_option("job", job_id)->required();
+  result->add_option("-o,--out", out_file, "write result.json here instead of printing it");
+  CLI::App* list = app.add_subcommand("list", "list jobs");
+  list->add_option("--state", state, "QUEUED, RUNNING, SUCCEEDED, FAILED or CANCELLED");
+  CLI::App* cancel = app.add_subcommand("cancel", "cancel a job");
+  cancel->add_option("job", job_id)->required();
+  CLI::App* health = app.add_subcommand("health", "check that the server is serving");
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e) == 0 ? kExitOk : kExitInvalidInput;
+  }
+  ReconstructionClient client = MakeClient(flags);
+
+  if (submit->parsed()) {
+    softid::client::CaptureFiles files;
+    std::string error;
+    if (!softid::client::ReadCaptureFiles(capture_dir, &files, &error)) {
+      std::fprintf(stderr, "softid: %s\n", error.c_str());
+      return kExitInvalidInput;
+    }
+    v1::CreateJobRequest create;
+    if (!config_file.empty()) {
+      std::ifstream in(config_file);
+      if (!in) {
+        std::fprintf(stderr, "softid: %s: cannot read the job config\n", config_file.c_str());
+        return kExitInvalidInput;
+      }
+      std::stringstream text;
+      text << in.rdbuf();
+      create.set_config_json(text.str());
+    }
+    v1::Capture capture;
+    grpc::Status s =
+        client.UploadCapture(files, request_id.empty() ? "" : request_id + "/capture", &capture);
+    if (!s.ok()) return Report(s, flags);
+    create.set_capture_id(capture.id());
+    create.set_request_id(request_id);
+    v1::Job job;
+    s = client.CreateJob(create, &job);
+    if (!s.ok()) return Report(s, flags);
+    if (flags.json) {
+      std::cout << JobJson(job).dump() << "\n";
+    } else {
+      std::cout << "capture " << capture.id() << " uploaded (" << files.files.size()
+                << " files); job " << job.id() << " " << StateName(job.state()) << "\n";
+    }
+    return wait ? WatchUntilDone(client, job.id(), flags) : kExitOk;
+  }
+  if (status->parsed()) {
+    v1::Job job;
+    grpc::Status s = client.GetJob(job_id, &job);
+    if (!s.ok()) return Report(s, flags);
+    PrintJob(job, flags);
+    return kExitOk;
+  }
+  if (watch->parsed()) return WatchUntilDone(client, job_id, flags);
+  if (result->parsed()) {
+    v1::Result r;
+    grpc::Status s = client.GetResult(job_id, &r);
+    if (!s.ok()) return Report(s, flags);
+    const std::string text = nlohmann::json::parse(r.result_json()).dump(2) + "\n";
+    if (out_file.empty()) {
+      std::cout << text;
+      return kExitOk;
+    }
+    std::ofstream out(out_file);
+    out << text;
+    if (!out.flush()) {
+      std::fprintf(stderr, "softid: %s: cannot write\n", out_file.c_str());
+      return kExitFailure;
+    }
+    if (!flags.json) std::cout << "result written to " << out_file << "\n";
+    return kExitOk;
+  }
+  if (list->parsed()) {
+    v1::ListJobsRequest request;
+    if (!state.empty()) {
+      v1::JobState parsed;
+      if (!v1::JobState_Parse(state, &parsed) || parsed == v1::JOB_STATE_UNSPECIFIED) {
+        std::fprintf(stderr,
+                     "softid: --state = %s: must be QUEUED, RUNNING, SUCCEEDED, FAILED "
+                     "or CANCELLED\n",
+                     state.c_str());
+        return kExitInvalidInput;
+      }
+      request.set_state(parsed);
+    }
+    nlohmann::json all = nlohmann::json::array();
+    do {
+      v1::ListJobsResponse page;
+      grpc::Status s = client.ListJobs(request, &page);
+      if (!s.ok()) return Report(s, flags);
+      for (const v1::Job& job : page.jobs()) {
+        if (flags.json) {
+          all.push_back(JobJson(job));
+        } else {
+          PrintJob(job, flags);
+        }
+      }
+      request.set_page_token(page.next_page_token());
+    } while (!request.page_token().empty());
+    if (flags.json) std::cout << all.dump() << "\n";
+    return kExitOk;
+  }
+  if (cancel->parsed()) {
+    v1::Job job;
+    grpc::Status s = client.CancelJob(job_id, &job);
+    if (!s.ok()) return Report(s, flags);
+    PrintJob(job, flags);
+    return kExitOk;
+  }
+  if (health->parsed()) {
+    softid::client::ServingStatus serving;
+    grpc::Status s = client.Health("", &serving);
+    if (!s.ok()) return Report(s, flags);
+    if (flags.json) {
+      std::cout << nlohmann::json{{"status", ToString(serving)}}.dump() << "\n";
+    } else {
+      std::cout << ToString(serving) << "\n";
+    }
+    return serving == softid::client::ServingStatus::kServing ? kExitOk : kExitUnreachable;
+  }
+  return kExitInvalidInput;
+}

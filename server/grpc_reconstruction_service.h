@@ -1,0 +1,39 @@
+// The gRPC transport of the JobService: converts softid.v1 messages to domain calls and back and
+// maps outcomes to status codes (grpc_status.h). No job logic lives here. Uses gRPC's synchronous
+// API: every call is short except uploads and watches, which block one thread of gRPC's pool each
+// while they stream.
+#pragma once
+
+#include "server/job_service.h"
+#include "softid/v1/softid.grpc.pb.h"
+
+namespace softid::server {
+
+class GrpcReconstructionService final : public v1::Reconstruction::Service {
+ public:
+  // `service` must outlive this object.
+  explicit GrpcReconstructionService(JobService* service) : service_(service) {}
+
+  grpc::Status UploadCapture(grpc::ServerContext* context,
+                             grpc::ServerReader<v1::UploadCaptureRequest>* reader,
+                             v1::Capture* response) override;
+  grpc::Status CreateJob(grpc::ServerContext* context, const v1::CreateJobRequest* request,
+                         v1::Job* response) override;
+  grpc::Status GetJob(grpc::ServerContext* context, const v1::GetJobRequest* request,
+                      v1::Job* response) override;
+  grpc::Status ListJobs(grpc::ServerContext* context, const v1::ListJobsRequest* request,
+                        v1::ListJobsResponse* response) override;
+  grpc::Status CancelJob(grpc::ServerContext* context, const v1::CancelJobRequest* request,
+                         v1::Job* response) override;
+  grpc::Status DeleteJob(grpc::ServerContext* context, const v1::DeleteJobRequest* request,
+                         v1::DeleteJobResponse* response) override;
+  grpc::Status WatchJob(grpc::ServerContext* context, const v1::WatchJobRequest* request,
+                        grpc::ServerWriter<v1::JobEvent>* writer) override;
+  grpc::Status GetResult(grpc::ServerContext* context, const v1::GetResultRequest* request,
+                         v1::Result* response) override;
+
+ private:
+  JobService* service_;
+};
+
+}  // namespace softid::server

@@ -1,0 +1,196 @@
+#include "server/job_runner.h"
+
+#include <spdlog/spdlog.h>
+
+#include <condition_variable>
+#include <mutex>
+#include <system_error>
+#include <thread>
+
+#include "core/capture/capture.h"
+#include "core/inverse/fit.h"
+#include "core/inverse/job_config.h"
+#include "server/materialize_capture.h"
+
+namespace softid::server {
+namespace {
+
+namespace fs = std::filesystem;
+using Stopwatch = std::chrono::steady_clock;
+
+// Renews the lease and polls for a cancel request while the fit runs, so that a long first
+// evaluation (before any iteration reports) neither loses the lease nor ignores a cancel.
+class Heartbeat {
+ public:
+  Heartbeat(const store::Job& job, const std::string& worker_id, const JobRunnerContext& context,
+            std::atomic<bool>& cancel)
+      : job_id_(job.id), thread_([&, this] { Loop(worker_id, context, cancel); }) {}
+  ~Heartbeat() {
+    {
+      std::lock_guard lock(mutex_);
+      done_ = true;
+    }
+    wake_.notify_all();
+    thread_.join();
+  }
+  bool lost() const { return lost_.load(); }
+  bool cancel_requested() const { return cancel_requested_.load(); }
+  void set_cancel_requested() { cancel_requested_.store(true); }
+
+ private:
+  void Loop(const std::string& worker_id, const JobRunnerContext& context,
+            std::atomic<bool>& cancel) {
+    std::unique_lock lock(mutex_);
+    while (!wake_.wait_for(lock, context.heartbeat_interval, [this] { return done_; })) {
+      if (Status renewed = context.jobs->RenewLease(job_id_, worker_id, context.lease);
+          !renewed.ok()) {
+        context.logger->warn("job {}: lease lost, stopping: {}", job_id_, renewed.message());
+        lost_.store(true);
+        cancel.store(true);
+        return;
+      }
+      Result<bool> requested = context.jobs->IsCancelRequested(job_id_);
+      if (requested.ok() && *requested) {
+        cancel_requested_.store(true);
+        cancel.store(true);
+      }
+    }
+  }
+
+  std::string job_id_;
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  bool done_ = false;
+  std::atomic<bool> lost_{false};
+  std::atomic<bool> cancel_requested_{false};
+  std::thread thread_;  // last: started after the members it uses
+};
+
+nlohmann::json FittedParametersJson(const inverse::JobConfig& config,
+                                    const fem::PhysicalParameters& parameters) {
+  nlohmann::json out = nlohmann::json::object();
+  for (const std::string& name : config.fit)
+    out[name] = inverse::ParameterValueJson(parameters, name);
+  return out;
+}
+
+// Records a failure; the job's error is what a user sees, so it says what went wrong.
+JobOutcome Fail(const store::Job& job, const JobRunnerContext& context, const std::string& error) {
+  context.logger->warn("job {}: FAILED: {}", job.id, error);
+  if (Status failed = context.jobs->FailJob(job.id, error); !failed.ok()) {
+    context.logger->error("job {}: cannot record the failure: {}", job.id, failed.message());
+  }
+  context.events->Notify(job.id);
+  return JobOutcome::kFailed;
+}
+
+struct WorkFolder {
+  explicit WorkFolder(fs::path p) : path(std::move(p)) {
+    std::error_code ignored;
+    fs::remove_all(path, ignored);
+  }
+  ~WorkFolder() {
+    std::error_code ignored;
+    fs::remove_all(path, ignored);
+  }
+  fs::path path;
+};
+
+}  // namespace
+
+const char* ToString(JobOutcome outcome) {
+  switch (outcome) {
+    case JobOutcome::kSucceeded: return "succeeded";
+    case JobOutcome::kFailed: return "failed";
+    case JobOutcome::kCancelled: return "cancelled";
+    case JobOutcome::kInterrupted: return "interrupted";
+    case JobOutcome::kLost: return "lost";
+  }
+  return "unknown";
+}
+
+JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
+                         const JobRunnerContext& context, std::atomic<bool>& cancel,
+                         const std::atomic<bool>& shutdown) {
+  const auto& log = context.logger;
+  const Stopwatch::time_point started = Stopwatch::now();
+  log->info("job {}: RUNNING on {} (attempt {})", job.id, worker_id, job.attempts);
+
+  // The config was validated at CreateJob; parsing again guards against a store edited by hand.
+  Result<inverse::JobConfig> config = inverse::JobConfigFromJson(job.config);
+  if (!config.ok()) return Fail(job, context, "config: " + config.status().message());
+  Result<store::Capture> stored = context.jobs->GetCapture(job.capture_id);
+  if (!stored.ok()) return Fail(job, context, stored.status().message());
+
+  WorkFolder folder(context.work_root / job.id);
+  if (Status laid_out = MaterializeCapture(*stored, *context.blobs, folder.path); !laid_out.ok()) {
+    return Fail(job, context, "capture " + job.capture_id + ": " + laid_out.message());
+  }
+  // Frames were decoded at upload; headers suffice here.
+  Result<capture::Capture> capture =
+      capture::ReadCapture(folder.path, capture::ReadCaptureOptions{.decode_frames = false});
+  if (!capture.ok()) {
+    return Fail(job, context, "capture " + job.capture_id + ": " + capture.status().message());
+  }
+
+  Heartbeat heartbeat(job, worker_id, context, cancel);
+  inverse::FitOptions options;
+  options.cancel = &cancel;
+  options.on_progress = [&](const inverse::FitProgress& p) {
+    store::ProgressEvent event;
+    event.kind = store::ProgressKind::kIteration;
+    event.iteration = p.iteration;
+    event.cost = p.cost;
+    event.gradient_norm = p.gradient_norm;
+    event.parameters = FittedParametersJson(*config, p.parameters);
+    event.elapsed_s = std::chrono::duration<double>(Stopwatch::now() - started).count();
+    if (p.num_starts > 1) {
+      event.message = "start " + std::to_string(p.start + 1) + "/" + std::to_string(p.num_starts);
+    }
+    if (Result<int64_t> seq = context.jobs->AppendProgress(job.id, event); !seq.ok()) {
+      log->warn("job {}: progress of iteration {} not recorded: {}", job.id, p.iteration,
+                seq.status().message());
+    }
+    context.events->Notify(job.id);
+    log->debug("job {}: iteration {}/{} cost {:.4e}", job.id, p.iteration, p.max_iterations,
+               p.cost);
+    Result<bool> requested = context.jobs->IsCancelRequested(job.id);
+    if (requested.ok() && *requested) {
+      heartbeat.set_cancel_requested();
+      cancel.store(true);
+    }
+  };
+  Result<inverse::FitResult> result = inverse::Fit(*capture, *config, options);
+
+  if (heartbeat.lost()) return JobOutcome::kLost;
+  // A fit that ran to its end is recorded whatever was asked meanwhile; only one that stopped
+  // early is a cancel or an interruption.
+  const bool stopped_early = result.ok() ? result->cancelled : cancel.load();
+  if (stopped_early && !heartbeat.cancel_requested() && shutdown.load()) {
+    log->info("job {}: interrupted by shutdown; stays RUNNING and is requeued at the next start",
+              job.id);
+    return JobOutcome::kInterrupted;
+  }
+  if (stopped_early) {
+    if (Status marked = context.jobs->MarkCancelled(job.id); !marked.ok()) {
+      log->error("job {}: cannot mark CANCELLED: {}", job.id, marked.message());
+    }
+    context.events->Notify(job.id);
+    log->info("job {}: CANCELLED", job.id);
+    return JobOutcome::kCancelled;
+  }
+  if (!result.ok()) return Fail(job, context, result.status().message());
+  if (Status completed = context.jobs->CompleteJob(job.id, inverse::ToJson(*result));
+      !completed.ok()) {
+    log->error("job {}: cannot record the result: {}", job.id, completed.message());
+    context.events->Notify(job.id);
+    return JobOutcome::kFailed;
+  }
+  context.events->Notify(job.id);
+  log->info("job {}: SUCCEEDED in {:.1f} s (final cost {:.4e})", job.id,
+            std::chrono::duration<double>(Stopwatch::now() - started).count(),
+            result->Best().final_cost);
+  return JobOutcome::kSucceeded;
+}
+
+}  // namespace softid::server

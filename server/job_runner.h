@@ -1,0 +1,54 @@
+// Runs one claimed job to its end: lays the capture out in a private folder, runs the core fit
+// with progress written to the store (and pushed to watchers) after every iteration, keeps the
+// lease alive, stops on cancel, and records the outcome. A job's failure is its state and error;
+// nothing here throws on bad input.
+#pragma once
+
+#include <spdlog/logger.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "server/job_events.h"
+#include "server/store/blob_store.h"
+#include "server/store/job_store.h"
+
+namespace softid::server {
+
+struct JobRunnerContext {
+  store::JobStore* jobs = nullptr;
+  const store::BlobStore* blobs = nullptr;
+  JobEvents* events = nullptr;
+  // Per-job folders <work_root>/<job id>, removed when the job ends.
+  std::filesystem::path work_root;
+  // A claim holds the job this long without renewal; see WorkerPoolOptions.
+  std::chrono::milliseconds lease{60000};
+  // How often the lease is renewed and a cancel request polled between iterations.
+  std::chrono::milliseconds heartbeat_interval{2000};
+  std::shared_ptr<spdlog::logger> logger;
+};
+
+enum class JobOutcome {
+  kSucceeded,
+  kFailed,
+  kCancelled,
+  // Stopped by a server shutdown: the job stays RUNNING in the store and RecoverAfterCrash
+  // requeues it at the next start (its progress history is kept).
+  kInterrupted,
+  // The lease was lost (another worker may own the job now): nothing more is written.
+  kLost,
+};
+
+const char* ToString(JobOutcome outcome);
+
+// Runs `job` (just claimed by `worker_id`). `cancel` is the fit's stop flag: the caller sets it
+// together with `shutdown` to interrupt the job; the runner sets it on a cancel request or a lost
+// lease.
+JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
+                         const JobRunnerContext& context, std::atomic<bool>& cancel,
+                         const std::atomic<bool>& shutdown);
+
+}  // namespace softid::server

@@ -1,0 +1,90 @@
+// The job service behind the API, free of any transport: uploads, job creation and queries,
+// cancellation, watching and results, on top of a JobStore and a BlobStore. The gRPC adapter
+// (grpc_reconstruction_service.h) only converts protos and forwards here; tests drive it
+// directly. Jobs are never run here: CreateJob queues, the WorkerPool runs.
+//
+// Thread-safe: every call may come from any RPC thread at once.
+#pragma once
+
+#include <spdlog/logger.h>
+
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <functional>
+#include <memory>
+#include <string>
+
+#include "server/capture_upload.h"
+#include "server/job_events.h"
+#include "server/service_status.h"
+#include "server/store/blob_store.h"
+#include "server/store/job_store.h"
+
+namespace softid::server {
+
+struct JobServiceOptions {
+  // CreateJob answers RESOURCE_EXHAUSTED once this many jobs are QUEUED: a bound on the work
+  // accepted but not started, so a flood of submissions cannot grow the queue without limit.
+  int64_t max_queued_jobs = 1000;  // >= 1
+  UploadLimits upload_limits;
+  // Uploads are staged here (removed on start); must be on the file system of the blobs.
+  std::filesystem::path staging_root;
+  // How often a watcher re-reads the history without a notification (changes made by another
+  // process sharing the database).
+  std::chrono::milliseconds watch_poll_interval{1000};
+  // Called after a job was queued (wakes an idle worker); may be empty.
+  std::function<void()> on_job_queued;
+};
+
+// What GetResult returns.
+struct JobResult {
+  std::string job_id;
+  nlohmann::json result;             // result.json
+  std::vector<double> cost_history;  // result["cost_history"]
+};
+
+class JobService {
+ public:
+  // The stores and `events` must outlive the service. `logger` null means spdlog's default.
+  JobService(store::JobStore* jobs, const store::BlobStore* blobs, JobEvents* events,
+             JobServiceOptions options, std::shared_ptr<spdlog::logger> logger = nullptr);
+
+  // Uploads: Begin checks the manifest; the caller feeds chunks to the returned upload, then
+  // FinishUpload validates the whole capture and stores it (blobs first, then the row).
+  ServiceResult<std::unique_ptr<CaptureUpload>> BeginUpload(UploadManifest manifest);
+  ServiceResult<store::Capture> FinishUpload(CaptureUpload& upload);
+
+  // `config_json` empty means "{}". InvalidArgument "config_json: <field> = <value>: <reason>";
+  // NotFound for an unknown capture; ResourceExhausted when the queue is full; Unavailable while
+  // draining; AlreadyExists for a request_id used before with other arguments.
+  ServiceResult<store::Job> CreateJob(const std::string& capture_id, const std::string& config_json,
+                                      const std::string& request_id);
+  ServiceResult<store::Job> GetJob(const std::string& job_id);
+  ServiceResult<store::JobPage> ListJobs(const store::ListJobsRequest& request);
+  ServiceResult<store::Job> CancelJob(const std::string& job_id);
+  ServiceStatus DeleteJob(const std::string& job_id);
+  // FailedPrecondition naming the state unless the job SUCCEEDED.
+  ServiceResult<JobResult> GetResult(const std::string& job_id);
+
+  // Calls `send` for every event of the job's history with iteration >= from_iteration, then for
+  // every new one, until the job is terminal and its last event was sent (OK), `send` returns
+  // false or `stop` returns true (Cancelled), or the service is draining (Unavailable).
+  using EventSink = std::function<bool(const store::ProgressEvent& event, const store::Job& job)>;
+  ServiceStatus WatchJob(const std::string& job_id, int from_iteration, const EventSink& send,
+                         const std::function<bool()>& stop);
+
+  // Refuse new jobs and end watches (shutdown).
+  void StartDraining();
+  bool draining() const { return draining_.load(); }
+
+ private:
+  store::JobStore* jobs_;
+  const store::BlobStore* blobs_;
+  JobEvents* events_;
+  JobServiceOptions options_;
+  std::shared_ptr<spdlog::logger> logger_;
+  std::atomic<bool> draining_{false};
+};
+
+}  // namespace softid::server

@@ -1,0 +1,98 @@
+#include "server/proto_conversion.h"
+
+#include <google/protobuf/util/time_util.h>
+
+namespace softid::server {
+namespace {
+
+void SetTimestamp(store::Timestamp t, google::protobuf::Timestamp* out) {
+  *out = google::protobuf::util::TimeUtil::MicrosecondsToTimestamp(store::ToUnixMicros(t));
+}
+
+}  // namespace
+
+v1::JobState ToProto(store::JobState state) {
+  switch (state) {
+    case store::JobState::kQueued: return v1::QUEUED;
+    case store::JobState::kRunning: return v1::RUNNING;
+    case store::JobState::kSucceeded: return v1::SUCCEEDED;
+    case store::JobState::kFailed: return v1::FAILED;
+    case store::JobState::kCancelled: return v1::CANCELLED;
+  }
+  return v1::JOB_STATE_UNSPECIFIED;
+}
+
+ServiceResult<std::optional<store::JobState>> StateFilterFromProto(v1::JobState state) {
+  switch (state) {
+    case v1::JOB_STATE_UNSPECIFIED: return std::optional<store::JobState>();
+    case v1::QUEUED: return std::optional(store::JobState::kQueued);
+    case v1::RUNNING: return std::optional(store::JobState::kRunning);
+    case v1::SUCCEEDED: return std::optional(store::JobState::kSucceeded);
+    case v1::FAILED: return std::optional(store::JobState::kFailed);
+    case v1::CANCELLED: return std::optional(store::JobState::kCancelled);
+    default: break;
+  }
+  return ServiceStatus(ServiceCode::kInvalidArgument,
+                       "state = " + std::to_string(static_cast<int>(state)) + ": not a JobState");
+}
+
+void ToProto(const store::Capture& capture, v1::Capture* out) {
+  out->set_id(capture.id);
+  out->set_request_id(capture.request_id);
+  for (const store::ManifestEntry& entry : capture.manifest) {
+    v1::CaptureFile* file = out->add_files();
+    file->set_path(entry.path);
+    file->set_size_bytes(entry.size_bytes);
+    file->set_sha256(entry.sha256);
+  }
+  SetTimestamp(capture.created_at, out->mutable_create_time());
+}
+
+void ToProto(const store::Job& job, v1::Job* out) {
+  out->set_id(job.id);
+  out->set_request_id(job.request_id);
+  out->set_capture_id(job.capture_id);
+  out->set_config_json(job.config.dump());
+  out->set_state(ToProto(job.state));
+  out->set_cancel_requested(job.cancel_requested);
+  out->set_attempts(job.attempts);
+  out->set_error(job.error);
+  SetTimestamp(job.created_at, out->mutable_create_time());
+  if (job.started_at) SetTimestamp(*job.started_at, out->mutable_start_time());
+  if (job.finished_at) SetTimestamp(*job.finished_at, out->mutable_end_time());
+}
+
+void ToProto(const store::ProgressEvent& event, const store::Job& job, v1::JobEvent* out) {
+  out->set_seq(event.seq);
+  out->set_kind(event.kind == store::ProgressKind::kIteration ? v1::JobEvent::ITERATION
+                                                              : v1::JobEvent::STATE_CHANGE);
+  out->set_attempt(event.attempt);
+  out->set_iteration(event.iteration);
+  out->set_cost(event.cost);
+  out->set_gradient_norm(event.gradient_norm);
+  if (!event.parameters.is_null()) out->set_parameters_json(event.parameters.dump());
+  // Iteration events happen while RUNNING; the store records a state only for state changes.
+  out->set_state(event.state ? ToProto(*event.state) : v1::RUNNING);
+  out->set_elapsed_seconds(event.elapsed_s);
+  out->set_message(event.message);
+  SetTimestamp(event.created_at, out->mutable_create_time());
+  // The job config's default when the key is absent (job_config.h).
+  int max_iterations = 50;
+  if (auto it = job.config.find("max_iterations");
+      it != job.config.end() && it->is_number_integer()) {
+    max_iterations = it->get<int>();
+  }
+  out->set_max_iterations(max_iterations);
+}
+
+UploadManifest FromProto(const v1::CaptureManifest& manifest) {
+  UploadManifest out;
+  out.request_id = manifest.request_id();
+  out.capture_json = manifest.capture_json();
+  for (const v1::CaptureFile& file : manifest.files()) {
+    out.files.push_back({file.path(), file.sha256(), file.size_bytes()});
+  }
+  return out;
+}
+
+}  // namespace softid::server

@@ -1,0 +1,184 @@
+#include "server/server.h"
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <grpcpp/security/server_credentials.h>
+#include <grpcpp/server.h>
+#include <grpcpp/server_builder.h>
+#include <spdlog/spdlog.h>
+#include <unistd.h>
+
+#include <mutex>
+#include <system_error>
+
+#include "server/grpc_reconstruction_service.h"
+#include "server/job_events.h"
+#include "server/job_service.h"
+#include "server/store/blob_store.h"
+#include "server/store/sqlite_job_store.h"
+#include "server/worker_pool.h"
+
+namespace softid::server {
+namespace {
+
+namespace fs = std::filesystem;
+
+Status ResetFolder(const fs::path& dir) {
+  std::error_code error;
+  fs::remove_all(dir, error);
+  if (!error) fs::create_directories(dir, error);
+  if (error) return Status::IoError("cannot prepare " + dir.string() + ": " + error.message());
+  return Status::Ok();
+}
+
+std::string HostName() {
+  char name[256] = {};
+  if (::gethostname(name, sizeof(name) - 1) != 0) return "host";
+  return name;
+}
+
+}  // namespace
+
+Status ServerOptions::Validate() const {
+  if (listen_address.empty()) return Status::InvalidArgument("listen = \"\": must be host:port");
+  if (data_dir.empty()) return Status::InvalidArgument("data = \"\": a data directory is required");
+  if (num_workers < 0) {
+    return Status::InvalidArgument("workers = " + std::to_string(num_workers) +
+                                   ": must not be negative");
+  }
+  if (max_queued_jobs < 1) {
+    return Status::InvalidArgument("max_queued = " + std::to_string(max_queued_jobs) +
+                                   ": must be at least 1");
+  }
+  if (max_attempts < 1) {
+    return Status::InvalidArgument("max_attempts = " + std::to_string(max_attempts) +
+                                   ": must be at least 1");
+  }
+  if (heartbeat_interval.count() <= 0 || lease <= heartbeat_interval) {
+    return Status::InvalidArgument("lease = " + std::to_string(lease.count()) +
+                                   " ms: must exceed the heartbeat interval (" +
+                                   std::to_string(heartbeat_interval.count()) + " ms)");
+  }
+  return Status::Ok();
+}
+
+// Members in construction order; destroyed in reverse (gRPC before the service it calls).
+struct Server::Parts {
+  ServerOptions options;
+  std::shared_ptr<spdlog::logger> logger;
+  std::unique_ptr<store::SqliteJobStore> jobs;
+  std::optional<store::BlobStore> blobs;
+  JobEvents events;
+  std::unique_ptr<WorkerPool> pool;
+  std::unique_ptr<JobService> service;
+  std::unique_ptr<GrpcReconstructionService> grpc_service;
+  std::unique_ptr<grpc::Server> grpc_server;
+  int port = 0;
+  std::mutex shutdown_mutex;
+  bool shut_down = false;
+};
+
+Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
+                                              std::shared_ptr<spdlog::logger> logger) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  auto parts = std::make_unique<Parts>();
+  parts->options = options;
+  parts->logger = logger ? std::move(logger) : spdlog::default_logger();
+  const auto& log = parts->logger;
+
+  std::error_code error;
+  fs::create_directories(options.data_dir, error);
+  if (error) {
+    return Status::IoError("cannot create data directory " + options.data_dir.string() + ": " +
+                           error.message());
+  }
+  const fs::path staging = options.data_dir / "uploads";
+  const fs::path work = options.data_dir / "work";
+  SOFTID_RETURN_IF_ERROR(ResetFolder(staging));
+  SOFTID_RETURN_IF_ERROR(ResetFolder(work));
+
+  store::SqliteJobStoreOptions store_options;
+  store_options.logger = parts->logger;
+  SOFTID_ASSIGN_OR_RETURN(
+      parts->jobs, store::SqliteJobStore::Open(options.data_dir / "softid.db", store_options));
+  SOFTID_ASSIGN_OR_RETURN(store::BlobStore blobs, store::BlobStore::Open(options.data_dir));
+  parts->blobs.emplace(std::move(blobs));
+  // No worker of this process runs yet, so every RUNNING job was left by a previous one.
+  SOFTID_ASSIGN_OR_RETURN(
+      const store::RecoverySummary recovered,
+      parts->jobs->RecoverAfterCrash(options.max_attempts, store::RecoveryScope::kAllRunning));
+  if (recovered.total() > 0) {
+    log->info("recovered {} job(s) left RUNNING: {} requeued, {} failed, {} cancelled",
+              recovered.total(), recovered.num_requeued, recovered.num_failed,
+              recovered.num_cancelled);
+  }
+
+  WorkerPoolOptions pool_options;
+  pool_options.num_workers = options.num_workers;
+  pool_options.lease = options.lease;
+  pool_options.heartbeat_interval = options.heartbeat_interval;
+  pool_options.idle_poll_interval = options.idle_poll_interval;
+  pool_options.work_root = work;
+  pool_options.worker_id_prefix = HostName() + "-" + std::to_string(::getpid());
+  parts->pool = std::make_unique<WorkerPool>(parts->jobs.get(), &*parts->blobs, &parts->events,
+                                             pool_options, parts->logger);
+
+  JobServiceOptions service_options;
+  service_options.max_queued_jobs = options.max_queued_jobs;
+  service_options.upload_limits = options.upload_limits;
+  service_options.staging_root = staging;
+  WorkerPool* pool = parts->pool.get();
+  service_options.on_job_queued = [pool] { pool->Wake(); };
+  parts->service = std::make_unique<JobService>(parts->jobs.get(), &*parts->blobs, &parts->events,
+                                                service_options, parts->logger);
+  parts->grpc_service = std::make_unique<GrpcReconstructionService>(parts->service.get());
+
+  grpc::EnableDefaultHealthCheckService(true);
+  grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+  grpc::ServerBuilder builder;
+  builder.AddListeningPort(options.listen_address, grpc::InsecureServerCredentials(), &parts->port);
+  builder.RegisterService(parts->grpc_service.get());
+  parts->grpc_server = builder.BuildAndStart();
+  if (parts->grpc_server == nullptr || parts->port == 0) {
+    parts->pool.reset();
+    (void)parts->jobs->Close();
+    return Status::IoError("cannot listen on " + options.listen_address);
+  }
+  parts->grpc_server->GetHealthCheckService()->SetServingStatus(
+      v1::Reconstruction::service_full_name(), true);
+  parts->pool->Start();
+  log->info("softid-server listening on {} (port {}), data {}, {} worker(s), max {} queued",
+            options.listen_address, parts->port, options.data_dir.string(), options.num_workers,
+            options.max_queued_jobs);
+  return std::unique_ptr<Server>(new Server(std::move(parts)));
+}
+
+Server::Server(std::unique_ptr<Parts> parts) : parts_(std::move(parts)) {}
+
+Server::~Server() {
+  if (Status closed = Shutdown(); !closed.ok()) {
+    parts_->logger->error("shutdown: {}", closed.message());
+  }
+}
+
+int Server::port() const {
+  return parts_->port;
+}
+
+Status Server::Shutdown() {
+  std::lock_guard lock(parts_->shutdown_mutex);
+  if (parts_->shut_down) return Status::Ok();
+  parts_->shut_down = true;
+  const auto& log = parts_->logger;
+  log->info("shutting down: NOT_SERVING, no new jobs, interrupting running fits");
+  parts_->grpc_server->GetHealthCheckService()->SetServingStatus(false);
+  parts_->service->StartDraining();
+  parts_->pool->Stop();
+  parts_->grpc_server->Shutdown(std::chrono::system_clock::now() + parts_->options.shutdown_grace);
+  parts_->grpc_server->Wait();
+  Status closed = parts_->jobs->Close();
+  log->info("shut down");
+  return closed;
+}
+
+}  // namespace softid::server

@@ -1,0 +1,66 @@
+// A running softid server: the data directory (SQLite database, content-addressed blobs, staging
+// and work folders), the job service, the worker pool and the gRPC server with health checking
+// and reflection, wired together. main.cc adds only flags and signals; tests start it in-process.
+//
+// Data directory layout:
+//   DIR/softid.db            jobs, captures, progress (WAL; schema migrated on start)
+//   DIR/blobs/               uploaded files, content-addressed (blob_store.h)
+//   DIR/uploads/, DIR/work/  staging of uploads and per-job capture folders; emptied on start
+#pragma once
+
+#include <spdlog/logger.h>
+
+#include <chrono>
+#include <filesystem>
+#include <memory>
+#include <string>
+
+#include "core/common/status.h"
+#include "server/capture_upload.h"
+
+namespace softid::server {
+
+struct ServerOptions {
+  // "host:port"; port 0 picks a free port (see Server::port()).
+  std::string listen_address = "localhost:50051";
+  std::filesystem::path data_dir;
+  int num_workers = 1;             // >= 0
+  int64_t max_queued_jobs = 1000;  // >= 1
+  // A job whose worker was lost (crash, kill -9, or shutdown mid-fit) is re-run until it was
+  // started this many times, then FAILED: a job that crashes the server every time must not
+  // crash it forever.
+  int max_attempts = 3;  // >= 1
+  std::chrono::milliseconds lease{60000};
+  std::chrono::milliseconds heartbeat_interval{2000};
+  std::chrono::milliseconds idle_poll_interval{1000};
+  // Shutdown gives open RPCs (watches, uploads) this long before cancelling them.
+  std::chrono::milliseconds shutdown_grace{3000};
+  UploadLimits upload_limits;
+
+  // InvalidArgument naming the field and value.
+  Status Validate() const;
+};
+
+class Server {
+ public:
+  // Opens (or creates) the data directory, migrates the schema, requeues jobs left RUNNING by a
+  // previous process, starts the workers and listens. `logger` null means spdlog's default.
+  static Result<std::unique_ptr<Server>> Start(const ServerOptions& options,
+                                               std::shared_ptr<spdlog::logger> logger = nullptr);
+  ~Server();  // Shutdown()
+  Server(const Server&) = delete;
+  Server& operator=(const Server&) = delete;
+
+  // The port actually bound.
+  int port() const;
+  // Drains: health NOT_SERVING, refuse new work, interrupt running fits (their jobs are requeued
+  // at the next start), end open RPCs within shutdown_grace, close the store. Idempotent.
+  Status Shutdown();
+
+ private:
+  struct Parts;
+  explicit Server(std::unique_ptr<Parts> parts);
+  std::unique_ptr<Parts> parts_;
+};
+
+}  // namespace softid::server

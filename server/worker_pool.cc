@@ -1,0 +1,104 @@
+#include "server/worker_pool.h"
+
+#include <spdlog/spdlog.h>
+
+#include <exception>
+
+namespace softid::server {
+
+WorkerPool::WorkerPool(store::JobStore* jobs, const store::BlobStore* blobs, JobEvents* events,
+                       WorkerPoolOptions options, std::shared_ptr<spdlog::logger> logger)
+    : jobs_(jobs), options_(std::move(options)) {
+  context_.jobs = jobs;
+  context_.blobs = blobs;
+  context_.events = events;
+  context_.work_root = options_.work_root;
+  context_.lease = options_.lease;
+  context_.heartbeat_interval = options_.heartbeat_interval;
+  context_.logger = logger ? std::move(logger) : spdlog::default_logger();
+}
+
+WorkerPool::~WorkerPool() {
+  Stop();
+}
+
+void WorkerPool::Start() {
+  for (int i = 0; i < options_.num_workers; ++i) {
+    threads_.emplace_back([this, i] { WorkerLoop(i); });
+  }
+  context_.logger->info("worker pool: {} worker(s) started", options_.num_workers);
+}
+
+void WorkerPool::Wake() {
+  {
+    std::lock_guard lock(mutex_);
+    ++wakes_;
+  }
+  wake_.notify_one();
+}
+
+void WorkerPool::Stop() {
+  {
+    std::lock_guard lock(mutex_);
+    stopping_.store(true);
+    for (std::atomic<bool>* cancel : running_) cancel->store(true);
+  }
+  wake_.notify_all();
+  for (std::thread& thread : threads_) {
+    if (thread.joinable()) thread.join();
+  }
+  threads_.clear();
+}
+
+void WorkerPool::RecordCrash(const std::string& job_id, const std::string& error) {
+  if (Status failed = jobs_->FailJob(job_id, error); !failed.ok()) {
+    context_.logger->error("job {}: cannot record the failure: {}", job_id, failed.message());
+  }
+  context_.events->Notify(job_id);
+}
+
+void WorkerPool::WorkerLoop(int index) {
+  const std::string worker_id = options_.worker_id_prefix + "-" + std::to_string(index);
+  const auto& log = context_.logger;
+  while (!stopping_.load()) {
+    uint64_t seen_wakes = 0;
+    {
+      std::lock_guard lock(mutex_);
+      seen_wakes = wakes_;
+    }
+    Result<std::optional<store::Job>> claimed = jobs_->ClaimNextJob(worker_id, options_.lease);
+    if (!claimed.ok()) {
+      log->error("{}: cannot claim a job: {}", worker_id, claimed.status().message());
+    }
+    if (!claimed.ok() || !claimed->has_value()) {
+      std::unique_lock lock(mutex_);
+      wake_.wait_for(lock, options_.idle_poll_interval,
+                     [&] { return stopping_.load() || wakes_ != seen_wakes; });
+      continue;
+    }
+    const store::Job& job = **claimed;
+    context_.events->Notify(job.id);
+    std::atomic<bool> cancel{false};
+    {
+      std::lock_guard lock(mutex_);
+      // Claimed while Stop ran: interrupt at once; recovery requeues it.
+      if (stopping_.load()) cancel.store(true);
+      running_.insert(&cancel);
+    }
+    // Exceptions must not cross the thread boundary (they would terminate the server).
+    try {
+      const JobOutcome outcome = RunClaimedJob(job, worker_id, context_, cancel, stopping_);
+      log->debug("job {}: {} on {}", job.id, ToString(outcome), worker_id);
+    } catch (const std::exception& e) {
+      log->error("job {}: internal error: {}", job.id, e.what());
+      RecordCrash(job.id, std::string("internal error: ") + e.what());
+    } catch (...) {
+      log->error("job {}: internal error (unknown exception)", job.id);
+      RecordCrash(job.id, "internal error (unknown exception)");
+    }
+    std::lock_guard lock(mutex_);
+    running_.erase(&cancel);
+  }
+}
+
+}  // namespace softid::server

@@ -1,0 +1,299 @@
+// End to end in one process: a real gRPC server on a free localhost port with a temporary data
+// directory, driven through the client library over loopback.
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
+#include <gtest/gtest.h>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <filesystem>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "client/capture_files.h"
+#include "client/reconstruction_client.h"
+#include "server/server.h"
+#include "tests/core/inverse/inverse_test_util.h"
+#include "tests/server/temp_dir.h"
+
+namespace softid::server {
+namespace {
+
+namespace fs = std::filesystem;
+using client::ReconstructionClient;
+using store::testing::TempDir;
+
+// Fits youngs_modulus on the small capture: a couple of seconds per iteration at most.
+std::string FitConfig(int max_iterations) {
+  return nlohmann::json{{"fit", {"youngs_modulus"}},
+                        {"max_iterations", max_iterations},
+                        {"starts", 1},
+                        {"threads", 1},
+                        {"cells", 8},
+                        {"substeps", 2},
+                        {"fixed", {{"ground", {{"normal", {0, 0, 1}}, {"offset", 0}}}}}}
+      .dump();
+}
+
+class GrpcServerTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    spdlog::set_level(spdlog::level::warn);
+    capture_ = new inverse::testing::SmallCapture(
+        inverse::testing::MakeSmallCapture("torus-drop", /*duration=*/0.2, /*cameras=*/1));
+  }
+  static void TearDownTestSuite() {
+    delete capture_;
+    capture_ = nullptr;
+  }
+
+  void SetUp() override { ASSERT_TRUE(capture_->ok) << capture_->error; }
+
+  // Starts (or restarts) the server on data_.
+  void StartServer(int num_workers) {
+    ServerOptions options;
+    options.listen_address = "localhost:0";
+    options.data_dir = data_.path();
+    options.num_workers = num_workers;
+    options.lease = std::chrono::milliseconds(5000);
+    options.heartbeat_interval = std::chrono::milliseconds(200);
+    options.idle_poll_interval = std::chrono::milliseconds(100);
+    options.shutdown_grace = std::chrono::milliseconds(500);
+    Result<std::unique_ptr<Server>> server = Server::Start(options);
+    ASSERT_TRUE(server.ok()) << server.status().ToString();
+    server_ = std::move(*server);
+    client::ClientOptions client_options;
+    client_options.retry_budget = std::chrono::milliseconds(2000);
+    client_ = std::make_unique<ReconstructionClient>(
+        grpc::CreateChannel("localhost:" + std::to_string(server_->port()),
+                            grpc::InsecureChannelCredentials()),
+        client_options);
+  }
+
+  void StopServer() {
+    client_.reset();
+    if (server_) {
+      ASSERT_TRUE(server_->Shutdown().ok());
+    }
+    server_.reset();
+  }
+
+  void TearDown() override { StopServer(); }
+
+  client::CaptureFiles CaptureFiles() {
+    client::CaptureFiles files;
+    std::string error;
+    EXPECT_TRUE(client::ReadCaptureFiles(capture_->directory, &files, &error)) << error;
+    return files;
+  }
+
+  v1::Capture Upload(const std::string& request_id = "") {
+    v1::Capture capture;
+    const grpc::Status status = client_->UploadCapture(CaptureFiles(), request_id, &capture);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return capture;
+  }
+
+  v1::Job CreateJob(const std::string& capture_id, const std::string& config) {
+    v1::CreateJobRequest request;
+    request.set_capture_id(capture_id);
+    request.set_config_json(config);
+    v1::Job job;
+    const grpc::Status status = client_->CreateJob(request, &job);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return job;
+  }
+
+  // Regular files under DIR/blobs (temporary files excluded).
+  int NumBlobs() {
+    int n = 0;
+    const fs::path blobs = data_.path() / "blobs";
+    if (!fs::exists(blobs)) return 0;
+    for (const auto& entry : fs::recursive_directory_iterator(blobs)) {
+      if (entry.is_regular_file() && entry.path().parent_path().filename() != "tmp") ++n;
+    }
+    return n;
+  }
+
+  static inverse::testing::SmallCapture* capture_;
+  TempDir data_;
+  std::unique_ptr<Server> server_;
+  std::unique_ptr<ReconstructionClient> client_;
+};
+
+inverse::testing::SmallCapture* GrpcServerTest::capture_ = nullptr;
+
+// Upload, create, watch to SUCCEEDED, fetch a result with the fitted parameter.
+TEST_F(GrpcServerTest, JobRunsFromUploadToResult) {
+  StartServer(/*num_workers=*/1);
+  const v1::Capture capture = Upload();
+  ASSERT_FALSE(capture.id().empty());
+  const v1::Job job = CreateJob(capture.id(), FitConfig(/*max_iterations=*/2));
+  EXPECT_EQ(job.state(), v1::QUEUED);
+
+  std::vector<v1::JobEvent> events;
+  const grpc::Status watched =
+      client_->WatchJob(job.id(), 0, [&](const v1::JobEvent& e) { events.push_back(e); });
+  ASSERT_TRUE(watched.ok()) << watched.error_message();
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back().state(), v1::SUCCEEDED);
+  int iterations = 0;
+  for (size_t i = 0; i < events.size(); ++i) {
+    if (i > 0) {
+      EXPECT_GT(events[i].seq(), events[i - 1].seq());
+    }
+    if (events[i].kind() == v1::JobEvent::ITERATION) {
+      ++iterations;
+      EXPECT_EQ(events[i].max_iterations(), 2);
+      EXPECT_TRUE(nlohmann::json::parse(events[i].parameters_json()).contains("youngs_modulus"));
+    }
+  }
+  EXPECT_GE(iterations, 1);
+
+  v1::Result result;
+  const grpc::Status got = client_->GetResult(job.id(), &result);
+  ASSERT_TRUE(got.ok()) << got.error_message();
+  const nlohmann::json json = nlohmann::json::parse(result.result_json());
+  ASSERT_TRUE(json.contains("parameters"));
+  EXPECT_TRUE(json["parameters"].contains("youngs_modulus"));
+  EXPECT_FALSE(result.cost_history().empty());
+
+  client::ServingStatus serving = client::ServingStatus::kUnknown;
+  ASSERT_TRUE(client_->Health("", &serving).ok());
+  EXPECT_EQ(serving, client::ServingStatus::kServing);
+}
+
+// A config the core rejects is INVALID_ARGUMENT naming the field and value.
+TEST_F(GrpcServerTest, InvalidConfigIsRejectedWithTheField) {
+  StartServer(/*num_workers=*/0);
+  const v1::Capture capture = Upload();
+  v1::CreateJobRequest request;
+  request.set_capture_id(capture.id());
+  request.set_config_json(R"({"fit": ["youngs_modulo"]})");
+  v1::Job job;
+  const grpc::Status status = client_->CreateJob(request, &job);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(status.error_message().find("fit[0]"), std::string::npos) << status.error_message();
+  EXPECT_NE(status.error_message().find("youngs_modulo"), std::string::npos);
+
+  request.set_capture_id("cap-0123456789abcdef");
+  request.set_config_json("");
+  EXPECT_EQ(client_->CreateJob(request, &job).error_code(), grpc::StatusCode::NOT_FOUND);
+}
+
+// A file whose bytes do not match its declared sha256 fails the upload and stores nothing.
+TEST_F(GrpcServerTest, BadSha256StoresNothing) {
+  StartServer(/*num_workers=*/0);
+  client::CaptureFiles files = CaptureFiles();
+  ASSERT_GE(files.files.size(), 2u);
+  const std::string path = files.files[1].path();
+  files.files[1].set_sha256(std::string(64, '0'));
+  v1::Capture capture;
+  const grpc::Status status = client_->UploadCapture(files, "", &capture);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(status.error_message().find(path), std::string::npos) << status.error_message();
+  EXPECT_NE(status.error_message().find("sha256"), std::string::npos);
+  EXPECT_EQ(NumBlobs(), 0);
+  EXPECT_TRUE(fs::is_empty(data_.path() / "uploads"));
+}
+
+// A repeated request_id returns the capture stored the first time.
+TEST_F(GrpcServerTest, UploadIsIdempotentByRequestId) {
+  StartServer(/*num_workers=*/0);
+  const v1::Capture first = Upload("station-7/take-1");
+  const v1::Capture again = Upload("station-7/take-1");
+  EXPECT_EQ(first.id(), again.id());
+}
+
+// Unknown ids are NOT_FOUND; a result asked before the job succeeded is FAILED_PRECONDITION; a
+// queued job cancels at once.
+TEST_F(GrpcServerTest, UnknownJobResultBeforeDoneAndCancel) {
+  StartServer(/*num_workers=*/0);
+  v1::Job job;
+  EXPECT_EQ(client_->GetJob("job-0123456789abcdef", &job).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(client_->GetJob("nonsense", &job).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+
+  const v1::Capture capture = Upload();
+  const v1::Job queued = CreateJob(capture.id(), FitConfig(/*max_iterations=*/2));
+  v1::Result result;
+  EXPECT_EQ(client_->GetResult(queued.id(), &result).error_code(),
+            grpc::StatusCode::FAILED_PRECONDITION);
+
+  v1::Job cancelled;
+  ASSERT_TRUE(client_->CancelJob(queued.id(), &cancelled).ok());
+  EXPECT_EQ(cancelled.state(), v1::CANCELLED);
+
+  v1::ListJobsRequest list;
+  list.set_state(v1::CANCELLED);
+  v1::ListJobsResponse page;
+  ASSERT_TRUE(client_->ListJobs(list, &page).ok());
+  ASSERT_EQ(page.jobs_size(), 1);
+  EXPECT_EQ(page.jobs(0).id(), queued.id());
+}
+
+// A job RUNNING when the server stops is QUEUED after a restart, keeps its history and then
+// completes.
+TEST_F(GrpcServerTest, RunningJobSurvivesRestart) {
+  StartServer(/*num_workers=*/1);
+  const v1::Capture capture = Upload();
+  const v1::Job job = CreateJob(capture.id(), FitConfig(/*max_iterations=*/3));
+
+  // Stop on the first iteration: the fit is running.
+  int iterations_before = 0;
+  {
+    grpc::ClientContext context;
+    v1::WatchJobRequest request;
+    request.set_job_id(job.id());
+    auto stub = v1::Reconstruction::NewStub(grpc::CreateChannel(
+        "localhost:" + std::to_string(server_->port()), grpc::InsecureChannelCredentials()));
+    auto reader = stub->WatchJob(&context, request);
+    v1::JobEvent event;
+    while (reader->Read(&event)) {
+      if (event.kind() == v1::JobEvent::ITERATION) {
+        ++iterations_before;
+        break;
+      }
+    }
+    context.TryCancel();
+    (void)reader->Finish();
+  }
+  ASSERT_EQ(iterations_before, 1);
+  StopServer();
+
+  // No workers: the recovered job waits in the queue.
+  StartServer(/*num_workers=*/0);
+  v1::Job recovered;
+  ASSERT_TRUE(client_->GetJob(job.id(), &recovered).ok());
+  EXPECT_EQ(recovered.state(), v1::QUEUED);
+  StopServer();
+
+  StartServer(/*num_workers=*/1);
+  std::vector<v1::JobEvent> events;
+  ASSERT_TRUE(
+      client_->WatchJob(job.id(), 0, [&](const v1::JobEvent& e) { events.push_back(e); }).ok());
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back().state(), v1::SUCCEEDED);
+  // The first attempt's iterations are still in the history, followed by the second attempt's.
+  bool first_attempt_iteration = false, second_attempt_iteration = false, requeued = false;
+  for (const v1::JobEvent& e : events) {
+    if (e.kind() == v1::JobEvent::ITERATION && e.attempt() == 1) first_attempt_iteration = true;
+    if (e.kind() == v1::JobEvent::ITERATION && e.attempt() == 2) second_attempt_iteration = true;
+    if (e.kind() == v1::JobEvent::STATE_CHANGE && e.state() == v1::QUEUED &&
+        e.message().find("requeued") != std::string::npos) {
+      requeued = true;
+    }
+  }
+  EXPECT_TRUE(first_attempt_iteration);
+  EXPECT_TRUE(second_attempt_iteration);
+  EXPECT_TRUE(requeued);
+  v1::Job done;
+  ASSERT_TRUE(client_->GetJob(job.id(), &done).ok());
+  EXPECT_EQ(done.attempts(), 2);
+}
+
+}  // namespace
+}  // namespace softid::server
