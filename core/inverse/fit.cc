@@ -301,6 +301,9 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
                       const FitOptions& options) {
   const auto begin = Clock::now();
   SOFTID_RETURN_IF_ERROR(config.Validate());
+  if (config.diagnose) {
+    return json::Invalid("diagnose", true, "the diagnosis is not available in this version yet");
+  }
   SOFTID_ASSIGN_OR_RETURN(geometry::TriangleMesh mesh, capture::LoadCaptureMesh(capture));
   SOFTID_ASSIGN_OR_RETURN(std::vector<ObservedFrame> loaded,
                           LoadObservedFrames(capture, config.frames.first, config.frames.last));

@@ -164,8 +164,8 @@ struct JobConfig {
   double finite_difference_step = 1e-4;  // [-], > 0
 
   CostSettings cost;
-  // Asks the job to record diagnostics of the fit (e.g. per-iteration cost terms and gradients)
-  // besides the result; off by default because they are large.
+  // Run the diagnosis of left-out physics after the fit and return its report with the result
+  // (issue 5). Not available yet: Fit rejects true rather than ignoring it.
   bool diagnose = false;
 
   // Whether `fittable_name` (canonical) is in `fit`.
