@@ -88,6 +88,21 @@ void ExpectDirectionalDerivative(const std::string& name, Simulator& sim,
       << name << ": adjoint " << adjoint_value << " vs finite differences " << finite_difference;
 }
 
+// Relative change of one scalar parameter: d L / d log(p) = p dL/dp.
+void ExpectRelativeDerivative(const char* name, Simulator& sim, const TrajectoryLoss& loss,
+                              const PhysicalParameters& p, double PhysicalParameters::*field,
+                              double adjoint_value) {
+  const double base = p.*field;
+  ExpectDirectionalDerivative(
+      name, sim, loss,
+      [&](double t) {
+        PhysicalParameters q = p;
+        q.*field = base * (1.0 + t);
+        return q;
+      },
+      1e-4, adjoint_value * base);
+}
+
 geometry::TriangleMesh SmallBox() {
   return geometry::MakeBox(Eigen::Vector3d(0.1, 0.07, 0.05), 0.025);
 }
@@ -111,15 +126,7 @@ TEST(Adjoint, FreeFlightGradientMatchesFiniteDifferences) {
   const ParameterGradient g = loss.Gradient(sim, p);
 
   auto scalar = [&](const char* name, double PhysicalParameters::*field, double adjoint_value) {
-    const double base = p.*field;
-    ExpectDirectionalDerivative(
-        name, sim, loss,
-        [&](double t) {
-          PhysicalParameters q = p;
-          q.*field = base * (1.0 + t);
-          return q;
-        },
-        1e-4, adjoint_value * base);
+    ExpectRelativeDerivative(name, sim, loss, p, field, adjoint_value);
   };
   scalar("youngs_modulus", &PhysicalParameters::youngs_modulus, g.youngs_modulus);
   scalar("poisson_ratio", &PhysicalParameters::poisson_ratio, g.poisson_ratio);
@@ -179,15 +186,7 @@ TEST(Adjoint, ContactAndFrictionGradientMatchesFiniteDifferences) {
   const ParameterGradient g = loss.Gradient(sim, p);
 
   auto scalar = [&](const char* name, double PhysicalParameters::*field, double adjoint_value) {
-    const double base = p.*field;
-    ExpectDirectionalDerivative(
-        name, sim, loss,
-        [&](double t) {
-          PhysicalParameters q = p;
-          q.*field = base * (1.0 + t);
-          return q;
-        },
-        1e-4, adjoint_value * base);
+    ExpectRelativeDerivative(name, sim, loss, p, field, adjoint_value);
   };
   // E also sets the default contact stiffness 100 E / L.
   scalar("youngs_modulus", &PhysicalParameters::youngs_modulus, g.youngs_modulus);
