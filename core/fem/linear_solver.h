@@ -9,6 +9,7 @@
 #include <Eigen/Core>
 #include <Eigen/SparseCore>
 #include <memory>
+#include <vector>
 
 #include "core/common/status.h"
 
@@ -43,15 +44,22 @@ class LinearSolver {
   // of one factorisation. Both costs are measured, so the rule adapts to the problem size.
   bool RefactorPays() const;
 
-  // Solves a x = b; x holds the initial guess on entry. @pre HasFactor()
+  // Which operator Solve inverts: a, or its transpose (the adjoint's systems). The preconditioner
+  // approximates the symmetric part, which both share.
+  enum class Operator { kMatrix, kTransposed };
+
+  // Solves op(a) x = b; x holds the initial guess on entry. @pre HasFactor()
   Summary Solve(const Matrix& a, const Eigen::VectorXd& b, const Eigen::Matrix3d& rotation,
-                const Options& options, Eigen::VectorXd* x);
+                const Options& options, Eigen::VectorXd* x, Operator op = Operator::kMatrix);
 
  private:
   void ApplyPreconditioner(const Eigen::Ref<const Eigen::VectorXd>& r, Eigen::VectorXd* z);
 
   struct Factor;
   std::unique_ptr<Factor> factor_;
+  // Analysed for the pattern below; refilled by the next Factorize and swapped in on success.
+  std::unique_ptr<Factor> spare_;
+  std::vector<int> pattern_outer_, pattern_inner_;
   Eigen::Matrix3d reference_rotation_ = Eigen::Matrix3d::Identity();
   Eigen::Matrix3d preconditioner_rotation_ = Eigen::Matrix3d::Identity();
   int num_factorizations_ = 0;

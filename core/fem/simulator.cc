@@ -165,7 +165,7 @@ void Simulator::ApplyParameters() {
   has_surface_forces_ = false;
   Assemble(Mode::kDynamic, zero, zero, zero);
   has_surface_forces_ = saved_forces;
-  solver_ = LinearSolver();
+  // The solver keeps its symbolic analysis: only the numbers change with the parameters.
   ThrowIfError(solver_.Factorize(assembler_.matrix(), Eigen::Matrix3d::Identity()));
 }
 

@@ -203,6 +203,9 @@ class Simulator {
 
   ElementAssembler assembler_;
   LinearSolver solver_;
+  // The last adjoint solution lambda of a backward pass: the next (earlier) step's initial guess,
+  // since lambda changes little from step to step. Cleared by BackpropagateInitialState.
+  Eigen::VectorXd adjoint_guess_;
   SimulationState state_;
   // Work vectors of the Newton iteration.
   Eigen::VectorXd residual_, update_, u_next_, v_next_, a_next_;

@@ -191,18 +191,21 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
   exact_tangent_only_if_definite_ = false;
   const Eigen::Matrix3d rotation = Assemble(Mode::kDynamic, next.u, next.v, next.a);
   exact_tangent_only_if_definite_ = true;
-  const LinearSolver::Matrix transposed = assembler_.matrix().transpose();
 
   Eigen::VectorXd lambda = Eigen::VectorXd::Zero(3 * n);
   if (!rhs.isZero(0.0)) {
+    if (adjoint_guess_.size() == lambda.size()) lambda = adjoint_guess_;
     LinearSolver::Options linear;
     linear.relative_tolerance = options_.adjoint_linear_tolerance;
     linear.max_iterations = options_.max_linear_iterations;
-    LinearSolver::Summary solve = solver_.Solve(transposed, rhs, rotation, linear, &lambda);
+    const LinearSolver::Matrix& jacobian = assembler_.matrix();
+    constexpr auto kTransposed = LinearSolver::Operator::kTransposed;
+    LinearSolver::Summary solve =
+        solver_.Solve(jacobian, rhs, rotation, linear, &lambda, kTransposed);
     if (!solve.converged) {
-      if (solver_.Factorize(transposed, rotation).ok()) {
+      if (solver_.Factorize(jacobian, rotation).ok()) {
         lambda.setZero();
-        solve = solver_.Solve(transposed, rhs, rotation, linear, &lambda);
+        solve = solver_.Solve(jacobian, rhs, rotation, linear, &lambda, kTransposed);
       }
       if (!solve.converged) {
         return Status::Internal("adjoint solve at t = " + std::to_string(next.time) +
@@ -210,7 +213,11 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
                                 std::to_string(solve.relative_residual) + ")");
       }
     }
+    // The same ski-rental rule as the forward pass: renew the factor once the extra iterations
+    // of a stale one have cost more than a factorisation.
+    if (solver_.RefactorPays()) (void)solver_.Factorize(jacobian, rotation);
   }
+  adjoint_guess_ = lambda;
 
   Eigen::VectorXd velocity_adjoint, previous_adjoint;
   ResidualAdjoint(next.u, next.v, next.a, previous.u, lambda, &velocity_adjoint, &previous_adjoint,
@@ -238,6 +245,7 @@ void Simulator::BackpropagateInitialState(const SimulationState& initial,
                                           const StateAdjoint& adjoint,
                                           ParameterGradient* gradient) {
   const int n = mesh_.NumNodes();
+  adjoint_guess_.resize(0);  // the backward pass ends here
   // a0 = -M^-1 r(0, v0, 0) at free nodes. With zeta = M^-1 a0_bar, d L = -zeta^T (dr + dM a0):
   // the residual's adjoint evaluated at a = a0 supplies both terms.
   Eigen::VectorXd zeta = Eigen::VectorXd::Zero(3 * n);
