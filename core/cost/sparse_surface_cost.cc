@@ -45,7 +45,16 @@ Status SurfaceCostOptions::Validate() const {
     return json::Invalid("SurfaceCostOptions.truncation_cells", truncation_cells,
                          "must be positive and finite");
   }
-  return Status::Ok();
+  return surface_fit.Validate();
+}
+
+const char* ToString(RestSdf mode) {
+  switch (mode) {
+    case RestSdf::kSampled: return "sampled";
+    case RestSdf::kSurfaceFitted: return "surface_fitted";
+    case RestSdf::kExact: return "exact";
+  }
+  return "?";
 }
 
 SparseSurfaceCost::SparseSurfaceCost(const fem::HexMesh& mesh,
@@ -54,10 +63,45 @@ SparseSurfaceCost::SparseSurfaceCost(const fem::HexMesh& mesh,
     : options_(ValidOrThrow(options)),
       grid_(mesh.grid),
       phi_max_(options.truncation_cells * mesh.grid.cell_size),
+      extension_(mesh, options.band_cells, options.extension_mode),
+      rest_sdf_(sdf) {
+  SOFTID_THROW_UNLESS(
+      SameGrid(mesh.grid, sdf.grid) && static_cast<int>(sdf.phi.size()) == sdf.grid.NumNodes(),
+      "sdf: its grid differs from mesh.grid");
+  BuildCandidates();
+}
+
+SparseSurfaceCost::SparseSurfaceCost(const fem::HexMesh& mesh,
+                                     const geometry::SignedDistanceField& sdf,
+                                     const geometry::TriangleMesh& rest_surface,
+                                     const SurfaceCostOptions& options)
+    : options_(ValidOrThrow(options)),
+      grid_(mesh.grid),
+      phi_max_(options.truncation_cells * mesh.grid.cell_size),
       extension_(mesh, options.band_cells, options.extension_mode) {
   SOFTID_THROW_UNLESS(
       SameGrid(mesh.grid, sdf.grid) && static_cast<int>(sdf.phi.size()) == sdf.grid.NumNodes(),
       "sdf: its grid differs from mesh.grid");
+  rest_sdf_ = options_.rest_sdf == RestSdf::kSampled
+                  ? sdf
+                  : FitSdfToSurface(sdf, rest_surface, options_.surface_fit, &surface_fit_summary_);
+  if (options_.rest_sdf == RestSdf::kExact) {
+    Result<geometry::MeshDistance> distance = geometry::MeshDistance::Create(rest_surface);
+    SOFTID_THROW_UNLESS(distance.ok(), "rest_surface: " + distance.status().message());
+    exact_distance_ = std::make_shared<const geometry::MeshDistance>(std::move(*distance));
+    face_normals_.reserve(rest_surface.triangles.size());
+    for (const Eigen::Vector3i& t : rest_surface.triangles) {
+      const Eigen::Vector3d n = (rest_surface.vertices[t[1]] - rest_surface.vertices[t[0]])
+                                    .cross(rest_surface.vertices[t[2]] - rest_surface.vertices[t[0]]);
+      face_normals_.push_back(n.norm() > 0.0 ? Eigen::Vector3d(n.normalized())
+                                             : Eigen::Vector3d::Zero());
+    }
+  }
+  BuildCandidates();
+}
+
+void SparseSurfaceCost::BuildCandidates() {
+  const geometry::SignedDistanceField& sdf = rest_sdf_;
   const int num_domain = extension_.num_domain_nodes();
 
   std::vector<int> cell_to_candidate(grid_.NumCells(), -1);
@@ -185,6 +229,27 @@ void SparseSurfaceCost::BuildBins() {
   }
 }
 
+double SparseSurfaceCost::ExactDistance(const Eigen::Vector3d& rest, double interpolated,
+                                        Eigen::Vector3d* gradient) const {
+  const geometry::ClosestPoint closest = exact_distance_->Closest(rest);
+  const Eigen::Vector3d& face = face_normals_[closest.triangle];
+  const Eigen::Vector3d offset = rest - closest.point;
+  // The side of the closest triangle decides the sign near the surface; that test can fail only
+  // next to a crease or a vertex (where several triangles are closest), so away from the surface
+  // (beyond the interpolant's error, a few % of h) the interpolant's sign is used instead.
+  const double side = offset.dot(face);
+  const bool outside = std::abs(interpolated) > 0.25 * grid_.cell_size ? interpolated > 0.0
+                                                                       : side >= 0.0;
+  const double sign = outside ? 1.0 : -1.0;
+  // grad phi = sign * (X - closest) / |X - closest|: the unit vector to X; on the surface itself
+  // (distance ~ 0) that is the face normal.
+  if (closest.distance > 1e-9 * grid_.cell_size)
+    *gradient = sign * offset / closest.distance;
+  else
+    *gradient = face;
+  return sign * closest.distance;
+}
+
 void SparseSurfaceCost::TryCandidate(int i, const Eigen::Vector3d& x, Match* best) const {
   if (!boxes_[i].contains(x)) return;
   const Candidate& candidate = candidates_[i];
@@ -254,8 +319,22 @@ double SparseSurfaceCost::Evaluate(const Eigen::VectorXd& u,
       if (matches != nullptr) (*matches)[p].cost = truncated;
       continue;
     }
-    sum += best.rho;
     const Candidate& candidate = candidates_[best.candidate];
+    // kExact: the chosen match's phi is the exact distance at its material point X = corner 0 +
+    // h xi (the rest cell is an axis-aligned cube), d phi / d xi = h grad_X phi.
+    Eigen::Vector3d grad_xi = Eigen::Vector3d::Zero();
+    if (exact_distance_ != nullptr) {
+      const Eigen::Vector3d rest =
+          extension_.rest_position(candidate.nodes[0]) + grid_.cell_size * best.xi;
+      Eigen::Vector3d grad_rest;
+      best.phi = ExactDistance(rest, best.phi, &grad_rest);
+      best.rho = TukeyLoss(best.phi, phi_max_);
+      grad_xi = grid_.cell_size * grad_rest;
+    } else {
+      const std::array<Eigen::Vector3d, 8> shape_gradients = geometry::TrilinearGradients(best.xi);
+      for (int c = 0; c < 8; ++c) grad_xi += candidate.phi[c] * shape_gradients[c];
+    }
+    sum += best.rho;
     if (matches != nullptr) {
       PointMatch& match = (*matches)[p];
       match.matched = true;
@@ -274,9 +353,6 @@ double SparseSurfaceCost::Evaluate(const Eigen::VectorXd& u,
     // d phi / d x_c = -N_c(xi) J^-T grad_xi(phi): x = sum_c N_c(xi) x_c is data, so moving a
     // corner moves xi by -J^-1 N_c dx_c.
     const std::array<double, 8> weights = geometry::TrilinearWeights(best.xi);
-    const std::array<Eigen::Vector3d, 8> shape_gradients = geometry::TrilinearGradients(best.xi);
-    Eigen::Vector3d grad_xi = Eigen::Vector3d::Zero();
-    for (int c = 0; c < 8; ++c) grad_xi += candidate.phi[c] * shape_gradients[c];
     const Eigen::Vector3d grad_x = best.jacobian.transpose().inverse() * grad_xi;
     for (int c = 0; c < 8; ++c) {
       grad_domain_.segment<3>(3 * candidate.nodes[c]) -= (drho * weights[c]) * grad_x;

@@ -11,6 +11,7 @@
 
 #include "core/capture/capture.h"
 #include "core/common/json_fields.h"
+#include "core/inverse/objective_settings.h"
 #include "core/inverse/parameter_space.h"
 #include "core/inverse/trajectory_objective.h"
 
@@ -322,15 +323,8 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   int threads =
       config.threads > 0 ? config.threads : static_cast<int>(std::thread::hardware_concurrency());
   threads = std::clamp(threads, 1, static_cast<int>(starts.size()));
-  fem::SimulationOptions simulation;
-  simulation.cells_along_longest_side = config.cells;
-  simulation.cell_size = config.cell_size;
-  simulation.padding_cells = std::max(
-      simulation.padding_cells, static_cast<int>(std::ceil(config.cost.truncation_cells)) + 1);
-  cost::SurfaceCostOptions cost_options;
-  cost_options.band_cells = config.cost.band_cells;
-  cost_options.truncation_cells = config.cost.truncation_cells;
-  simulation.padding_cells = std::max(simulation.padding_cells, cost_options.band_cells);
+  const fem::SimulationOptions simulation = SimulationOptionsFor(config);
+  const cost::SurfaceCostOptions cost_options = CostOptionsFor(config);
 
   ProgressBoard board(options, config, static_cast<int>(starts.size()), threads);
   std::atomic<int> next_start{0};

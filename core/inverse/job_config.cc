@@ -281,21 +281,38 @@ Result<FrameRange> ParseFrames(const Json& value) {
 
 Result<CostSettings> ParseCost(const Json& value) {
   if (!value.is_object()) {
-    return json::Invalid("cost", value,
-                         "must be an object {\"band_cells\": n, \"truncation_cells\": x}");
+    return json::Invalid(
+        "cost", value,
+        "must be an object {\"band_cells\": n, \"truncation_cells\": x, \"rest_sdf\": s}");
   }
-  SOFTID_RETURN_IF_ERROR(
-      CheckKeys(value, "cost", std::array<std::string_view, 2>{"band_cells", "truncation_cells"}));
-  CostSettings cost;
+  SOFTID_RETURN_IF_ERROR(CheckKeys(
+      value, "cost",
+      std::array<std::string_view, 3>{"band_cells", "truncation_cells", "rest_sdf"}));
+  CostSettings settings;
   if (value.contains("band_cells")) {
-    SOFTID_ASSIGN_OR_RETURN(cost.band_cells,
+    SOFTID_ASSIGN_OR_RETURN(settings.band_cells,
                             ReadIntAtLeast(value["band_cells"], "cost.band_cells", 1));
   }
   if (value.contains("truncation_cells")) {
-    SOFTID_ASSIGN_OR_RETURN(cost.truncation_cells,
+    SOFTID_ASSIGN_OR_RETURN(settings.truncation_cells,
                             ReadPositive(value["truncation_cells"], "cost.truncation_cells"));
   }
-  return cost;
+  if (value.contains("rest_sdf")) {
+    const Json& rest_sdf = value["rest_sdf"];
+    bool known = false;
+    for (cost::RestSdf mode :
+         {cost::RestSdf::kSurfaceFitted, cost::RestSdf::kExact, cost::RestSdf::kSampled}) {
+      if (rest_sdf.is_string() && rest_sdf.get<std::string>() == cost::ToString(mode)) {
+        settings.rest_sdf = mode;
+        known = true;
+      }
+    }
+    if (!known) {
+      return json::Invalid("cost.rest_sdf", rest_sdf,
+                           "must be \"surface_fitted\", \"exact\" or \"sampled\"");
+    }
+  }
+  return settings;
 }
 
 Result<GradientMethod> ParseGradient(const Json& value) {
@@ -527,7 +544,8 @@ Json ToJson(const JobConfig& config) {
       {"finite_difference_step", config.finite_difference_step},
       {"cost",
        {{"band_cells", config.cost.band_cells},
-        {"truncation_cells", config.cost.truncation_cells}}},
+        {"truncation_cells", config.cost.truncation_cells},
+        {"rest_sdf", cost::ToString(config.cost.rest_sdf)}}},
       {"diagnose", config.diagnose},
   };
   // 0 means "absent" (use cells); written only when set so the round trip keeps it absent.

@@ -23,7 +23,8 @@
 //     "parameter_tolerance": 1e-8,
 //     "gradient": "adjoint",     // or "finite_difference"
 //     "finite_difference_step": 1e-4,
-//     "cost": {"band_cells": 3, "truncation_cells": 2.0},
+//     "cost": {"band_cells": 3, "truncation_cells": 2.0,
+//              "rest_sdf": "surface_fitted"},  // or "exact", "sampled"
 //     "diagnose": false
 //   }
 // Malformed input is rejected with InvalidArgument "<field path> = <value>: <reason>", e.g.
@@ -45,6 +46,7 @@
 #include <vector>
 
 #include "core/common/status.h"
+#include "core/cost/sparse_surface_cost.h"
 #include "core/fem/physical_parameters.h"
 
 namespace softid::inverse {
@@ -118,6 +120,12 @@ struct CostSettings {
   // outliers (background, sensor noise, missing geometry) cost a bounded amount instead of
   // dragging the fit [cells].
   double truncation_cells = 2.0;  // > 0
+  // How the cost evaluates the rest signed distance (sparse_surface_cost.h): "surface_fitted"
+  // (default) interpolates nodal values refitted so that observations of the true motion cost
+  // ~0 (the sampled distances leave a floor that biases fits: surface_fitted_sdf.h); "exact"
+  // queries the distance to the rest surface itself (no floor, one closest-point query per
+  // point); "sampled" interpolates the nodal distances (the paper's).
+  cost::RestSdf rest_sdf = cost::RestSdf::kSurfaceFitted;
   friend bool operator==(const CostSettings&, const CostSettings&) = default;
 };
 
@@ -165,7 +173,8 @@ struct JobConfig {
 
   CostSettings cost;
   // Run the diagnosis of left-out physics after the fit and return its report with the result
-  // (issue 5). Not available yet: Fit rejects true rather than ignoring it.
+  // (issue 5). Honoured by the callers (softid-lab fit/diagnose, the service), which call
+  // diagnosis::Diagnose; inverse::Fit itself ignores it.
   bool diagnose = false;
 
   // Whether `fittable_name` (canonical) is in `fit`.

@@ -27,8 +27,11 @@ TrajectoryObjective::TrajectoryObjective(const geometry::TriangleMesh& rest_mesh
   options.time_step = 1.0 / (fps * substeps);
   simulator_ =
       std::make_unique<fem::Simulator>(rest_mesh, initial_parameters, options, fixed_region);
-  cost_ = std::make_unique<cost::SparseSurfaceCost>(simulator_->hex_mesh(),
-                                                    simulator_->signed_distance(), cost_options);
+  // The rest surface the simulator renders (and cameras see) is what the cost's rest SDF values
+  // are fitted to.
+  cost_ = std::make_unique<cost::SparseSurfaceCost>(
+      simulator_->hex_mesh(), simulator_->signed_distance(), simulator_->rest_surface(),
+      cost_options);
 }
 
 Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalParameters& parameters,

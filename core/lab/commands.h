@@ -18,5 +18,6 @@ Command RegisterSynth(CLI::App* app);
 Command RegisterSimulate(CLI::App* app);
 Command RegisterBench(CLI::App* app);
 Command RegisterFit(CLI::App* app);
+Command RegisterReproduce(CLI::App* app);
 
 }  // namespace softid::lab

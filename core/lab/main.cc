@@ -28,6 +28,8 @@ int main(int argc, char** argv) {
   add("bench", "time simulation steps at several grid sizes", softid::lab::RegisterBench);
   add("fit", "recover physical parameters from a capture (writes result.json)",
       softid::lab::RegisterFit);
+  add("reproduce", "benchmarks of issue 3: table1 | ball-bounce | pillow-ramp | bar-hanging",
+      softid::lab::RegisterReproduce);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

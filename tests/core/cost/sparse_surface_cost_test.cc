@@ -342,14 +342,9 @@ TEST(SparseSurfaceCost, DropoutKeepsCost) {
 
 // The gradient equals central finite differences of Evaluate with respect to every entry of u, for
 // a non-rigid displacement and noisy points with outliers and truncated points.
-class GradientTest : public ::testing::TestWithParam<ExtensionMode> {};
-
-TEST_P(GradientTest, MatchesFiniteDifferences) {
-  // A coarse grid keeps the 2 x (number of dofs) evaluations quick.
-  const Scene scene = MakeSphereScene(/*cells=*/6, /*padding=*/4, /*subdivisions=*/3);
-  SurfaceCostOptions options;
-  options.extension_mode = GetParam();
-  SparseSurfaceCost cost(scene.mesh, scene.sdf, options);
+// (A coarse grid keeps the 2 x (number of dofs) evaluations quick.)
+void ExpectGradientMatchesFiniteDifferences(const Scene& scene, SparseSurfaceCost& cost,
+                                            const char* label) {
   const double h = scene.h();
   const Eigen::VectorXd u = SampleOnNodes(scene.mesh, 0.3 * h);
   std::vector<Eigen::Vector3d> points = DeformedSurface(scene, u);
@@ -397,10 +392,122 @@ TEST_P(GradientTest, MatchesFiniteDifferences) {
     fd[k] = (plus - minus) / (2.0 * step);
   }
   const double error = (gradient - fd).norm() / gradient.norm();
-  std::printf("gradient vs FD (%s): %d dofs, %zu points, relative error %.2e\n",
-              ToString(GetParam()), static_cast<int>(u.size()), kept.size(), error);
+  std::printf("gradient vs FD (%s): %d dofs, %zu points, relative error %.2e\n", label,
+              static_cast<int>(u.size()), kept.size(), error);
   EXPECT_LT(error, 1e-5);
   EXPECT_GT(gradient.norm(), 0.0);
+}
+
+class GradientTest : public ::testing::TestWithParam<ExtensionMode> {};
+
+TEST_P(GradientTest, MatchesFiniteDifferences) {
+  const Scene scene = MakeSphereScene(/*cells=*/6, /*padding=*/4, /*subdivisions=*/3);
+  SurfaceCostOptions options;
+  options.extension_mode = GetParam();
+  SparseSurfaceCost cost(scene.mesh, scene.sdf, options);
+  ExpectGradientMatchesFiniteDifferences(scene, cost, ToString(GetParam()));
+}
+
+// The same with surface-fitted rest SDF values: the gradient interpolates the values the cost
+// interpolates.
+TEST(SparseSurfaceCost, SurfaceFittedGradientMatchesFiniteDifferences) {
+  const Scene scene = MakeSphereScene(/*cells=*/6, /*padding=*/4, /*subdivisions=*/3);
+  SparseSurfaceCost cost(scene.mesh, scene.sdf, scene.surface);
+  ASSERT_GT(cost.surface_fit_summary().num_fitted_nodes, 0);
+  ExpectGradientMatchesFiniteDifferences(scene, cost, "surface-fitted values");
+}
+
+// With the exact rest distance too; its gradient d phi / d X is the unit vector from the closest
+// surface point.
+TEST(SparseSurfaceCost, ExactGradientMatchesFiniteDifferences) {
+  const Scene scene = MakeSphereScene(/*cells=*/6, /*padding=*/4, /*subdivisions=*/3);
+  SurfaceCostOptions options;
+  options.rest_sdf = RestSdf::kExact;
+  SparseSurfaceCost cost(scene.mesh, scene.sdf, scene.surface, options);
+  ExpectGradientMatchesFiniteDifferences(scene, cost, "exact rest distance");
+}
+
+// The exact mode measures signed distances: points 0.5 h outside and inside the torus read
+// +-0.5 h (to the facets' deviation from the smooth torus), with the right sign everywhere.
+TEST(SparseSurfaceCost, ExactModeMeasuresSignedDistance) {
+  const Scene scene = MakeTorusScene(/*cells=*/16, /*padding=*/4);
+  const double h = scene.h();
+  SurfaceCostOptions options;
+  options.rest_sdf = RestSdf::kExact;
+  SparseSurfaceCost cost(scene.mesh, scene.sdf, scene.surface, options);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(3 * scene.mesh.NumNodes());
+  for (double offset : {0.1 * h, 0.5 * h, -0.1 * h, -0.5 * h, 1.5 * h}) {
+    std::vector<Eigen::Vector3d> points;
+    for (const auto& v : scene.surface.vertices) points.push_back(v + offset * TorusNormal(v));
+    std::vector<PointMatch> matches;
+    cost.Evaluate(zero, points, nullptr, &matches);
+    double worst = 0.0;
+    for (const PointMatch& m : matches) {
+      ASSERT_TRUE(m.matched);
+      worst = std::max(worst, std::abs(m.phi - offset));
+    }
+    EXPECT_LT(worst, 0.01 * h) << offset / h;
+  }
+}
+
+// The cost floor at the true state: points on the rest surface carried by a smooth deformation
+// (where observations of a correct simulation lie) cost far less with surface-fitted values than
+// with the sampled distances, at rest and deformed, and points 0.5 h off the surface still cost
+// about rho(0.5 h).
+TEST(SparseSurfaceCost, SurfaceFittedValuesLowerTheFloor) {
+  const Scene scene = MakeTorusScene(/*cells=*/16, /*padding=*/4);
+  const double h = scene.h();
+  SparseSurfaceCost sampled(scene.mesh, scene.sdf);
+  SparseSurfaceCost fitted(scene.mesh, scene.sdf, scene.surface);
+  SurfaceCostOptions exact_options;
+  exact_options.rest_sdf = RestSdf::kExact;
+  SparseSurfaceCost exact(scene.mesh, scene.sdf, scene.surface, exact_options);
+  SurfaceCostOptions sampled_options;
+  sampled_options.rest_sdf = RestSdf::kSampled;
+  SparseSurfaceCost sampled_with_surface(scene.mesh, scene.sdf, scene.surface, sampled_options);
+  EXPECT_EQ(sampled_with_surface.rest_sdf().phi, scene.sdf.phi);
+  EXPECT_EQ(sampled_with_surface.surface_fit_summary().num_fitted_nodes, 0);
+  EXPECT_NE(fitted.rest_sdf().phi, scene.sdf.phi);
+
+  // Points the fit did not sample: the vertices of a finer tessellation of the same torus lie on
+  // the curved torus, off the fitted polygonal surface by up to 0.3 mm (~0.02 h), so use the mesh's
+  // own edge midpoints instead (on the polygonal surface, between the fit's samples).
+  std::vector<Eigen::Vector3d> rest_points;
+  for (const Eigen::Vector3i& t : scene.surface.triangles) {
+    rest_points.push_back(0.5 * (scene.surface.vertices[t[0]] + scene.surface.vertices[t[1]]));
+  }
+  const double phi_max = fitted.truncation_distance();
+  for (double amplitude : {0.0, 0.3 * h}) {
+    const Eigen::VectorXd u = SampleOnNodes(scene.mesh, amplitude);
+    Scene moved = scene;
+    moved.surface.vertices = rest_points;
+    const std::vector<Eigen::Vector3d> points = DeformedSurface(moved, u);
+    std::vector<PointMatch> matches;
+    const double before = sampled.Evaluate(u, points, nullptr);
+    const double after = fitted.Evaluate(u, points, nullptr, &matches);
+    double worst = 0.0;
+    for (const PointMatch& m : matches) {
+      ASSERT_TRUE(m.matched);
+      worst = std::max(worst, std::abs(m.phi));
+    }
+    std::printf(
+        "torus 16 cells, deformation %.1f h: floor C = %.3g phi_max^2 sampled, %.3g "
+        "surface-fitted (max |phi| %.4f h)\n",
+        amplitude / h, before / (phi_max * phi_max), after / (phi_max * phi_max), worst / h);
+    EXPECT_LT(after, 0.25 * before);
+    EXPECT_LT(worst, 0.06 * h);
+    // The exact distance leaves only Newton's tolerance: the points are exact images of X.
+    const double exact_floor = exact.Evaluate(u, points, nullptr);
+    std::printf("  exact rest distance: floor C = %.3g phi_max^2\n", exact_floor / (phi_max * phi_max));
+    EXPECT_LT(exact_floor, 1e-6 * before);
+  }
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(3 * scene.mesh.NumNodes());
+  for (double offset : {0.5 * h, -0.5 * h}) {
+    std::vector<Eigen::Vector3d> points;
+    for (const auto& v : scene.surface.vertices) points.push_back(v + offset * TorusNormal(v));
+    const double expected = TukeyLoss(offset, phi_max);
+    EXPECT_NEAR(fitted.Evaluate(zero, points, nullptr), expected, 0.2 * expected) << offset;
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(SparseSurfaceCost, GradientTest,

@@ -80,7 +80,7 @@ json FullConfig() {
     "parameter_tolerance": 1e-6,
     "gradient": "finite_difference",
     "finite_difference_step": 1e-3,
-    "cost": {"band_cells": 4, "truncation_cells": 1.5},
+    "cost": {"band_cells": 4, "truncation_cells": 1.5, "rest_sdf": "sampled"},
     "diagnose": true
   })");
 }
@@ -134,6 +134,7 @@ TEST(JobConfig, DefaultsFromEmptyObject) {
   EXPECT_EQ(config->finite_difference_step, 1e-4);
   EXPECT_EQ(config->cost.band_cells, 3);
   EXPECT_EQ(config->cost.truncation_cells, 2.0);
+  EXPECT_EQ(config->cost.rest_sdf, cost::RestSdf::kSurfaceFitted);
   EXPECT_FALSE(config->diagnose);
   EXPECT_TRUE(config->Validate().ok());
 
@@ -174,7 +175,7 @@ TEST(JobConfig, FullConfigRoundTrips) {
   EXPECT_EQ(config->parameter_tolerance, 1e-6);
   EXPECT_EQ(config->gradient, GradientMethod::kFiniteDifference);
   EXPECT_EQ(config->finite_difference_step, 1e-3);
-  EXPECT_EQ(config->cost, (CostSettings{4, 1.5}));
+  EXPECT_EQ(config->cost, (CostSettings{4, 1.5, cost::RestSdf::kSampled}));
   EXPECT_TRUE(config->diagnose);
   EXPECT_TRUE(config->Validate().ok()) << config->Validate().ToString();
 
@@ -363,6 +364,8 @@ TEST(JobConfigRejects, NumericalSettings) {
   ExpectInvalid(json::parse(R"({"cost": {"truncation_cells": -2}})"),
                 "cost.truncation_cells = -2: ", "must be a finite number > 0");
   ExpectInvalid(json::parse(R"({"cost": 3})"), "cost = 3: ", "must be an object");
+  ExpectInvalid(json::parse(R"({"cost": {"rest_sdf": "nodal"}})"), "cost.rest_sdf = \"nodal\": ",
+                "must be \"surface_fitted\", \"exact\" or \"sampled\"");
   ExpectInvalid(json::parse(R"({"diagnose": "yes"})"),
                 "diagnose = \"yes\": ", "must be true or false");
 }

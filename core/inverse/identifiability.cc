@@ -1,0 +1,461 @@
+#include "core/inverse/identifiability.h"
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <mutex>
+#include <thread>
+
+#include "core/capture/capture.h"
+#include "core/common/json_fields.h"
+#include "core/inverse/objective_settings.h"
+#include "core/inverse/observed_frames.h"
+
+namespace softid::inverse {
+namespace {
+
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
+// Scaled eigenvalues below this fraction of the largest count as exactly singular (no finite
+// uncertainty along them); round-off of a finite-difference Hessian is far above 1e-12.
+constexpr double kSingularEigenvalue = 1e-10;
+
+double SecondsSince(std::chrono::steady_clock::time_point start) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+// The fitted parameter a variable belongs to: "gravity[2]" -> "gravity".
+std::string ParameterOf(const std::string& variable) {
+  const size_t end = variable.find_first_of("[.");
+  return end == std::string::npos ? variable : variable.substr(0, end);
+}
+
+// Physical value of variable i at x, with its unit and the scale its relative uncertainty refers
+// to (<= 0: none).
+struct PhysicalValue {
+  double value = 0.0;
+  double scale = 0.0;
+  std::string unit;
+};
+
+PhysicalValue ValueOf(const ParameterSpace& space, const fem::PhysicalParameters& base,
+                      const std::vector<double>& x, int i) {
+  const std::string& name = space.variable_names()[i];
+  const std::string parameter = ParameterOf(name);
+  fem::PhysicalParameters p = space.ToParameters(x.data(), base);
+  PhysicalValue out;
+  out.unit = fem::ParameterUnit(parameter);
+  if (double* scalar = ScalarParameter(p, parameter)) {
+    out.value = *scalar;
+    out.scale = std::abs(*scalar);
+    return out;
+  }
+  const int component = name.find('[') != std::string::npos ? name[name.find('[') + 1] - '0' : 0;
+  const Eigen::Vector3d* vector = parameter == "gravity"            ? &p.gravity
+                                  : parameter == "initial_velocity" ? &p.initial_velocity
+                                  : parameter == "initial_angular_velocity"
+                                      ? &p.initial_angular_velocity
+                                      : nullptr;
+  if (vector != nullptr) {
+    out.value = (*vector)[component];
+    out.scale = vector->norm();
+    return out;
+  }
+  if (name == "ground_plane.offset") {
+    out.value = p.ground ? p.ground->offset : 0.0;
+    out.unit = "m";
+    return out;
+  }
+  if (parameter == "ground_plane") {  // tilt: radians for small tilts around the start normal
+    out.value = x[i];
+    out.unit = "rad";
+    return out;
+  }
+  if (parameter == "stiffness_field") {
+    // Index after "stiffness_field[" may have several digits.
+    const int k = std::stoi(name.substr(name.find('[') + 1));
+    if (p.stiffness_field.kind == fem::StiffnessField::Kind::kRegions) {
+      out.value = p.stiffness_field.regions[k].scale;
+      out.scale = std::abs(out.value);
+      out.unit = "1";
+    } else {
+      out.value = p.stiffness_field.log_gradient[k];
+      out.unit = "1/m";
+    }
+  }
+  return out;
+}
+
+struct Evaluation {
+  double cost = 0.0;
+  Eigen::VectorXd gradient;  // in the variables
+};
+
+}  // namespace
+
+Status IdentifiabilityOptions::Validate() const {
+  const auto positive = [](double v) { return v > 0.0 && std::isfinite(v); };
+  if (!positive(step)) return json::Invalid("IdentifiabilityOptions.step", step,
+                                            "must be positive and finite");
+  if (threads < 0) return json::Invalid("IdentifiabilityOptions.threads", threads, "must be >= 0");
+  if (!(num_effective_samples >= 0.0) || !std::isfinite(num_effective_samples)) {
+    return json::Invalid("IdentifiabilityOptions.num_effective_samples", num_effective_samples,
+                         "must be finite and >= 0 (0 = the number of observed points)");
+  }
+  if (!(min_residual_sigma >= 0.0) || !std::isfinite(min_residual_sigma)) {
+    return json::Invalid("IdentifiabilityOptions.min_residual_sigma", min_residual_sigma,
+                         "must be finite and >= 0");
+  }
+  if (!positive(max_relative_uncertainty)) {
+    return json::Invalid("IdentifiabilityOptions.max_relative_uncertainty",
+                         max_relative_uncertainty, "must be positive and finite");
+  }
+  const auto in_unit = [](double v) { return v > 0.0 && v < 1.0; };
+  if (!in_unit(max_correlation))
+    return json::Invalid("IdentifiabilityOptions.max_correlation", max_correlation,
+                         "must lie in (0, 1)");
+  if (!in_unit(min_scaled_eigenvalue))
+    return json::Invalid("IdentifiabilityOptions.min_scaled_eigenvalue", min_scaled_eigenvalue,
+                         "must lie in (0, 1)");
+  if (!in_unit(min_loading))
+    return json::Invalid("IdentifiabilityOptions.min_loading", min_loading, "must lie in (0, 1)");
+  return Status::Ok();
+}
+
+const char* ToString(IdentifiabilityFlag flag) {
+  switch (flag) {
+    case IdentifiabilityFlag::kNoSensitivity: return "no_sensitivity";
+    case IdentifiabilityFlag::kLargeUncertainty: return "large_uncertainty";
+    case IdentifiabilityFlag::kCorrelatedPair: return "correlated_pair";
+    case IdentifiabilityFlag::kDegenerateCombination: return "degenerate_combination";
+  }
+  return "?";
+}
+
+const VariableIdentifiability* IdentifiabilityReport::Find(const std::string& name) const {
+  for (const VariableIdentifiability& v : variables) {
+    if (v.name == name) return &v;
+  }
+  return nullptr;
+}
+
+Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& make_objective,
+                                                     const ParameterSpace& space,
+                                                     const fem::PhysicalParameters& parameters,
+                                                     const IdentifiabilityOptions& options) {
+  const auto begin = std::chrono::steady_clock::now();
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  const int p = space.NumVariables();
+  const std::vector<double> x0 = space.ToVariables(parameters);
+  const double s = options.step;
+
+  // Task 0: the centre; task 1 + 2 j (+ 1): x0 -+ s e_j.
+  const int num_tasks = 1 + 2 * p;
+  std::vector<Evaluation> results(num_tasks);
+  int num_points = 0;
+  std::atomic<int> next{0};
+  std::mutex error_mutex;
+  Status error;
+  const auto fail = [&](Status status) {
+    std::lock_guard lock(error_mutex);
+    if (error.ok()) error = std::move(status);
+  };
+  auto worker = [&]() {
+    std::unique_ptr<TrajectoryObjective> objective;
+    try {
+      objective = make_objective();
+    } catch (const std::invalid_argument& e) {
+      fail(Status::InvalidArgument(e.what()));
+      return;
+    }
+    if (objective == nullptr) {
+      fail(Status::Internal("identifiability: the objective factory returned null"));
+      return;
+    }
+    for (int task = next++; task < num_tasks; task = next++) {
+      {
+        std::lock_guard lock(error_mutex);
+        if (!error.ok()) return;
+      }
+      std::vector<double> x = x0;
+      if (task > 0) x[(task - 1) / 2] += (task % 2 == 1 ? -s : s);
+      const fem::PhysicalParameters at = space.ToParameters(x.data(), parameters);
+      if (Status valid = at.Validate(); !valid.ok()) {
+        fail(Status::FailedPrecondition("identifiability: invalid parameters at a difference "
+                                        "step (lower IdentifiabilityOptions.step): " +
+                                        valid.message()));
+        return;
+      }
+      Result<ObjectiveEvaluation> evaluation = objective->Evaluate(at, /*with_gradient=*/true);
+      if (!evaluation.ok()) {
+        fail(evaluation.status());
+        return;
+      }
+      if (evaluation->diverged) {
+        fail(Status::FailedPrecondition(
+            task == 0 ? std::string("identifiability: the simulation diverges at the optimum")
+                      : "identifiability: the simulation diverges at " +
+                            space.variable_names()[(task - 1) / 2] +
+                            (task % 2 == 1 ? " - " : " + ") + std::to_string(s) +
+                            " (lower IdentifiabilityOptions.step)"));
+        return;
+      }
+      Evaluation& out = results[task];
+      out.cost = evaluation->cost;
+      out.gradient.resize(p);
+      space.ChainGradient(evaluation->gradient, x.data(), out.gradient.data());
+      if (task == 0) {
+        for (const ObservedFrame& frame : objective->frames()) {
+          if (!frame.heldout) num_points += static_cast<int>(frame.points.size());
+        }
+      }
+    }
+  };
+  int threads = options.threads > 0 ? options.threads
+                                    : static_cast<int>(std::thread::hardware_concurrency());
+  threads = std::clamp(threads, 1, num_tasks);
+  {
+    std::vector<std::jthread> pool;
+    for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
+    worker();
+  }
+  SOFTID_RETURN_IF_ERROR(error);
+
+  IdentifiabilityReport report;
+  report.evaluations = num_tasks;
+  report.cost = results[0].cost;
+  report.gradient = results[0].gradient;
+  Eigen::MatrixXd h(p, p);
+  for (int j = 0; j < p; ++j)
+    h.col(j) = (results[2 + 2 * j].gradient - results[1 + 2 * j].gradient) / (2.0 * s);
+  const double norm = h.norm();
+  report.hessian_asymmetry = norm > 0.0 ? (h - h.transpose()).norm() / norm : 0.0;
+  h = 0.5 * (h + h.transpose()).eval();
+  report.hessian = h;
+  report.hessian_positive_definite = p > 0 && h.llt().info() == Eigen::Success &&
+                                     (h.diagonal().array() > 0.0).all();
+
+  // Noise scale: sigma^2 = 2 C_min N / (N - p), floored (see the header).
+  const double n_eff =
+      options.num_effective_samples > 0.0 ? options.num_effective_samples : double(num_points);
+  report.num_effective_samples = n_eff;
+  const double dof = n_eff > p ? n_eff - p : std::max(n_eff, 1.0);
+  const double sigma2 = std::max(2.0 * std::max(report.cost, 0.0) * std::max(n_eff, 1.0) / dof,
+                                 options.min_residual_sigma * options.min_residual_sigma);
+  report.residual_sigma = std::sqrt(sigma2);
+  const double variance_scale = sigma2 / std::max(n_eff, 1.0);  // Cov = variance_scale * H^-1
+
+  // Variables without upward curvature are left out of the scaled analysis.
+  std::vector<int> kept;
+  report.variables.resize(p);
+  for (int i = 0; i < p; ++i) {
+    VariableIdentifiability& v = report.variables[i];
+    v.name = space.variable_names()[i];
+    v.parameter = ParameterOf(v.name);
+    v.variable = x0[i];
+    if (h(i, i) > 0.0 && std::isfinite(h(i, i)))
+      kept.push_back(i);
+    else
+      v.flags.push_back(IdentifiabilityFlag::kNoSensitivity);
+  }
+  const int k = static_cast<int>(kept.size());
+  Eigen::VectorXd d_inv_sqrt(k);
+  Eigen::MatrixXd scaled(k, k);
+  for (int a = 0; a < k; ++a) d_inv_sqrt[a] = 1.0 / std::sqrt(h(kept[a], kept[a]));
+  for (int a = 0; a < k; ++a)
+    for (int b = 0; b < k; ++b) scaled(a, b) = h(kept[a], kept[b]) * d_inv_sqrt[a] * d_inv_sqrt[b];
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(scaled);
+  const Eigen::VectorXd lambda = k > 0 ? eigen.eigenvalues() : Eigen::VectorXd();
+  const Eigen::MatrixXd vectors = k > 0 ? eigen.eigenvectors() : Eigen::MatrixXd();
+  report.scaled_eigenvalues = lambda;
+  report.scaled_eigenvectors = vectors;
+
+  // Cov over the kept variables = variance_scale D^-1/2 V Lambda^-1 V^T D^-1/2, with singular
+  // eigenvalues clamped for the correlations and marking infinite variances.
+  const double lambda_max = k > 0 ? std::max(lambda.maxCoeff(), 0.0) : 0.0;
+  const double lambda_floor = kSingularEigenvalue * std::max(lambda_max, 1.0);
+  std::vector<bool> singular(k, false);
+  Eigen::VectorXd inverse_lambda(k);
+  for (int e = 0; e < k; ++e) {
+    inverse_lambda[e] = 1.0 / std::max(lambda[e], lambda_floor);
+    if (lambda[e] <= lambda_floor) {
+      for (int a = 0; a < k; ++a) singular[a] = singular[a] || std::abs(vectors(a, e)) > 1e-6;
+    }
+  }
+  const Eigen::MatrixXd scaled_covariance =
+      vectors * inverse_lambda.asDiagonal() * vectors.transpose();
+  report.covariance = Eigen::MatrixXd::Constant(p, p, kInfinity);
+  report.correlation = Eigen::MatrixXd::Constant(p, p, std::nan(""));
+  for (int i = 0; i < p; ++i) report.correlation(i, i) = 1.0;
+  for (int a = 0; a < k; ++a) {
+    for (int b = 0; b < k; ++b) {
+      const int i = kept[a], j = kept[b];
+      report.correlation(i, j) =
+          scaled_covariance(a, b) / std::sqrt(scaled_covariance(a, a) * scaled_covariance(b, b));
+      if (!singular[a] && !singular[b]) {
+        report.covariance(i, j) =
+            variance_scale * scaled_covariance(a, b) * d_inv_sqrt[a] * d_inv_sqrt[b];
+      }
+    }
+  }
+
+  // Per-variable uncertainties in physical units (d value / d x by central differences of the
+  // transform: exact enough, and the same code for every parameterisation).
+  for (int i = 0; i < p; ++i) {
+    VariableIdentifiability& v = report.variables[i];
+    const PhysicalValue value = ValueOf(space, parameters, x0, i);
+    v.value = value.value;
+    v.unit = value.unit;
+    std::vector<double> x = x0;
+    const double dx = 1e-6;
+    x[i] = x0[i] + dx;
+    const double plus = ValueOf(space, parameters, x, i).value;
+    x[i] = x0[i] - dx;
+    const double minus = ValueOf(space, parameters, x, i).value;
+    const double slope = std::abs(plus - minus) / (2.0 * dx);
+    v.variable_uncertainty = std::sqrt(report.covariance(i, i));
+    v.standard_uncertainty = std::isfinite(v.variable_uncertainty)
+                                 ? slope * v.variable_uncertainty
+                                 : kInfinity;
+    v.relative_uncertainty = value.scale > 0.0 ? v.standard_uncertainty / value.scale : -1.0;
+    if (v.relative_uncertainty > options.max_relative_uncertainty &&
+        v.flags.empty()) {  // (no sensitivity already says more)
+      v.flags.push_back(IdentifiabilityFlag::kLargeUncertainty);
+    }
+  }
+  for (int a = 0; a < k; ++a) {
+    for (int b = a + 1; b < k; ++b) {
+      const int i = kept[a], j = kept[b];
+      if (std::abs(report.correlation(i, j)) <= options.max_correlation) continue;
+      report.correlated_pairs.emplace_back(report.variables[i].name, report.variables[j].name);
+      for (int m : {i, j}) {
+        auto& flags = report.variables[m].flags;
+        if (std::find(flags.begin(), flags.end(), IdentifiabilityFlag::kCorrelatedPair) ==
+            flags.end())
+          flags.push_back(IdentifiabilityFlag::kCorrelatedPair);
+      }
+    }
+  }
+  for (int e = 0; e < k && k > 1; ++e) {
+    if (!(lambda[e] < options.min_scaled_eigenvalue)) continue;
+    DegenerateCombination combination;
+    combination.scaled_eigenvalue = lambda[e];
+    combination.direction = Eigen::VectorXd::Zero(p);
+    for (int a = 0; a < k; ++a) combination.direction[kept[a]] = vectors(a, e) * d_inv_sqrt[a];
+    combination.direction.normalize();
+    // Flags and loadings from the scaled eigenvector (scale-free); the direction is for people.
+    for (int a = 0; a < k; ++a) {
+      if (std::abs(vectors(a, e)) < options.min_loading) continue;
+      VariableIdentifiability& v = report.variables[kept[a]];
+      combination.loadings.emplace_back(v.name, vectors(a, e));
+      if (std::find(v.flags.begin(), v.flags.end(),
+                    IdentifiabilityFlag::kDegenerateCombination) == v.flags.end())
+        v.flags.push_back(IdentifiabilityFlag::kDegenerateCombination);
+    }
+    report.degenerate_combinations.push_back(std::move(combination));
+  }
+  report.seconds = SecondsSince(begin);
+  return report;
+}
+
+Result<IdentifiabilityReport> AnalyzeIdentifiability(const capture::Capture& capture,
+                                                     const JobConfig& config,
+                                                     const FitResult& fit,
+                                                     const IdentifiabilityOptions& options) {
+  SOFTID_RETURN_IF_ERROR(config.Validate());
+  if (fit.best < 0 || fit.best >= static_cast<int>(fit.starts.size()))
+    return Status::FailedPrecondition("identifiability: the fit has no usable start");
+  SOFTID_ASSIGN_OR_RETURN(geometry::TriangleMesh mesh, capture::LoadCaptureMesh(capture));
+  SOFTID_ASSIGN_OR_RETURN(std::vector<ObservedFrame> loaded,
+                          LoadObservedFrames(capture, config.frames.first, config.frames.last));
+  for (ObservedFrame& frame : loaded) frame.heldout = config.IsHeldOut(frame.frame);
+  auto frames = std::make_shared<const std::vector<ObservedFrame>>(std::move(loaded));
+  const double length = mesh.Bounds().sizes().maxCoeff();
+  // The fit's own variables: the same reference (the base parameters) fixes the ground plane's
+  // tangent basis.
+  SOFTID_ASSIGN_OR_RETURN(ParameterSpace space, ParameterSpace::Create(fit.fitted, fit.base,
+                                                                       length));
+  const fem::PhysicalParameters& optimum = fit.Best().final;
+  const fem::SimulationOptions simulation = SimulationOptionsFor(config);
+  const cost::SurfaceCostOptions cost_options = CostOptionsFor(config);
+  IdentifiabilityOptions resolved = options;
+  if (resolved.threads == 0) resolved.threads = config.threads;
+  return AnalyzeIdentifiability(
+      [&]() {
+        return std::make_unique<TrajectoryObjective>(mesh, capture.fixed_region, optimum,
+                                                     simulation, cost_options, frames,
+                                                     capture.fps, config.substeps);
+      },
+      space, optimum, resolved);
+}
+
+nlohmann::json ToJson(const IdentifiabilityReport& report) {
+  const auto number = [](double v) {
+    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+  };
+  const auto matrix = [&](const Eigen::MatrixXd& m) {
+    nlohmann::json rows = nlohmann::json::array();
+    for (int i = 0; i < m.rows(); ++i) {
+      nlohmann::json row = nlohmann::json::array();
+      for (int j = 0; j < m.cols(); ++j) row.push_back(number(m(i, j)));
+      rows.push_back(row);
+    }
+    return rows;
+  };
+  const auto vector = [&](const Eigen::VectorXd& v) {
+    nlohmann::json out = nlohmann::json::array();
+    for (int i = 0; i < v.size(); ++i) out.push_back(number(v[i]));
+    return out;
+  };
+  nlohmann::json variables = nlohmann::json::array();
+  for (const VariableIdentifiability& v : report.variables) {
+    nlohmann::json flags = nlohmann::json::array();
+    for (IdentifiabilityFlag f : v.flags) flags.push_back(ToString(f));
+    variables.push_back({{"name", v.name},
+                         {"parameter", v.parameter},
+                         {"unit", v.unit},
+                         {"value", number(v.value)},
+                         {"variable", number(v.variable)},
+                         {"variable_uncertainty", number(v.variable_uncertainty)},
+                         {"standard_uncertainty", number(v.standard_uncertainty)},
+                         {"relative_uncertainty", v.relative_uncertainty >= 0.0
+                                                      ? number(v.relative_uncertainty)
+                                                      : nlohmann::json(nullptr)},
+                         {"identifiable", v.identifiable()},
+                         {"flags", flags}});
+  }
+  nlohmann::json pairs = nlohmann::json::array();
+  for (const auto& [a, b] : report.correlated_pairs) pairs.push_back({a, b});
+  nlohmann::json combinations = nlohmann::json::array();
+  for (const DegenerateCombination& c : report.degenerate_combinations) {
+    nlohmann::json loadings = nlohmann::json::object();
+    for (const auto& [name, w] : c.loadings) loadings[name] = w;
+    combinations.push_back({{"scaled_eigenvalue", number(c.scaled_eigenvalue)},
+                            {"loadings", loadings},
+                            {"direction", vector(c.direction)}});
+  }
+  return {
+      {"method",
+       "Laplace approximation: Cov(x) = 2 C_min / (N_eff - p) * H^-1, H by central differences "
+       "of adjoint gradients in the optimiser's variables (log for positive quantities)"},
+      {"cost", number(report.cost)},
+      {"residual_sigma", number(report.residual_sigma)},
+      {"num_effective_samples", number(report.num_effective_samples)},
+      {"hessian_positive_definite", report.hessian_positive_definite},
+      {"hessian_asymmetry", number(report.hessian_asymmetry)},
+      {"variables", variables},
+      {"gradient", vector(report.gradient)},
+      {"hessian", matrix(report.hessian)},
+      {"correlation", matrix(report.correlation)},
+      {"scaled_eigenvalues", vector(report.scaled_eigenvalues)},
+      {"correlated_pairs", pairs},
+      {"degenerate_combinations", combinations},
+      {"evaluations", report.evaluations},
+      {"seconds", report.seconds},
+  };
+}
+
+}  // namespace softid::inverse

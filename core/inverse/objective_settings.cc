@@ -1,0 +1,28 @@
+#include "core/inverse/objective_settings.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace softid::inverse {
+
+fem::SimulationOptions SimulationOptionsFor(const JobConfig& config) {
+  fem::SimulationOptions simulation;
+  simulation.cells_along_longest_side = config.cells;
+  simulation.cell_size = config.cell_size;
+  // The band must fit in the padding, and the cost must be truncated where the grid cuts it off.
+  simulation.padding_cells =
+      std::max({simulation.padding_cells,
+                static_cast<int>(std::ceil(config.cost.truncation_cells)) + 1,
+                config.cost.band_cells});
+  return simulation;
+}
+
+cost::SurfaceCostOptions CostOptionsFor(const JobConfig& config) {
+  cost::SurfaceCostOptions options;
+  options.band_cells = config.cost.band_cells;
+  options.truncation_cells = config.cost.truncation_cells;
+  options.rest_sdf = config.cost.rest_sdf;
+  return options;
+}
+
+}  // namespace softid::inverse

@@ -1,0 +1,20 @@
+// The simulation and cost settings a job config implies. Everything that builds a
+// TrajectoryObjective for a job (the fit, the identifiability analysis, the diagnosis) takes them
+// from here, so that all of them see the same cost function.
+#pragma once
+
+#include "core/cost/sparse_surface_cost.h"
+#include "core/fem/simulation_options.h"
+#include "core/inverse/job_config.h"
+
+namespace softid::inverse {
+
+// Grid resolution from config.cells / config.cell_size, with a grid padding wide enough for the
+// cost's band and truncation (SurfaceCostOptions::band_cells); everything else at its default.
+// time_step is set by TrajectoryObjective from the capture's fps and config.substeps.
+fem::SimulationOptions SimulationOptionsFor(const JobConfig& config);
+
+// config.cost as the cost's options.
+cost::SurfaceCostOptions CostOptionsFor(const JobConfig& config);
+
+}  // namespace softid::inverse

@@ -1,0 +1,530 @@
+// softid-lab reproduce: regenerate the paper's Table 1 and the multi-parameter benchmarks of issue
+// 3 with our simulator (benchmarks defined in reproduce_benchmarks.h): synthesise each row's
+// capture (reused when an identical one exists), fit it from the benchmark's random starts, score
+// every start against the truth, print per row the mean error of converged runs and the
+// convergence rate next to the paper's figures, and write one result JSON per row plus a summary.
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <memory>
+#include <mutex>
+#include <thread>
+
+#include "core/capture/capture.h"
+#include "core/inverse/fit.h"
+#include "core/inverse/identifiability.h"
+#include "core/lab/commands.h"
+#include "core/lab/reproduce_benchmarks.h"
+#include "core/lab/result_report.h"
+#include "core/scenes/scene.h"
+#include "core/scenes/synthesize.h"
+
+namespace softid::lab {
+namespace {
+
+using reproduce::Benchmark;
+using reproduce::Metric;
+using reproduce::Quantity;
+using reproduce::Row;
+using Clock = std::chrono::steady_clock;
+
+constexpr const char* kStampFile = "reproduce-capture.json";
+
+struct ReproduceFlags {
+  std::string benchmark;
+  int starts = 0;  // 0: the benchmark's
+  std::vector<std::string> rows;
+  int threads = 0;
+  std::string out = "reproduce-out";
+  std::string work;  // captures; default OUT/captures
+  bool quick = false;
+  int cells = 0;     // 0: the benchmark's
+  int substeps = 0;  // 0: the benchmark's
+  int max_iterations = 0;
+  std::uint64_t seed = 1;
+};
+
+double SecondsSince(Clock::time_point start) {
+  return std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+struct QuantitySummary {
+  const Quantity* quantity = nullptr;
+  double mean_error = std::numeric_limits<double>::quiet_NaN();  // converged runs, metric unit
+  double max_error = std::numeric_limits<double>::quiet_NaN();
+  bool met = false;
+};
+
+struct RowSummary {
+  const Row* row = nullptr;
+  int starts = 0, converged = 0, failed = 0;
+  std::vector<QuantitySummary> quantities;
+  bool pass = false;
+  double seconds = 0.0;
+  std::string result_file;
+  nlohmann::json identifiability_verdict;  // null without the analysis
+  std::vector<std::string> verdict_lines;
+};
+
+// The synthesis options of a row; the stamp records them so an identical capture is reused.
+scenes::SynthesisOptions SynthesisFor(const Benchmark& b, const Row& row, double duration) {
+  scenes::SynthesisOptions options;
+  options.run.simulation.cells_along_longest_side = b.cells;
+  options.run.substeps_per_frame = b.substeps;
+  options.run.fps = 60.0;
+  if (duration > 0.0) options.run.duration = duration;
+  options.cameras.count = row.cameras;
+  options.cameras.width = row.width;
+  options.cameras.height = row.height;
+  options.noise = b.noise;
+  options.depth_scale = b.depth_scale;
+  options.write_mass = !b.fit_mass;
+  return options;
+}
+
+nlohmann::json Stamp(const Benchmark& b, const scenes::SynthesisOptions& o) {
+  return {{"scene", b.scene},
+          {"cells", o.run.simulation.cells_along_longest_side},
+          {"substeps", o.run.substeps_per_frame},
+          {"fps", o.run.fps},
+          {"duration", o.run.duration ? *o.run.duration : 0.0},
+          {"cameras", o.cameras.count},
+          {"width", o.cameras.width},
+          {"height", o.cameras.height},
+          {"noise",
+           {o.noise.sigma_constant, o.noise.sigma_quadratic, o.noise.dropout_probability,
+            o.noise.seed}},
+          {"depth_scale", o.depth_scale},
+          {"write_mass", o.write_mass}};
+}
+
+// The row's capture folder, synthesised unless an identical one is there.
+Result<std::filesystem::path> EnsureCapture(const Benchmark& b, const Row& row, double duration,
+                                            const std::filesystem::path& work,
+                                            const scenes::Scene& scene) {
+  const scenes::SynthesisOptions options = SynthesisFor(b, row, duration);
+  const nlohmann::json stamp = Stamp(b, options);
+  const std::filesystem::path dir =
+      work / b.scene /
+      fmt::format("c{}-{}x{}-{}cells-{}sub-{:.2f}s{}", row.cameras, row.width, row.height, b.cells,
+                  b.substeps, duration > 0.0 ? duration : scene.duration,
+                  b.fit_mass ? "-nomass" : "");
+  if (std::filesystem::exists(dir / capture::kCaptureFileName)) {
+    std::ifstream in(dir / kStampFile);
+    const nlohmann::json existing = nlohmann::json::parse(in, nullptr, false);
+    if (!existing.is_discarded() && existing == stamp) {
+      spdlog::info("reproduce: reusing capture {}", dir.string());
+      return dir;
+    }
+    spdlog::info("reproduce: {} was made with other settings; synthesising again", dir.string());
+  }
+  std::error_code ignored;
+  std::filesystem::remove_all(dir, ignored);
+  const auto start = Clock::now();
+  SOFTID_ASSIGN_OR_RETURN(scenes::SynthesisSummary summary,
+                          scenes::Synthesize(scene, options, dir));
+  SOFTID_RETURN_IF_ERROR(WriteJsonFile(dir / kStampFile, stamp));
+  spdlog::info(
+      "reproduce: synthesised {} ({} frames, {} elements, {:.0f} object pixels per frame and "
+      "camera) in {:.1f} s",
+      dir.string(), summary.run.num_frames, summary.num_elements, summary.mean_valid_pixels,
+      SecondsSince(start));
+  return dir;
+}
+
+// The identifiability verdict for the benchmark's focus variables, in words and as JSON.
+void Verdict(const Benchmark& b, const inverse::IdentifiabilityReport& report, RowSummary* out) {
+  nlohmann::json verdict = nlohmann::json::object();
+  for (const std::string& name : b.identifiability_focus) {
+    const inverse::VariableIdentifiability* v = report.Find(name);
+    if (v == nullptr) continue;
+    std::string flags;
+    for (inverse::IdentifiabilityFlag f : v->flags)
+      flags += (flags.empty() ? "" : ", ") + std::string(inverse::ToString(f));
+    verdict[name] = {{"identifiable", v->identifiable()},
+                     {"relative_uncertainty", v->relative_uncertainty >= 0.0 &&
+                                                      std::isfinite(v->relative_uncertainty)
+                                                  ? nlohmann::json(v->relative_uncertainty)
+                                                  : nlohmann::json(nullptr)},
+                     {"flags", nlohmann::json::array()}};
+    for (inverse::IdentifiabilityFlag f : v->flags) verdict[name]["flags"].push_back(ToString(f));
+    out->verdict_lines.push_back(fmt::format(
+        "{}: {} (formal 1-sigma {:.3g} %{}{})", name,
+        v->identifiable() ? "identifiable" : "NOT separately identifiable",
+        100.0 * v->relative_uncertainty, flags.empty() ? "" : "; ", flags));
+  }
+  // Pairwise correlations and valleys among the focus variables.
+  for (size_t a = 0; a < b.identifiability_focus.size(); ++a) {
+    for (size_t c = a + 1; c < b.identifiability_focus.size(); ++c) {
+      int i = -1, j = -1;
+      for (size_t k = 0; k < report.variables.size(); ++k) {
+        if (report.variables[k].name == b.identifiability_focus[a]) i = static_cast<int>(k);
+        if (report.variables[k].name == b.identifiability_focus[c]) j = static_cast<int>(k);
+      }
+      if (i < 0 || j < 0) continue;
+      const double rho = report.correlation(i, j);
+      out->verdict_lines.push_back(fmt::format("correlation({}, {}) = {:+.3f}",
+                                               report.variables[i].name,
+                                               report.variables[j].name, rho));
+      verdict["correlations"][report.variables[i].name + "," + report.variables[j].name] =
+          std::isfinite(rho) ? nlohmann::json(rho) : nlohmann::json(nullptr);
+    }
+  }
+  for (const inverse::DegenerateCombination& c : report.degenerate_combinations) {
+    std::string loadings;
+    for (const auto& [name, w] : c.loadings)
+      loadings += fmt::format("{}{} {:+.2f}", loadings.empty() ? "" : ", ", name, w);
+    out->verdict_lines.push_back(fmt::format(
+        "valley (scaled eigenvalue {:.3g}): the data fix only a combination; loadings {}",
+        c.scaled_eigenvalue, loadings));
+  }
+  verdict["degenerate_combinations"] = report.degenerate_combinations.size();
+  out->identifiability_verdict = verdict;
+}
+
+// Fits every start of one row and summarises them.
+Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFlags& flags,
+                          int starts, int threads, double duration,
+                          const std::filesystem::path& work, const std::filesystem::path& out) {
+  const auto begin = Clock::now();
+  RowSummary summary;
+  summary.row = &row;
+  SOFTID_ASSIGN_OR_RETURN(scenes::Scene scene, scenes::MakeBuiltinScene(b.scene));
+  if (duration > 0.0) scene.duration = duration;
+  const fem::PhysicalParameters truth = scene.parameters;
+  SOFTID_ASSIGN_OR_RETURN(std::filesystem::path dir,
+                          EnsureCapture(b, row, duration, work, scene));
+  SOFTID_ASSIGN_OR_RETURN(capture::Capture capture,
+                          capture::ReadCapture(dir, {.decode_frames = false}));
+  const int max_iterations = flags.max_iterations > 0 ? flags.max_iterations : b.max_iterations;
+
+  // The same starts for every row of a benchmark (one seed), so rows differ only in their data.
+  std::mt19937_64 rng(flags.seed);
+  std::vector<nlohmann::json> initial;
+  for (int s = 0; s < starts; ++s) initial.push_back(reproduce::DrawStart(b, truth, rng));
+
+  inverse::FitResult combined;
+  combined.fitted = b.fit;
+  combined.starts.resize(starts);
+  std::vector<inverse::JobConfig> configs(starts);
+  std::vector<bool> have_base(starts, false);
+  std::atomic<int> next{0};
+  std::mutex mutex;
+  Status error;
+  auto worker = [&]() {
+    for (int s = next++; s < starts; s = next++) {
+      Result<inverse::JobConfig> config = reproduce::MakeStartConfig(
+          b, row, truth, initial[s], capture.mass_kg.has_value(), max_iterations);
+      if (!config.ok()) {
+        std::lock_guard lock(mutex);
+        error = config.status();
+        return;
+      }
+      configs[s] = *config;
+      Result<inverse::FitResult> fit = inverse::Fit(capture, *config);
+      std::lock_guard lock(mutex);
+      inverse::StartResult& start = combined.starts[s];
+      if (fit.ok()) {
+        start = fit->starts[0];
+        if (!have_base[s]) combined.base = fit->base;
+        have_base[s] = true;
+      } else {
+        start.failed = true;
+        start.termination = fit.status().message();
+        Result<fem::PhysicalParameters> p =
+            inverse::ApplyToParameters(*config, fem::PhysicalParameters{});
+        if (p.ok()) start.initial = start.final = *p;
+      }
+      start.index = s;
+      std::string errors;
+      for (const Quantity& q : b.quantities) {
+        errors += fmt::format(" {} {:.3g}{}", q.label,
+                              reproduce::MetricDisplayScale(q.metric) *
+                                  reproduce::ScoreError(q, start.final, truth),
+                              reproduce::MetricUnit(q.metric));
+      }
+      spdlog::info("{} {} start {}/{}: {}{}; cost {:.3e} m^2, {} iterations, {:.0f} s", b.name,
+                   row.id, s + 1, starts, start.failed ? "FAILED " : "", errors, start.final_cost,
+                   start.iterations, start.seconds);
+    }
+  };
+  {
+    std::vector<std::jthread> pool;
+    for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
+    worker();
+  }
+  SOFTID_RETURN_IF_ERROR(error);
+  for (int s = 0; s < starts; ++s) {
+    const inverse::StartResult& start = combined.starts[s];
+    if (start.failed || start.evaluations == 0) continue;
+    if (combined.best < 0 || start.final_cost < combined.starts[combined.best].final_cost)
+      combined.best = s;
+  }
+  combined.total_seconds = SecondsSince(begin);
+
+  // Scores: per start and per quantity; convergence over the judged quantities.
+  summary.starts = starts;
+  nlohmann::json start_scores = nlohmann::json::array();
+  std::vector<std::vector<double>> errors(b.quantities.size());
+  for (int s = 0; s < starts; ++s) {
+    const inverse::StartResult& start = combined.starts[s];
+    bool converged = !start.failed;
+    nlohmann::json scores = nlohmann::json::object();
+    std::vector<double> e(b.quantities.size());
+    for (size_t q = 0; q < b.quantities.size(); ++q) {
+      const Quantity& quantity = b.quantities[q];
+      e[q] = reproduce::ScoreError(quantity, start.final, truth);
+      scores[quantity.name] = std::isfinite(e[q]) ? nlohmann::json(e[q]) : nlohmann::json(nullptr);
+      if (quantity.judged && !(e[q] < reproduce::ConvergenceLimit(quantity.metric)))
+        converged = false;
+    }
+    summary.failed += start.failed;
+    summary.converged += converged;
+    if (converged) {
+      for (size_t q = 0; q < e.size(); ++q) errors[q].push_back(e[q]);
+    }
+    start_scores.push_back({{"index", s}, {"converged", converged}, {"errors", scores}});
+  }
+  summary.pass = summary.converged == starts;
+  for (size_t q = 0; q < b.quantities.size(); ++q) {
+    QuantitySummary qs;
+    qs.quantity = &b.quantities[q];
+    if (!errors[q].empty()) {
+      double sum = 0.0, worst = 0.0;
+      for (double e : errors[q]) sum += e, worst = std::max(worst, e);
+      qs.mean_error = sum / static_cast<double>(errors[q].size());
+      qs.max_error = worst;
+    }
+    qs.met = qs.mean_error <= qs.quantity->target;
+    if (qs.quantity->judged && !qs.met) summary.pass = false;
+    summary.quantities.push_back(qs);
+  }
+
+  nlohmann::json result = combined.best >= 0 ? inverse::ToJson(combined) : nlohmann::json::object();
+  if (!b.identifiability_focus.empty() && combined.best >= 0) {
+    inverse::IdentifiabilityOptions options;
+    options.threads = threads;
+    const auto analysis_start = Clock::now();
+    Result<inverse::IdentifiabilityReport> report =
+        inverse::AnalyzeIdentifiability(capture, configs[combined.best], combined, options);
+    if (report.ok()) {
+      result["identifiability"] = inverse::ToJson(*report);
+      Verdict(b, *report, &summary);
+      spdlog::info("{} {}: identifiability analysis in {:.0f} s", b.name, row.id,
+                   SecondsSince(analysis_start));
+    } else {
+      summary.verdict_lines.push_back("identifiability analysis failed: " +
+                                      report.status().message());
+      summary.identifiability_verdict = {{"error", report.status().message()}};
+    }
+  }
+  summary.seconds = SecondsSince(begin);
+
+  nlohmann::json quantities = nlohmann::json::array();
+  for (const QuantitySummary& qs : summary.quantities) {
+    quantities.push_back(
+        {{"name", qs.quantity->name},
+         {"label", qs.quantity->label},
+         {"unit", reproduce::MetricUnit(qs.quantity->metric)},
+         {"scale", reproduce::MetricDisplayScale(qs.quantity->metric)},
+         {"judged", qs.quantity->judged},
+         {"target", qs.quantity->target},
+         {"mean_error_converged",
+          std::isfinite(qs.mean_error) ? nlohmann::json(qs.mean_error) : nlohmann::json(nullptr)},
+         {"max_error_converged",
+          std::isfinite(qs.max_error) ? nlohmann::json(qs.max_error) : nlohmann::json(nullptr)},
+         {"met", qs.met}});
+  }
+  nlohmann::json row_json = {
+      {"benchmark", b.name},
+      {"row", row.id},
+      {"label", row.label},
+      {"capture", dir.string()},
+      {"cameras", row.cameras},
+      {"width", row.width},
+      {"height", row.height},
+      {"gradient", inverse::ToString(row.gradient)},
+      {"cells", b.cells},
+      {"substeps", b.substeps},
+      {"duration", scene.duration},
+      {"starts", starts},
+      {"converged", summary.converged},
+      {"failed", summary.failed},
+      {"convergence_rate", static_cast<double>(summary.converged) / std::max(1, starts)},
+      {"quantities", quantities},
+      {"start_scores", start_scores},
+      {"pass", summary.pass},
+      {"seconds", summary.seconds},
+      {"truth", fem::ToJson(truth)},
+  };
+  if (row.paper) {
+    row_json["paper"] = {{"error_percent", row.paper->error_percent},
+                         {"converged_percent", row.paper->converged_percent},
+                         {"entry", row.paper->note}};
+  }
+  if (!summary.identifiability_verdict.is_null())
+    row_json["identifiability_verdict"] = summary.identifiability_verdict;
+  result["reproduce"] = row_json;
+  summary.result_file = (out / fmt::format("{}-{}.json", b.name, row.id)).string();
+  SOFTID_RETURN_IF_ERROR(WriteJsonFile(summary.result_file, result));
+  return summary;
+}
+
+void PrintRows(const Benchmark& b, const std::vector<RowSummary>& rows) {
+  std::printf("\n%-10s %-36s %-7s %-5s %-13s %-12s %-10s %-6s %-22s %s\n", "row", "setup",
+              "conv.", "", "quantity", "mean err", "target", "met", "paper (err, conv.)", "time");
+  for (const RowSummary& r : rows) {
+    for (size_t q = 0; q < r.quantities.size(); ++q) {
+      const QuantitySummary& qs = r.quantities[q];
+      const double scale = reproduce::MetricDisplayScale(qs.quantity->metric);
+      const char* unit = reproduce::MetricUnit(qs.quantity->metric);
+      const std::string conv =
+          q == 0 ? fmt::format("{}/{}", r.converged, r.starts) : std::string();
+      const std::string rate =
+          q == 0 ? fmt::format("{:.0f}%", 100.0 * r.converged / std::max(1, r.starts))
+                 : std::string();
+      const std::string mean = std::isfinite(qs.mean_error)
+                                   ? fmt::format("{:.3g} {}", scale * qs.mean_error, unit)
+                                   : std::string("-");
+      const std::string target = qs.quantity->judged
+                                     ? fmt::format("<= {:.3g} {}", scale * qs.quantity->target,
+                                                   unit)
+                                     : std::string("(info)");
+      const std::string met = qs.quantity->judged ? (qs.met ? "yes" : "NO") : "";
+      const std::string paper = q == 0 && r.row->paper
+                                    ? fmt::format("{:.1f} %, {:.0f} %", r.row->paper->error_percent,
+                                                  r.row->paper->converged_percent)
+                                    : std::string();
+      const std::string time = q == 0 ? fmt::format("{:.0f} s", r.seconds) : std::string();
+      std::printf("%-10s %-36s %-7s %-5s %-13s %-12s %-10s %-6s %-22s %s\n",
+                  q == 0 ? r.row->id.c_str() : "", q == 0 ? r.row->label.c_str() : "",
+                  conv.c_str(), rate.c_str(), qs.quantity->label.c_str(), mean.c_str(),
+                  target.c_str(), met.c_str(), paper.c_str(), time.c_str());
+    }
+    for (const std::string& line : r.verdict_lines) std::printf("%-10s   %s\n", "", line.c_str());
+  }
+  std::printf("converged = every judged quantity within %.0f %% (relative), 5 deg, 10 mm; mean "
+              "errors over converged runs; %s\n",
+              100.0 * reproduce::ConvergenceLimit(Metric::kRelative), b.description.c_str());
+}
+
+int RunReproduce(const ReproduceFlags& flags) {
+  Result<Benchmark> made = reproduce::MakeBenchmark(flags.benchmark);
+  if (!made.ok()) {
+    spdlog::error("{}", made.status().message());
+    return kExitInvalidInput;
+  }
+  Benchmark b = *made;
+  if (flags.cells > 0) b.cells = flags.cells;
+  if (flags.substeps > 0) b.substeps = flags.substeps;
+  const int starts = flags.starts > 0 ? flags.starts : (flags.quick ? b.quick_starts : b.starts);
+  const double duration = flags.quick && b.quick_duration > 0.0 ? b.quick_duration : b.duration;
+  int threads =
+      flags.threads > 0 ? flags.threads : static_cast<int>(std::thread::hardware_concurrency());
+  threads = std::clamp(threads, 1, std::max(1, starts));
+  std::vector<const Row*> rows;
+  if (flags.rows.empty()) {
+    for (const Row& row : b.rows) {
+      if (!flags.quick || row.in_quick) rows.push_back(&row);
+    }
+  } else {
+    for (const std::string& id : flags.rows) {
+      auto it = std::find_if(b.rows.begin(), b.rows.end(), [&](const Row& r) { return r.id == id; });
+      if (it == b.rows.end()) {
+        std::string known;
+        for (const Row& r : b.rows) known += (known.empty() ? "" : ", ") + r.id;
+        spdlog::error("--rows: \"{}\" is not a row of {} (rows: {})", id, b.name, known);
+        return kExitInvalidInput;
+      }
+      rows.push_back(&*it);
+    }
+  }
+  const std::filesystem::path out = flags.out;
+  const std::filesystem::path work =
+      flags.work.empty() ? out / "captures" : std::filesystem::path(flags.work);
+  std::error_code ec;
+  std::filesystem::create_directories(out, ec);
+  if (ec) {
+    spdlog::error("--out = {}: {}", out.string(), ec.message());
+    return kExitFailure;
+  }
+  spdlog::info("reproduce {}: {} row(s), {} start(s) each, {} thread(s), grid {} cells, {} "
+               "substeps{}",
+               b.name, rows.size(), starts, threads, b.cells, b.substeps,
+               flags.quick ? ", quick" : "");
+
+  std::vector<RowSummary> summaries;
+  nlohmann::json summary_rows = nlohmann::json::array();
+  bool pass = true;
+  for (const Row* row : rows) {
+    Result<RowSummary> summary = RunRow(b, *row, flags, starts, threads, duration, work, out);
+    if (!summary.ok()) {
+      spdlog::error("{} {}: {}", b.name, row->id, summary.status().message());
+      return summary.status().code() == StatusCode::kInvalidArgument ? kExitInvalidInput
+                                                                     : kExitFailure;
+    }
+    summaries.push_back(*summary);
+    pass = pass && summary->pass;
+    PrintRows(b, {summaries.back()});
+    std::fflush(stdout);
+    std::ifstream in(summary->result_file);
+    const nlohmann::json written = nlohmann::json::parse(in, nullptr, false);
+    nlohmann::json row_json = written.is_discarded() ? nlohmann::json::object()
+                                                     : written.value("reproduce", nlohmann::json());
+    row_json.erase("start_scores");
+    row_json["result_file"] = summary->result_file;
+    summary_rows.push_back(row_json);
+  }
+  std::printf("\n== reproduce %s: %s ==", b.name.c_str(), b.description.c_str());
+  PrintRows(b, summaries);
+  const nlohmann::json summary = {{"format", "softid-reproduce/1"},
+                                  {"benchmark", b.name},
+                                  {"description", b.description},
+                                  {"quick", flags.quick},
+                                  {"starts", starts},
+                                  {"seed", flags.seed},
+                                  {"rows", summary_rows},
+                                  {"pass", pass}};
+  const std::filesystem::path summary_file = out / fmt::format("{}-summary.json", b.name);
+  if (Status written = WriteJsonFile(summary_file, summary); !written.ok()) {
+    spdlog::error("{}", written.message());
+    return kExitFailure;
+  }
+  std::printf("%s: every row %s its target; summary written to %s\n", b.name.c_str(),
+              pass ? "meets" : "does NOT meet", summary_file.string().c_str());
+  return kExitOk;
+}
+
+}  // namespace
+
+Command RegisterReproduce(CLI::App* app) {
+  auto flags = std::make_shared<ReproduceFlags>();
+  std::string names;
+  for (const std::string& n : reproduce::BenchmarkNames()) names += (names.empty() ? "" : "|") + n;
+  app->add_option("benchmark", flags->benchmark, names)->required();
+  app->add_option("--starts", flags->starts, "random starts per row (default: the benchmark's)");
+  app->add_option("--rows", flags->rows, "row ids to run (default: all; with --quick the first)")
+      ->delimiter(',');
+  app->add_option("--threads", flags->threads, "parallel starts (0 = all cores)")
+      ->capture_default_str();
+  app->add_option("--out", flags->out, "folder for the result JSON of every row and the summary")
+      ->capture_default_str();
+  app->add_option("--work", flags->work, "folder for the synthesised captures (default OUT/captures)");
+  app->add_flag("--quick", flags->quick,
+                "reduced run: fewer starts, a shorter clip, only the main row");
+  app->add_option("--cells", flags->cells, "grid cells along the longest side (default 16)");
+  app->add_option("--substeps", flags->substeps, "steps per frame (default 2)");
+  app->add_option("--max-iterations", flags->max_iterations, "optimiser iterations per start");
+  app->add_option("--seed", flags->seed, "seed of the random starts")->capture_default_str();
+  return [flags] { return RunReproduce(*flags); };
+}
+
+}  // namespace softid::lab
