@@ -264,6 +264,15 @@ Result<std::string> BlobStore::Get(std::string_view sha256) const {
   return bytes;
 }
 
+Status BlobStore::Remove(std::string_view sha256) const {
+  SOFTID_RETURN_IF_ERROR(CheckHash(sha256));
+  const fs::path path = FinalPath(blobs_dir_, sha256);
+  std::error_code error;
+  fs::remove(path, error);
+  if (error) return Status::IoError(path.string() + ": cannot remove: " + error.message());
+  return Status::Ok();
+}
+
 Status BlobStore::Verify(std::string_view sha256) const {
   SOFTID_ASSIGN_OR_RETURN(std::ifstream in, OpenBlob(sha256));
   Sha256 hasher;

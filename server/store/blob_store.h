@@ -99,6 +99,9 @@ class BlobStore {
   Result<std::ifstream> OpenBlob(std::string_view sha256) const;
   // The path of a stored blob, for readers that map or stream the file themselves.
   Result<std::filesystem::path> PathOf(std::string_view sha256) const;
+  // Deletes a blob; absent is fine. The caller makes sure nothing refers to it any more
+  // (JobStore::IsBlobReferenced) and that no put of the same bytes is under way.
+  Status Remove(std::string_view sha256) const;
   // Re-hashes a stored blob: IoError naming both hashes if the file no longer matches its name.
   Status Verify(std::string_view sha256) const;
 

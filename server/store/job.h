@@ -3,7 +3,8 @@
 //   QUEUED --claim--> RUNNING --complete--> SUCCEEDED
 //     |                 |  |----fail------> FAILED
 //     |                 |  `--cancel seen-> CANCELLED (cancel_requested set, worker stopped)
-//     |                 `--worker lost----> QUEUED again, or FAILED after max attempts
+//     |                 |--worker lost----> QUEUED again, or FAILED after max attempts
+//     |                 `--released-------> QUEUED again (shutdown; the attempt does not count)
 //     `--cancel-----------------------------> CANCELLED
 //
 // SUCCEEDED, FAILED and CANCELLED are terminal. A failed optimisation is a FAILED job with an
@@ -45,6 +46,9 @@ struct Job {
   bool cancel_requested = false;
   // Number of times a worker claimed the job (1 on its first run).
   int attempts = 0;
+  // Of those, claims handed back by ReleaseJob (a graceful shutdown): they do not count against
+  // max_attempts, which is meant for jobs that keep killing their worker.
+  int released_attempts = 0;
   std::string error;  // why the job FAILED; empty otherwise
   Timestamp created_at{};
   std::optional<Timestamp> started_at;   // last claim

@@ -83,6 +83,14 @@ class JobStore {
   // `config` is a JSON object.
   virtual Result<Job> CreateJob(const std::string& capture_id, const nlohmann::json& config,
                                 const std::string& request_id) = 0;
+  // CreateJob with a bound on the queue, checked in the same transaction as the insert so that
+  // concurrent creates cannot overshoot it: nullopt (and nothing created) when `max_queued`
+  // (>= 1) jobs are QUEUED already. A repeated request_id returns its job even then, and an
+  // unknown capture is NotFound before the queue is looked at.
+  virtual Result<std::optional<Job>> CreateJobBounded(const std::string& capture_id,
+                                                      const nlohmann::json& config,
+                                                      const std::string& request_id,
+                                                      int64_t max_queued) = 0;
   virtual Result<Job> GetJob(const std::string& job_id) = 0;
   virtual Result<JobPage> ListJobs(const ListJobsRequest& request) = 0;
   // Jobs in `state`, or all jobs; used to bound the queue before CreateJob.
@@ -125,13 +133,23 @@ class JobStore {
   virtual Result<bool> IsCancelRequested(const std::string& job_id) = 0;
   // RUNNING with cancel_requested -> CANCELLED: the worker acknowledges the cancel.
   virtual Status MarkCancelled(const std::string& job_id) = 0;
+  // RUNNING (leased to `worker_id`) -> QUEUED, recording `reason` in the history: the worker
+  // gives the job back unfinished (a graceful shutdown). The claim stays in `attempts` but also
+  // counts in `released_attempts`, so it is not held against max_attempts. With a cancel pending
+  // the job becomes CANCELLED instead. FailedPrecondition when the worker no longer holds it.
+  virtual Status ReleaseJob(const std::string& job_id, const std::string& worker_id,
+                            const std::string& reason) = 0;
 
   // --- Maintenance --------------------------------------------------------------------------
 
   // Jobs left RUNNING by lost workers (see RecoveryScope) go back to QUEUED, or to FAILED with an
-  // error saying so once they were claimed `max_attempts` times (>= 1), or to CANCELLED if a
-  // cancel was pending.
+  // error saying so once they were claimed `max_attempts` times (>= 1; released claims do not
+  // count), or to CANCELLED if a cancel was pending.
   virtual Result<RecoverySummary> RecoverAfterCrash(int max_attempts, RecoveryScope scope) = 0;
+
+  // True when some capture's manifest lists a file with this sha256: the blob must be kept. Used
+  // to remove the blobs of an upload that failed after they were stored.
+  virtual Result<bool> IsBlobReferenced(const std::string& sha256) = 0;
 
   // Releases the connection(s). Later calls fail with FailedPrecondition. Idempotent.
   virtual Status Close() = 0;

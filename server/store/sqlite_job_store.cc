@@ -16,7 +16,7 @@ constexpr size_t kMaxRequestIdLength = 256;
 
 constexpr std::string_view kJobColumns =
     "id, request_id, capture_id, config, state, cancel_requested, attempts, error, created_at, "
-    "started_at, finished_at, lease_owner, lease_expires_at, result";
+    "started_at, finished_at, lease_owner, lease_expires_at, result, released_attempts";
 
 constexpr std::string_view kProgressColumns =
     "seq, attempt, event, iteration, cost, gradient_norm, parameters, elapsed_s, state, message, "
@@ -65,6 +65,7 @@ Result<Job> ReadJob(const SqliteStatement& row) {
   if (!row.IsNull(13)) {
     SOFTID_ASSIGN_OR_RETURN(job.result, ParseStoredJson(row.ColumnText(13), "jobs.result"));
   }
+  job.released_attempts = static_cast<int>(row.ColumnInt64(14));
   return job;
 }
 
@@ -310,10 +311,30 @@ Result<Capture> SqliteJobStore::GetCapture(const std::string& capture_id) {
 
 Result<Job> SqliteJobStore::CreateJob(const std::string& capture_id, const nlohmann::json& config,
                                       const std::string& request_id) {
+  SOFTID_ASSIGN_OR_RETURN(std::optional<Job> job,
+                          CreateJobIfRoom(capture_id, config, request_id, std::nullopt));
+  return *std::move(job);
+}
+
+Result<std::optional<Job>> SqliteJobStore::CreateJobBounded(const std::string& capture_id,
+                                                            const nlohmann::json& config,
+                                                            const std::string& request_id,
+                                                            int64_t max_queued) {
+  if (max_queued < 1) {
+    return Status::InvalidArgument("max_queued = " + std::to_string(max_queued) +
+                                   ": must be at least 1");
+  }
+  return CreateJobIfRoom(capture_id, config, request_id, max_queued);
+}
+
+Result<std::optional<Job>> SqliteJobStore::CreateJobIfRoom(const std::string& capture_id,
+                                                           const nlohmann::json& config,
+                                                           const std::string& request_id,
+                                                           std::optional<int64_t> max_queued) {
   SOFTID_RETURN_IF_ERROR(CheckResourceId(capture_id, kCaptureIdPrefix, "capture id"));
   if (!config.is_object()) return json::Invalid("config", config, "must be a JSON object");
   SOFTID_RETURN_IF_ERROR(CheckRequestId(request_id));
-  return Write([&]() -> Result<Job> {
+  return Write([&]() -> Result<std::optional<Job>> {
     if (!request_id.empty()) {
       SOFTID_ASSIGN_OR_RETURN(std::optional<Job> existing, FindJobByRequestId(request_id));
       if (existing.has_value()) {
@@ -322,7 +343,7 @@ Result<Job> SqliteJobStore::CreateJob(const std::string& capture_id, const nlohm
               "request_id '" + request_id + "' was already used to create job " + existing->id +
               " with a different " + (existing->capture_id != capture_id ? "capture" : "config"));
         }
-        return *std::move(existing);
+        return existing;
       }
     }
     {
@@ -331,6 +352,14 @@ Result<Job> SqliteJobStore::CreateJob(const std::string& capture_id, const nlohm
       SOFTID_RETURN_IF_ERROR(stmt.Bind(capture_id));
       SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
       if (!found) return Status::NotFound("capture " + capture_id + " not found");
+    }
+    if (max_queued.has_value()) {
+      // Counted inside the write transaction: no other create can slip in between.
+      SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                              db_.Prepare("SELECT count(*) FROM jobs WHERE state = 'QUEUED'"));
+      SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+      if (!has_row) return Status::Internal("count(*) returned no row");
+      if (stmt.ColumnInt64(0) >= *max_queued) return std::optional<Job>();
     }
     Job job;
     job.id = NewResourceId(kJobIdPrefix);
@@ -346,7 +375,7 @@ Result<Job> SqliteJobStore::CreateJob(const std::string& capture_id, const nlohm
                                      ToUnixMicros(job.created_at)));
     SOFTID_RETURN_IF_ERROR(stmt.Run());
     SOFTID_RETURN_IF_ERROR(AppendStateEvent(job, "created", job.created_at).status());
-    return job;
+    return std::optional<Job>(std::move(job));
   });
 }
 
@@ -677,7 +706,56 @@ Status SqliteJobStore::MarkCancelled(const std::string& job_id) {
   });
 }
 
+Status SqliteJobStore::ReleaseJob(const std::string& job_id, const std::string& worker_id,
+                                  const std::string& reason) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(Job job, LoadJob(job_id));
+    if (job.state != JobState::kRunning) return WrongState(job, "only a RUNNING job is released");
+    if (job.lease_owner != worker_id) {
+      return Status::FailedPrecondition("job " + job_id + " is leased to " + job.lease_owner +
+                                        ", not " + worker_id);
+    }
+    const Timestamp now = Now();
+    std::string message;
+    if (job.cancel_requested) {
+      // Running it again would only be cancelled again.
+      job.state = JobState::kCancelled;
+      message = "cancelled: released (" + reason + ") after the cancel was requested";
+      SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+          UPDATE jobs SET state = 'CANCELLED', finished_at = ?2, lease_owner = NULL,
+                          lease_expires_at = NULL
+          WHERE id = ?1)sql"));
+      SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, ToUnixMicros(now)));
+      SOFTID_RETURN_IF_ERROR(stmt.Run());
+    } else {
+      job.state = JobState::kQueued;
+      message = "requeued: " + reason + " during attempt " + std::to_string(job.attempts) +
+                " (not counted against max_attempts)";
+      SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+          UPDATE jobs SET state = 'QUEUED', released_attempts = released_attempts + 1,
+                          lease_owner = NULL, lease_expires_at = NULL
+          WHERE id = ?1)sql"));
+      SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id));
+      SOFTID_RETURN_IF_ERROR(stmt.Run());
+    }
+    return AppendStateEvent(job, message, now).status();
+  });
+}
+
 // --- Maintenance ---------------------------------------------------------------------------------
+
+Result<bool> SqliteJobStore::IsBlobReferenced(const std::string& sha256) {
+  return Read([&]() -> Result<bool> {
+    // A scan of every manifest: only failed uploads ask, and they are rare.
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        SELECT 1 FROM captures, json_each(captures.manifest) AS file
+        WHERE json_extract(file.value, '$.sha256') = ?1 LIMIT 1)sql"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(sha256));
+    return stmt.Step();
+  });
+}
 
 Result<RecoverySummary> SqliteJobStore::RecoverAfterCrash(int max_attempts, RecoveryScope scope) {
   if (max_attempts < 1) {
@@ -715,9 +793,10 @@ Result<RecoverySummary> SqliteJobStore::RecoverAfterCrash(int max_attempts, Reco
         message = "cancelled: " + cause + " after the cancel was requested";
         sql = "UPDATE jobs SET state = 'CANCELLED', finished_at = ?2";
         ++summary.num_cancelled;
-      } else if (job.attempts >= max_attempts) {
+      } else if (const int counted = job.attempts - job.released_attempts;
+                 counted >= max_attempts) {
         job.state = JobState::kFailed;
-        job.error = "gave up after " + std::to_string(job.attempts) + " attempt(s) (max_attempts " +
+        job.error = "gave up after " + std::to_string(counted) + " attempt(s) (max_attempts " +
                     std::to_string(max_attempts) + "): " + cause + " while RUNNING";
         message = job.error;
         sql = "UPDATE jobs SET state = 'FAILED', finished_at = ?2, error = ?3";

@@ -53,6 +53,10 @@ class SqliteJobStore final : public JobStore {
 
   Result<Job> CreateJob(const std::string& capture_id, const nlohmann::json& config,
                         const std::string& request_id) override;
+  Result<std::optional<Job>> CreateJobBounded(const std::string& capture_id,
+                                              const nlohmann::json& config,
+                                              const std::string& request_id,
+                                              int64_t max_queued) override;
   Result<Job> GetJob(const std::string& job_id) override;
   Result<JobPage> ListJobs(const ListJobsRequest& request) override;
   Result<int64_t> CountJobs(std::optional<JobState> state) override;
@@ -72,8 +76,11 @@ class SqliteJobStore final : public JobStore {
   Status FailJob(const std::string& job_id, const std::string& error) override;
   Result<bool> IsCancelRequested(const std::string& job_id) override;
   Status MarkCancelled(const std::string& job_id) override;
+  Status ReleaseJob(const std::string& job_id, const std::string& worker_id,
+                    const std::string& reason) override;
 
   Result<RecoverySummary> RecoverAfterCrash(int max_attempts, RecoveryScope scope) override;
+  Result<bool> IsBlobReferenced(const std::string& sha256) override;
   Status Close() override;
 
   // SQLite only: a consistent copy of the database at `destination` (VACUUM INTO), taken while the
@@ -92,6 +99,12 @@ class SqliteJobStore final : public JobStore {
   auto Write(Fn&& fn) -> decltype(fn());
   template <typename Fn>
   auto Read(Fn&& fn) -> decltype(fn());
+
+  // CreateJob and CreateJobBounded; nullopt `max_queued` means no bound.
+  Result<std::optional<Job>> CreateJobIfRoom(const std::string& capture_id,
+                                             const nlohmann::json& config,
+                                             const std::string& request_id,
+                                             std::optional<int64_t> max_queued);
 
   // Helpers for use inside Write/Read.
   Result<Job> LoadJob(const std::string& job_id);

@@ -71,6 +71,11 @@ CREATE TABLE checkpoints (
   updated_at  INTEGER NOT NULL
 ) STRICT;
 )sql",
+    // 1 -> 2: claims handed back by a graceful shutdown, not held against max_attempts.
+    R"sql(
+ALTER TABLE jobs ADD COLUMN released_attempts INTEGER NOT NULL DEFAULT 0
+  CHECK (released_attempts >= 0);
+)sql",
 };
 
 Result<int64_t> ReadPragma(SqliteDatabase& db, std::string_view pragma) {

@@ -48,7 +48,9 @@ struct Backend {
 };
 
 // Names the backend in test output instead of dumping its bytes.
-void PrintTo(const Backend& backend, std::ostream* out) { *out << backend.name; }
+void PrintTo(const Backend& backend, std::ostream* out) {
+  *out << backend.name;
+}
 
 const Backend kSqlite{"Sqlite",
                       [](const fs::path& dir, Clock clock) -> Result<std::unique_ptr<JobStore>> {
@@ -234,6 +236,59 @@ TEST_P(JobStoreConformance, JobCreationIsIdempotent) {
   const Result<Job> other_capture = store_->CreateJob(other.id, first.config, "create-1");
   EXPECT_NE(other_capture.status().message().find("with a different capture"), std::string::npos);
   EXPECT_EQ(*store_->CountJobs(std::nullopt), 1);
+}
+
+// The bounded create refuses (nullopt, nothing created) once max_queued jobs are QUEUED; a
+// repeated request_id still gets its job, and an unknown capture is still NotFound.
+TEST_P(JobStoreConformance, CreateJobBoundedRefusesWhenTheQueueIsFull) {
+  const Capture capture = NewCapture();
+  const nlohmann::json config = {{"model", "corotated"}};
+  EXPECT_EQ(store_->CreateJobBounded(capture.id, config, "", 0).status().code(),
+            StatusCode::kInvalidArgument);
+  const Result<std::optional<Job>> first = store_->CreateJobBounded(capture.id, config, "r-1", 2);
+  ASSERT_TRUE(first.ok() && first->has_value()) << first.status().ToString();
+  ASSERT_TRUE(store_->CreateJobBounded(capture.id, config, "", 2)->has_value());
+  const Result<std::optional<Job>> full = store_->CreateJobBounded(capture.id, config, "r-2", 2);
+  ASSERT_TRUE(full.ok()) << full.status().ToString();
+  EXPECT_FALSE(full->has_value());
+  EXPECT_EQ(*store_->CountJobs(std::nullopt), 2);
+
+  const Result<std::optional<Job>> repeat = store_->CreateJobBounded(capture.id, config, "r-1", 2);
+  ASSERT_TRUE(repeat.ok() && repeat->has_value()) << repeat.status().ToString();
+  EXPECT_EQ((*repeat)->id, (*first)->id);
+  EXPECT_EQ(store_->CreateJobBounded("cap-0123456789abcdef", config, "", 2).status().code(),
+            StatusCode::kNotFound);
+
+  Claim();  // one QUEUED job left: room for one more
+  const Result<std::optional<Job>> after = store_->CreateJobBounded(capture.id, config, "r-2", 2);
+  ASSERT_TRUE(after.ok() && after->has_value());
+  EXPECT_EQ((*after)->request_id, "r-2");
+  EXPECT_EQ(*store_->CountJobs(JobState::kQueued), 2);
+}
+
+// Concurrent bounded creates never overshoot the bound: the count and the insert are one
+// transaction.
+TEST_P(JobStoreConformance, CreateJobBoundedHoldsUnderConcurrency) {
+  const Capture capture = NewCapture();
+  constexpr int kNumThreads = 6;
+  constexpr int kMaxQueued = 10;
+  std::atomic<int> created{0};
+  std::atomic<int> refused{0};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kNumThreads; ++t) {
+    threads.emplace_back([&] {
+      for (int i = 0; i < 4; ++i) {
+        Result<std::optional<Job>> job =
+            store_->CreateJobBounded(capture.id, nlohmann::json::object(), "", kMaxQueued);
+        EXPECT_TRUE(job.ok()) << job.status().ToString();
+        if (job.ok()) ++(job->has_value() ? created : refused);
+      }
+    });
+  }
+  for (std::thread& thread : threads) thread.join();
+  EXPECT_EQ(created.load(), kMaxQueued);
+  EXPECT_EQ(refused.load(), kNumThreads * 4 - kMaxQueued);
+  EXPECT_EQ(*store_->CountJobs(JobState::kQueued), kMaxQueued);
 }
 
 // --- Running jobs ------------------------------------------------------------------------------
@@ -618,6 +673,63 @@ TEST_P(JobStoreConformance, RecoveryRequeuesThenFailsAfterMaxAttempts) {
   const auto history = *store_->ListProgress(job.id, 0);
   EXPECT_EQ(history.back().state, JobState::kFailed);
   EXPECT_EQ(history.back().attempt, 2);
+}
+
+// A released job (graceful shutdown) is QUEUED again at once, and its attempt is not held against
+// max_attempts: with max_attempts 1 it still runs again after a release, and fails only after a
+// real loss.
+TEST_P(JobStoreConformance, ReleaseRequeuesWithoutUsingAnAttempt) {
+  const Capture capture = NewCapture();
+  const Job job = NewJob(capture.id);
+  EXPECT_EQ(store_->ReleaseJob(job.id, "worker-1", "shutdown").code(),
+            StatusCode::kFailedPrecondition);  // QUEUED: nothing to release
+  Claim("worker-1");
+  ASSERT_TRUE(store_->AppendProgress(job.id, Iteration(0, 2.0)).ok());
+  const Status foreign = store_->ReleaseJob(job.id, "worker-2", "shutdown");
+  EXPECT_EQ(foreign.message(), "job " + job.id + " is leased to worker-1, not worker-2");
+  ASSERT_TRUE(store_->ReleaseJob(job.id, "worker-1", "the server shut down").ok());
+  const Job released = *store_->GetJob(job.id);
+  EXPECT_EQ(released.state, JobState::kQueued);
+  EXPECT_EQ(released.attempts, 1);
+  EXPECT_EQ(released.released_attempts, 1);
+  EXPECT_TRUE(released.lease_owner.empty());
+  EXPECT_FALSE(released.lease_expires_at.has_value());
+  const auto history = *store_->ListProgress(job.id, 0);
+  EXPECT_EQ(history.back().state, JobState::kQueued);
+  EXPECT_EQ(history.back().iteration, 0);
+  EXPECT_EQ(history.back().message,
+            "requeued: the server shut down during attempt 1 (not counted against max_attempts)");
+
+  EXPECT_EQ(Claim("worker-1").attempts, 2);
+  const Result<RecoverySummary> lost = store_->RecoverAfterCrash(1, RecoveryScope::kAllRunning);
+  ASSERT_TRUE(lost.ok());
+  EXPECT_EQ(lost->num_failed, 1);
+  EXPECT_EQ(store_->GetJob(job.id)->error,
+            "gave up after 1 attempt(s) (max_attempts 1): its worker was lost (the server "
+            "restarted) while RUNNING");
+}
+
+// A release with a cancel pending ends the job CANCELLED instead of queueing it again.
+TEST_P(JobStoreConformance, ReleaseHonoursPendingCancel) {
+  const Capture capture = NewCapture();
+  const Job job = NewJob(capture.id);
+  Claim("worker-1");
+  ASSERT_TRUE(store_->RequestCancel(job.id).ok());
+  ASSERT_TRUE(store_->ReleaseJob(job.id, "worker-1", "the server shut down").ok());
+  const Job cancelled = *store_->GetJob(job.id);
+  EXPECT_EQ(cancelled.state, JobState::kCancelled);
+  EXPECT_TRUE(cancelled.finished_at.has_value());
+  EXPECT_EQ(cancelled.released_attempts, 0);
+}
+
+// Blobs listed by a stored capture are referenced; any other hash is not.
+TEST_P(JobStoreConformance, IsBlobReferenced) {
+  const std::vector<ManifestEntry> manifest = Manifest("default");
+  EXPECT_FALSE(*store_->IsBlobReferenced(manifest[1].sha256));
+  NewCapture();
+  EXPECT_TRUE(*store_->IsBlobReferenced(manifest[0].sha256));
+  EXPECT_TRUE(*store_->IsBlobReferenced(manifest[1].sha256));
+  EXPECT_FALSE(*store_->IsBlobReferenced(Sha256::Hex("nothing")));
 }
 
 // A lost job that had a cancel pending ends CANCELLED instead of running again.

@@ -84,13 +84,45 @@ TEST(SqliteSchema, RefusesNewerSchema) {
   ASSERT_FALSE(store.ok());
   EXPECT_EQ(store.status().code(), StatusCode::kFailedPrecondition);
   EXPECT_EQ(store.status().message(),
-            path.string() +
-                ": database schema version 2 is newer than this build supports (1); "
-                "it was written by a newer softid. Refusing to open it; run a newer "
+            path.string() + ": database schema version " +
+                std::to_string(kSqliteSchemaVersion + 1) + " is newer than this build supports (" +
+                std::to_string(kSqliteSchemaVersion) +
+                "); it was written by a newer softid. Refusing to open it; run a newer "
                 "softid-server");
   Result<SqliteDatabase> db = SqliteDatabase::Open(path);
   ASSERT_TRUE(db.ok());
   EXPECT_EQ(*ReadSchemaVersion(*db), kSqliteSchemaVersion + 1);
+}
+
+// A version 1 database (before released_attempts) is migrated in place: its jobs are kept and
+// read with no released attempts.
+TEST(SqliteSchema, MigratesVersion1Jobs) {
+  TempDir dir;
+  const auto path = dir.path() / "jobs.db";
+  {
+    Result<SqliteDatabase> db = SqliteDatabase::Open(path);
+    ASSERT_TRUE(db.ok());
+    ASSERT_TRUE(MigrateSqliteSchema(*db).ok());
+    // Back to the version 1 layout: version 2 only added this column.
+    ASSERT_TRUE(db->Exec("ALTER TABLE jobs DROP COLUMN released_attempts").ok());
+    ASSERT_TRUE(db->Exec("PRAGMA user_version = 1").ok());
+    ASSERT_TRUE(
+        db->Exec("INSERT INTO captures VALUES ('cap-0123456789abcdef', NULL, '[]', 0)").ok());
+    ASSERT_TRUE(db->Exec("INSERT INTO jobs (id, capture_id, config, state, attempts, created_at) "
+                         "VALUES ('job-0123456789abcdef', 'cap-0123456789abcdef', '{}', 'QUEUED', "
+                         "2, 0)")
+                    .ok());
+  }
+  Result<std::unique_ptr<SqliteJobStore>> store = SqliteJobStore::Open(path);
+  ASSERT_TRUE(store.ok()) << store.status().ToString();
+  const Result<Job> job = (*store)->GetJob("job-0123456789abcdef");
+  ASSERT_TRUE(job.ok()) << job.status().ToString();
+  EXPECT_EQ(job->attempts, 2);
+  EXPECT_EQ(job->released_attempts, 0);
+  ASSERT_TRUE((*store)->Close().ok());
+  Result<SqliteDatabase> db = SqliteDatabase::Open(path);
+  ASSERT_TRUE(db.ok());
+  EXPECT_EQ(*ReadSchemaVersion(*db), kSqliteSchemaVersion);
 }
 
 // Some other application's SQLite file is not adopted.
