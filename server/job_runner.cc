@@ -133,42 +133,59 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
     return Fail(job, context, "capture " + job.capture_id + ": " + capture.status().message());
   }
 
-  Heartbeat heartbeat(job, worker_id, context, cancel);
-  inverse::FitOptions options;
-  options.cancel = &cancel;
-  options.on_progress = [&](const inverse::FitProgress& p) {
-    store::ProgressEvent event;
-    event.kind = store::ProgressKind::kIteration;
-    event.iteration = p.iteration;
-    event.cost = p.cost;
-    event.gradient_norm = p.gradient_norm;
-    event.parameters = FittedParametersJson(*config, p.parameters);
-    event.elapsed_s = std::chrono::duration<double>(Stopwatch::now() - started).count();
-    if (p.num_starts > 1) {
-      event.message = "start " + std::to_string(p.start + 1) + "/" + std::to_string(p.num_starts);
-    }
-    if (Result<int64_t> seq = context.jobs->AppendProgress(job.id, event); !seq.ok()) {
-      log->warn("job {}: progress of iteration {} not recorded: {}", job.id, p.iteration,
-                seq.status().message());
-    }
-    context.events->Notify(job.id);
-    log->debug("job {}: iteration {}/{} cost {:.4e}", job.id, p.iteration, p.max_iterations,
-               p.cost);
-    Result<bool> requested = context.jobs->IsCancelRequested(job.id);
-    if (requested.ok() && *requested) {
-      heartbeat.set_cancel_requested();
-      cancel.store(true);
-    }
-  };
-  Result<inverse::FitResult> result = inverse::Fit(*capture, *config, options);
+  // The heartbeat stops before the outcome is written, so it never renews a lease that the
+  // outcome just gave up (which would look like a lost lease).
+  bool lost = false;
+  bool cancel_requested = false;
+  Result<inverse::FitResult> result = Status::Internal("the fit did not run");
+  {
+    Heartbeat heartbeat(job, worker_id, context, cancel);
+    inverse::FitOptions options;
+    options.cancel = &cancel;
+    options.on_progress = [&](const inverse::FitProgress& p) {
+      store::ProgressEvent event;
+      event.kind = store::ProgressKind::kIteration;
+      event.iteration = p.iteration;
+      event.cost = p.cost;
+      event.gradient_norm = p.gradient_norm;
+      event.parameters = FittedParametersJson(*config, p.parameters);
+      event.elapsed_s = std::chrono::duration<double>(Stopwatch::now() - started).count();
+      if (p.num_starts > 1) {
+        event.message = "start " + std::to_string(p.start + 1) + "/" + std::to_string(p.num_starts);
+      }
+      if (Result<int64_t> seq = context.jobs->AppendProgress(job.id, event); !seq.ok()) {
+        log->warn("job {}: progress of iteration {} not recorded: {}", job.id, p.iteration,
+                  seq.status().message());
+      }
+      context.events->Notify(job.id);
+      log->debug("job {}: iteration {}/{} cost {:.4e}", job.id, p.iteration, p.max_iterations,
+                 p.cost);
+      Result<bool> requested = context.jobs->IsCancelRequested(job.id);
+      if (requested.ok() && *requested) {
+        heartbeat.set_cancel_requested();
+        cancel.store(true);
+      }
+    };
+    result = inverse::Fit(*capture, *config, options);
+    lost = heartbeat.lost();
+    cancel_requested = heartbeat.cancel_requested();
+  }
 
-  if (heartbeat.lost()) return JobOutcome::kLost;
+  if (lost) return JobOutcome::kLost;
   // A fit that ran to its end is recorded whatever was asked meanwhile; only one that stopped
   // early is a cancel or an interruption.
   const bool stopped_early = result.ok() ? result->cancelled : cancel.load();
-  if (stopped_early && !heartbeat.cancel_requested() && shutdown.load()) {
-    log->info("job {}: interrupted by shutdown; stays RUNNING and is requeued at the next start",
-              job.id);
+  if (stopped_early && !cancel_requested && shutdown.load()) {
+    // Handed back at once, so a clean shutdown leaves nothing RUNNING, and the attempt is not
+    // held against max_attempts: the job did nothing wrong.
+    if (Status released = context.jobs->ReleaseJob(job.id, worker_id, "the server shut down");
+        !released.ok()) {
+      log->warn("job {}: not released ({}); the next start requeues it", job.id,
+                released.message());
+    } else {
+      log->info("job {}: interrupted by shutdown; QUEUED again", job.id);
+    }
+    context.events->Notify(job.id);
     return JobOutcome::kInterrupted;
   }
   if (stopped_early) {

@@ -35,8 +35,8 @@ enum class JobOutcome {
   kSucceeded,
   kFailed,
   kCancelled,
-  // Stopped by a server shutdown: the job stays RUNNING in the store and RecoverAfterCrash
-  // requeues it at the next start (its progress history is kept).
+  // Stopped by a server shutdown: the job is QUEUED again (JobStore::ReleaseJob) without using
+  // up an attempt, its progress history kept.
   kInterrupted,
   // The lease was lost (another worker may own the job now): nothing more is written.
   kLost,

@@ -37,22 +37,56 @@ ServiceResult<std::unique_ptr<CaptureUpload>> JobService::BeginUpload(UploadMani
 ServiceResult<store::Capture> JobService::FinishUpload(CaptureUpload& upload) {
   ServiceResult<std::vector<store::ManifestEntry>> manifest = upload.Finish();
   if (!manifest.ok()) return manifest.status();
-  // Blobs before the row: a committed capture never points at a missing blob. A failure part way
-  // leaves only unreferenced content-addressed files, which no capture can see.
-  for (const store::ManifestEntry& entry : *manifest) {
-    std::ifstream in(upload.staging_dir() / entry.path, std::ios::binary);
-    if (!in) {
-      return ServiceStatus(ServiceCode::kInternal, "cannot reopen staged file " + entry.path);
+  // Blobs before the row: a committed capture never points at a missing blob. Blobs this upload
+  // added are removed again if it fails before its row is committed (disk full part way, a
+  // request_id reused for other files), unless another capture refers to them by then.
+  std::vector<std::string> added;
+  ServiceResult<store::Capture> capture = [&]() -> ServiceResult<store::Capture> {
+    std::shared_lock puts(blob_puts_);
+    for (const store::ManifestEntry& entry : *manifest) {
+      std::ifstream in(upload.staging_dir() / entry.path, std::ios::binary);
+      if (!in) {
+        return ServiceStatus(ServiceCode::kInternal, "cannot reopen staged file " + entry.path);
+      }
+      const bool existed = blobs_->Has(entry.sha256);
+      Result<std::string> put = blobs_->Put(
+          in, store::PutOptions{.expected_sha256 = entry.sha256, .source_name = entry.path});
+      if (!put.ok()) return put.status();
+      if (!existed) added.push_back(entry.sha256);
     }
-    Result<std::string> put = blobs_->Put(
-        in, store::PutOptions{.expected_sha256 = entry.sha256, .source_name = entry.path});
-    if (!put.ok()) return put.status();
+    Result<store::Capture> created = jobs_->CreateCapture(*manifest, upload.request_id());
+    if (!created.ok()) return FromStoreCreate(created.status());
+    return *created;
+  }();
+  if (!capture.ok()) {
+    RemoveUnreferencedBlobs(added);
+    return capture.status();
   }
-  Result<store::Capture> capture = jobs_->CreateCapture(*manifest, upload.request_id());
-  if (!capture.ok()) return FromStoreCreate(capture.status());
   logger_->info("capture {}: stored {} files (request_id '{}')", capture->id,
                 capture->manifest.size(), capture->request_id);
-  return *capture;
+  return capture;
+}
+
+void JobService::RemoveUnreferencedBlobs(const std::vector<std::string>& sha256s) {
+  if (sha256s.empty()) return;
+  // Exclusive: every other upload is either before its first put or past its commit, so a blob
+  // that no committed capture lists now is not about to be listed by one.
+  std::unique_lock puts(blob_puts_);
+  int removed = 0;
+  for (const std::string& sha256 : sha256s) {
+    Result<bool> referenced = jobs_->IsBlobReferenced(sha256);
+    if (!referenced.ok()) {
+      logger_->warn("blob {}: kept: {}", sha256, referenced.status().message());
+      continue;
+    }
+    if (*referenced) continue;
+    if (Status gone = blobs_->Remove(sha256); !gone.ok()) {
+      logger_->warn("blob {}: {}", sha256, gone.message());
+      continue;
+    }
+    ++removed;
+  }
+  logger_->info("failed upload: removed {} of its {} new blob(s)", removed, sha256s.size());
 }
 
 ServiceResult<store::Job> JobService::CreateJob(const std::string& capture_id,
@@ -68,24 +102,23 @@ ServiceResult<store::Job> JobService::CreateJob(const std::string& capture_id,
     return ServiceStatus(ServiceCode::kInvalidArgument,
                          "config_json: " + parsed.status().message());
   }
-  // Before counting the queue: an unknown capture is NOT_FOUND even when the queue is full.
-  if (Result<store::Capture> capture = jobs_->GetCapture(capture_id); !capture.ok()) {
-    return capture.status();
-  }
-  Result<int64_t> queued = jobs_->CountJobs(store::JobState::kQueued);
-  if (!queued.ok()) return queued.status();
-  if (*queued >= options_.max_queued_jobs) {
-    return ServiceStatus(ServiceCode::kResourceExhausted,
-                         "the queue is full: " + std::to_string(*queued) +
-                             " jobs are QUEUED (max_queued " +
-                             std::to_string(options_.max_queued_jobs) + "); retry later");
-  }
-  Result<store::Job> job = jobs_->CreateJob(capture_id, config, request_id);
+  // The store checks the bound in the transaction that inserts, so concurrent creates cannot
+  // overshoot it, and a repeated request_id gets its job back even when the queue is full.
+  Result<std::optional<store::Job>> job =
+      jobs_->CreateJobBounded(capture_id, config, request_id, options_.max_queued_jobs);
   if (!job.ok()) return FromStoreCreate(job.status());
-  logger_->info("job {}: QUEUED for capture {} (request_id '{}')", job->id, capture_id, request_id);
-  events_->Notify(job->id);
+  if (!job->has_value()) {
+    return ServiceStatus(
+        ServiceCode::kResourceExhausted,
+        "the queue is full: max_queued = " + std::to_string(options_.max_queued_jobs) +
+            " jobs are QUEUED already; retry later");
+  }
+  const store::Job& created = **job;
+  logger_->info("job {}: {} for capture {} (request_id '{}')", created.id,
+                store::ToString(created.state), capture_id, request_id);
+  events_->Notify(created.id);
   if (options_.on_job_queued) options_.on_job_queued();
-  return *job;
+  return created;
 }
 
 ServiceResult<store::Job> JobService::GetJob(const std::string& job_id) {

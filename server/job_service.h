@@ -13,7 +13,9 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <shared_mutex>
 #include <string>
+#include <vector>
 
 #include "server/capture_upload.h"
 #include "server/job_events.h"
@@ -79,12 +81,18 @@ class JobService {
   bool draining() const { return draining_.load(); }
 
  private:
+  // After a failed upload: deletes those of `sha256s` that no capture refers to.
+  void RemoveUnreferencedBlobs(const std::vector<std::string>& sha256s);
+
   store::JobStore* jobs_;
   const store::BlobStore* blobs_;
   JobEvents* events_;
   JobServiceOptions options_;
   std::shared_ptr<spdlog::logger> logger_;
   std::atomic<bool> draining_{false};
+  // Shared from an upload's first blob put to its commit; exclusive while a failed upload removes
+  // its blobs (RemoveUnreferencedBlobs).
+  std::shared_mutex blob_puts_;
 };
 
 }  // namespace softid::server

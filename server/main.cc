@@ -6,6 +6,8 @@
 
 #include <CLI/CLI.hpp>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <thread>
 
 #include "server/server.h"
@@ -24,6 +26,21 @@ void ForwardToWaiter(int signal) {
   pthread_kill(g_signal_waiter, signal);
 }
 
+// Through a temporary file renamed into place: whoever polls for the file never reads half a
+// number.
+softid::Status WritePortFile(const std::string& path, int port) {
+  const std::string temporary = path + ".tmp";
+  {
+    std::ofstream out(temporary);
+    out << port << "\n";
+    if (!out.flush()) return softid::Status::IoError("--port-file " + path + ": cannot write");
+  }
+  std::error_code error;
+  std::filesystem::rename(temporary, path, error);
+  if (error) return softid::Status::IoError("--port-file " + path + ": " + error.message());
+  return softid::Status::Ok();
+}
+
 int DefaultWorkers() {
   const unsigned cores = std::thread::hardware_concurrency();
   return cores == 0 ? 1 : static_cast<int>(cores);
@@ -35,6 +52,7 @@ int main(int argc, char** argv) {
   softid::server::ServerOptions options;
   options.num_workers = DefaultWorkers();
   std::string data_dir;
+  std::string port_file;
   std::string log_level = "info";
 
   CLI::App app{"softid-server: queues and runs reconstruction jobs behind a gRPC API"};
@@ -55,8 +73,11 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--max-attempts", options.max_attempts,
                  "starts of a job whose worker was lost before it is FAILED")
+      ->envname("SOFTID_MAX_ATTEMPTS")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  app.add_option("--port-file", port_file,
+                 "once listening, write the bound port here (for --listen host:0)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
       ->envname("SOFTID_LOG_LEVEL")
       ->capture_default_str();
@@ -97,12 +118,22 @@ int main(int argc, char** argv) {
     return server.status().code() == softid::StatusCode::kInvalidArgument ? kExitInvalidInput
                                                                           : kExitFailure;
   }
+  bool port_file_failed = false;
+  if (!port_file.empty()) {
+    if (const softid::Status written = WritePortFile(port_file, (*server)->port()); !written.ok()) {
+      spdlog::error("{}", written.message());
+      port_file_failed = true;
+      pthread_kill(waiter.native_handle(), SIGTERM);
+    }
+  }
   waiter.join();
-  spdlog::info("received {}", received == SIGTERM ? "SIGTERM" : "SIGINT");
+  if (!port_file_failed) {
+    spdlog::info("received {}", received == SIGTERM ? "SIGTERM" : "SIGINT");
+  }
   const softid::Status closed = (*server)->Shutdown();
   if (!closed.ok()) {
     spdlog::error("{}", closed.message());
     return kExitFailure;
   }
-  return kExitOk;
+  return port_file_failed ? kExitFailure : kExitOk;
 }

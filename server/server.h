@@ -53,8 +53,9 @@ class Server {
 
   // The port actually bound.
   int port() const;
-  // Drains: health NOT_SERVING, refuse new work, interrupt running fits (their jobs are requeued
-  // at the next start), end open RPCs within shutdown_grace, close the store. Idempotent.
+  // Drains: health NOT_SERVING, refuse new work, interrupt running fits (their jobs go back to
+  // QUEUED without using up an attempt), end open RPCs within shutdown_grace, close the store.
+  // Idempotent.
   Status Shutdown();
 
  private:

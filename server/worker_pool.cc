@@ -81,7 +81,7 @@ void WorkerPool::WorkerLoop(int index) {
     std::atomic<bool> cancel{false};
     {
       std::lock_guard lock(mutex_);
-      // Claimed while Stop ran: interrupt at once; recovery requeues it.
+      // Claimed while Stop ran: interrupt at once; the runner releases it.
       if (stopping_.load()) cancel.store(true);
       running_.insert(&cancel);
     }

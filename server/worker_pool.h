@@ -3,8 +3,8 @@
 // another process sharing the database are picked up too.
 //
 // States: constructed (idle) -> Start() -> running -> Stop() -> stopped. Stop() stops claiming,
-// interrupts running fits (their jobs stay RUNNING and are requeued by RecoverAfterCrash at the
-// next start) and joins the threads.
+// interrupts running fits (their jobs are QUEUED again without using up an attempt, see
+// JobStore::ReleaseJob) and joins the threads.
 #pragma once
 
 #include <spdlog/logger.h>
