@@ -13,6 +13,7 @@
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 #include <string>
 
@@ -156,6 +157,88 @@ class ProgressPrinter {
   bool on_line_ = false;
 };
 
+// "2.1e+04", "[0, 0, -9.81]", "n=[0, 0, 1] d=0": short forms of result.json and truth.json values.
+std::string Compact(const nlohmann::json& value) {
+  if (value.is_number()) {
+    char text[32];
+    std::snprintf(text, sizeof(text), "%.5g", value.get<double>());
+    return text;
+  }
+  if (value.is_array()) {
+    std::string out = "[";
+    for (size_t i = 0; i < value.size(); ++i) out += (i ? ", " : "") + Compact(value[i]);
+    return out + "]";
+  }
+  if (value.is_object() && value.contains("normal") && value.contains("offset")) {
+    return "n=" + Compact(value["normal"]) + " d=" + Compact(value["offset"]);
+  }
+  return value.dump();
+}
+
+// |recovered - truth| / |truth| for numbers, the same with Euclidean norms for vectors.
+std::optional<double> RelativeError(const nlohmann::json& value, const nlohmann::json& truth) {
+  if (value.is_number() && truth.is_number()) {
+    const double t = truth.get<double>();
+    if (t == 0.0) return std::nullopt;
+    return std::abs(value.get<double>() - t) / std::abs(t);
+  }
+  if (value.is_array() && truth.is_array() && value.size() == truth.size()) {
+    double diff = 0.0, norm = 0.0;
+    for (size_t i = 0; i < value.size(); ++i) {
+      if (!value[i].is_number() || !truth[i].is_number()) return std::nullopt;
+      diff += std::pow(value[i].get<double>() - truth[i].get<double>(), 2);
+      norm += std::pow(truth[i].get<double>(), 2);
+    }
+    if (norm == 0.0) return std::nullopt;
+    return std::sqrt(diff / norm);
+  }
+  return std::nullopt;
+}
+
+// The fitted parameters next to the truth of a synthetic capture (softid-lab synth's
+// truth.json: {"parameters": {name: value}}). False with `error` set for an unreadable truth file.
+bool PrintAgainstTruth(const nlohmann::json& result, const std::string& truth_file,
+                       std::string* error) {
+  std::ifstream in(truth_file);
+  if (!in) {
+    *error = truth_file + ": cannot be read";
+    return false;
+  }
+  const nlohmann::json truth = nlohmann::json::parse(in, nullptr, /*allow_exceptions=*/false);
+  if (truth.is_discarded() || !truth.contains("parameters") || !truth["parameters"].is_object()) {
+    *error = truth_file + ": not a truth file (expected {\"parameters\": {...}})";
+    return false;
+  }
+  const nlohmann::json& parameters = result.value("parameters", nlohmann::json::object());
+  std::printf("%-24s %-20s %-10s %-20s %-20s %s\n", "parameter", "recovered", "unit", "start",
+              "truth", "error");
+  for (const auto& [name, entry] : parameters.items()) {
+    const std::string key = name == "ground_plane" ? "ground" : name;
+    const nlohmann::json value = entry.value("value", nlohmann::json());
+    const nlohmann::json* true_value =
+        truth["parameters"].contains(key) ? &truth["parameters"][key] : nullptr;
+    std::string error_text = "-";
+    if (true_value != nullptr) {
+      if (const std::optional<double> e = RelativeError(value, *true_value)) {
+        char text[32];
+        std::snprintf(text, sizeof(text), "%.2f %%", 100.0 * *e);
+        error_text = text;
+      }
+    }
+    std::printf("%-24s %-20s %-10s %-20s %-20s %s\n", name.c_str(), Compact(value).c_str(),
+                entry.value("unit", std::string()).c_str(),
+                Compact(entry.value("initial", nlohmann::json())).c_str(),
+                true_value != nullptr ? Compact(*true_value).c_str() : "-", error_text.c_str());
+  }
+  const nlohmann::json& cost = result.value("cost", nlohmann::json::object());
+  if (cost.contains("initial") && cost.contains("final")) {
+    std::printf("cost %s -> %s m^2 after %s iterations\n", Compact(cost["initial"]).c_str(),
+                Compact(cost["final"]).c_str(),
+                Compact(result.value("iterations", nlohmann::json())).c_str());
+  }
+  return true;
+}
+
 ReconstructionClient MakeClient(const GlobalFlags& flags) {
   softid::client::ClientOptions options;
   options.call_timeout =
@@ -197,7 +280,7 @@ int main(int argc, char** argv) {
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
 
-  std::string capture_dir, config_file, request_id, job_id, out_file, state;
+  std::string capture_dir, config_file, request_id, job_id, out_file, truth_file, state;
   bool wait = false;
   CLI::App* submit = app.add_subcommand("submit", "upload a capture folder and queue a job");
   submit->add_option("capture_dir", capture_dir, "capture folder (with capture.json)")->required();
@@ -211,6 +294,8 @@ int main(int argc, char** argv) {
   CLI::App* result = app.add_subcommand("result", "print or save the result of a job");
   result->add_option("job", job_id)->required();
   result->add_option("-o,--out", out_file, "write result.json here instead of printing it");
+  result->add_option("--truth", truth_file,
+                     "print the fitted parameters next to this truth.json (softid-lab synth)");
   CLI::App* list = app.add_subcommand("list", "list jobs");
   list->add_option("--state", state, "QUEUED, RUNNING, SUCCEEDED, FAILED or CANCELLED");
   CLI::App* cancel = app.add_subcommand("cancel", "cancel a job");
@@ -271,9 +356,22 @@ int main(int argc, char** argv) {
     v1::Result r;
     grpc::Status s = client.GetResult(job_id, &r);
     if (!s.ok()) return Report(s, flags);
-    const std::string text = nlohmann::json::parse(r.result_json()).dump(2) + "\n";
+    const nlohmann::json parsed = nlohmann::json::parse(r.result_json(), nullptr, false);
+    if (parsed.is_discarded()) {
+      std::fprintf(stderr, "softid: job %s: the server sent a result that is not JSON\n",
+                   job_id.c_str());
+      return kExitFailure;
+    }
+    const std::string text = parsed.dump(2) + "\n";
+    if (!truth_file.empty()) {
+      std::string error;
+      if (!PrintAgainstTruth(parsed, truth_file, &error)) {
+        std::fprintf(stderr, "softid: --truth %s\n", error.c_str());
+        return kExitInvalidInput;
+      }
+    }
     if (out_file.empty()) {
-      std::cout << text;
+      if (truth_file.empty()) std::cout << text;
       return kExitOk;
     }
     std::ofstream out(out_file);
