@@ -235,8 +235,8 @@ TEST_F(GrpcServerTest, UnknownJobResultBeforeDoneAndCancel) {
   EXPECT_EQ(page.jobs(0).id(), queued.id());
 }
 
-// A job RUNNING when the server stops is QUEUED after a restart, keeps its history and then
-// completes.
+// A job RUNNING when the server stops is QUEUED again (released at shutdown), keeps its history
+// after a restart and then completes.
 TEST_F(GrpcServerTest, RunningJobSurvivesRestart) {
   StartServer(/*num_workers=*/1);
   const v1::Capture capture = Upload();

@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# Usage: dockerfile_test.sh SOURCE_DIR
+# No Docker engine runs here, so the Dockerfile is checked as text for what the deployment relies
+# on: a bookworm build stage that uses the CI dependency script, a bookworm-slim runtime stage
+# with the runtime package list, a non-root user, the data volume, a HEALTHCHECK through
+# `softid health`, and tini as PID 1 (from a listed package); the compose file builds it.
+set -euo pipefail
+
+source_dir=$1
+dockerfile=$source_dir/deploy/Dockerfile
+compose=$source_dir/deploy/docker-compose.yml
+list=$source_dir/deploy/runtime-packages.txt
+failed=0
+
+expect() {  # DESCRIPTION EXTENDED-REGEX FILE
+  if ! grep -Eq -- "$2" "$3"; then
+    echo "FAIL: $(basename "$3"): $1 (no line matches /$2/)" >&2
+    failed=1
+  fi
+}
+
+[ -f "$dockerfile" ] || { echo "FAIL: $dockerfile is missing" >&2; exit 1; }
+[ "$(grep -Ec '^FROM ' "$dockerfile")" -eq 2 ] || { echo "FAIL: expected two stages" >&2; failed=1; }
+expect "build stage on debian:bookworm" '^FROM debian:bookworm AS build$' "$dockerfile"
+expect "build stage uses the CI dependency script" '^RUN .*bash deploy/install-deps\.sh' "$dockerfile"
+expect "runtime stage on debian:bookworm-slim" '^FROM debian:bookworm-slim$' "$dockerfile"
+expect "runtime packages come from the list" '^COPY deploy/runtime-packages\.txt ' "$dockerfile"
+expect "binaries come from the build stage" '^COPY --from=build ' "$dockerfile"
+expect "a data volume" '^VOLUME .*/var/lib/softid' "$dockerfile"
+expect "the server's data directory is the volume" 'SOFTID_DATA=/var/lib/softid' "$dockerfile"
+expect "health checked with the client" 'CMD \["softid", "--retry-for", "0", "--timeout", "3", "health"\]' \
+  "$dockerfile"
+expect "tini as PID 1" '^ENTRYPOINT \["/usr/bin/tini", "--", "softid-server"\]' "$dockerfile"
+expect "tini is installed" '^tini([[:space:]]|#|$)' "$list"
+
+# The last USER wins: it must name a user other than root.
+user=$(awk '$1 == "USER" {u = $2} END {print u}' "$dockerfile")
+case "${user%%:*}" in
+  "" ) echo "FAIL: Dockerfile: no USER: the server would run as root" >&2; failed=1 ;;
+  root | 0 ) echo "FAIL: Dockerfile: USER $user is root" >&2; failed=1 ;;
+esac
+# Every file the Dockerfile copies from the context exists.
+while read -r source; do
+  [ -e "$source_dir/$source" ] || { echo "FAIL: Dockerfile copies $source, which is missing" >&2; failed=1; }
+done < <(awk '$1 == "COPY" && $2 !~ /^--/ && $2 != "." {print $2}' "$dockerfile")
+
+expect "compose builds deploy/Dockerfile" 'dockerfile: deploy/Dockerfile' "$compose"
+expect "compose keeps the data on a volume" ':/var/lib/softid' "$compose"
+
+[ "$failed" -eq 0 ] || exit 1
+echo "ok: Dockerfile and compose file have every part the deployment relies on"

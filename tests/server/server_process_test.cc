@@ -1,0 +1,631 @@
+// The real softid-server binary in its own process, driven over loopback with the client library:
+// what only a separate process shows (kill -9 and restart, SIGTERM and its exit status, the
+// command line) plus the API's answers to bad input, a full queue and repeated request ids.
+#include <fcntl.h>
+#include <grpcpp/create_channel.h>
+#include <grpcpp/security/credentials.h>
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <spawn.h>
+#include <spdlog/spdlog.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "client/capture_files.h"
+#include "client/reconstruction_client.h"
+#include "tests/core/inverse/inverse_test_util.h"
+#include "tests/server/temp_dir.h"
+
+extern char** environ;
+
+namespace softid::server {
+namespace {
+
+namespace fs = std::filesystem;
+using Clock = std::chrono::steady_clock;
+using client::ReconstructionClient;
+using store::testing::TempDir;
+
+// Fits youngs_modulus on the small capture with one thread; starts run one after the other.
+std::string FitConfig(int max_iterations, int starts = 1) {
+  return nlohmann::json{{"fit", {"youngs_modulus"}},
+                        {"max_iterations", max_iterations},
+                        {"starts", starts},
+                        {"threads", 1},
+                        {"cells", 8},
+                        {"substeps", 2},
+                        {"fixed", {{"ground", {{"normal", {0, 0, 1}}, {"offset", 0}}}}}}
+      .dump();
+}
+
+std::string ReadFile(const fs::path& path) {
+  std::ifstream in(path);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// One softid-server process on a free port, its output in a log file. Killed (SIGKILL) on
+// destruction if still running.
+class ServerProcess {
+ public:
+  struct Flags {
+    int workers = 1;
+    int max_queued = 100;
+    int max_attempts = 3;
+  };
+
+  ServerProcess(const fs::path& data_dir, const fs::path& log_file, const Flags& flags)
+      : port_file_(data_dir.string() + ".port"), log_file_(log_file) {
+    std::error_code ignored;
+    fs::remove(port_file_, ignored);
+    const std::vector<std::string> args = {SOFTID_SERVER_BINARY,
+                                           "--listen",
+                                           "localhost:0",
+                                           "--port-file",
+                                           port_file_.string(),
+                                           "--data",
+                                           data_dir.string(),
+                                           "--workers",
+                                           std::to_string(flags.workers),
+                                           "--max-queued",
+                                           std::to_string(flags.max_queued),
+                                           "--max-attempts",
+                                           std::to_string(flags.max_attempts)};
+    std::vector<char*> argv;
+    for (const std::string& arg : args) argv.push_back(const_cast<char*>(arg.c_str()));
+    argv.push_back(nullptr);
+    posix_spawn_file_actions_t actions;
+    posix_spawn_file_actions_init(&actions);
+    // Appended, so one log file tells the story of every start in a test.
+    posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, log_file_.c_str(),
+                                     O_WRONLY | O_CREAT | O_APPEND, 0644);
+    posix_spawn_file_actions_adddup2(&actions, STDOUT_FILENO, STDERR_FILENO);
+    const int spawned =
+        posix_spawn(&pid_, SOFTID_SERVER_BINARY, &actions, nullptr, argv.data(), environ);
+    posix_spawn_file_actions_destroy(&actions);
+    if (spawned != 0) {
+      ADD_FAILURE() << "cannot start " << SOFTID_SERVER_BINARY << ": " << std::strerror(spawned);
+      pid_ = -1;
+    }
+  }
+
+  ~ServerProcess() {
+    if (running()) {
+      ::kill(pid_, SIGKILL);
+      (void)Wait(std::chrono::seconds(10));
+    }
+  }
+
+  ServerProcess(const ServerProcess&) = delete;
+  ServerProcess& operator=(const ServerProcess&) = delete;
+
+  // Waits until the server wrote its port and answers health checks; false (with a failure
+  // naming the log) if it exited or took too long.
+  bool WaitUntilServing() {
+    const Clock::time_point give_up = Clock::now() + std::chrono::seconds(30);
+    while (Clock::now() < give_up) {
+      if (!running()) {
+        ADD_FAILURE() << "softid-server exited with status " << exit_status_.value_or(-1)
+                      << " before serving; log:\n"
+                      << ReadFile(log_file_);
+        return false;
+      }
+      std::ifstream in(port_file_);
+      if (in >> port_ && port_ > 0) {
+        client::ServingStatus serving = client::ServingStatus::kUnknown;
+        if (Client().Health("", &serving).ok() && serving == client::ServingStatus::kServing) {
+          return true;
+        }
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    }
+    ADD_FAILURE() << "softid-server did not serve within 30 s; log:\n" << ReadFile(log_file_);
+    return false;
+  }
+
+  ReconstructionClient Client() const {
+    client::ClientOptions options;
+    options.retry_budget = std::chrono::milliseconds(0);
+    options.call_timeout = std::chrono::milliseconds(10000);
+    // A job that never ends fails the test instead of hanging it.
+    options.watch_timeout = std::chrono::milliseconds(180000);
+    return ReconstructionClient(grpc::CreateChannel("localhost:" + std::to_string(port_),
+                                                    grpc::InsecureChannelCredentials()),
+                                options);
+  }
+  std::unique_ptr<v1::Reconstruction::Stub> Stub() const {
+    return v1::Reconstruction::NewStub(grpc::CreateChannel("localhost:" + std::to_string(port_),
+                                                           grpc::InsecureChannelCredentials()));
+  }
+
+  void Signal(int signal) { ::kill(pid_, signal); }
+
+  // The exit status (or 128 + signal), or nullopt if it still runs after `timeout`.
+  std::optional<int> Wait(std::chrono::milliseconds timeout) {
+    const Clock::time_point give_up = Clock::now() + timeout;
+    while (running()) {
+      if (Clock::now() >= give_up) return std::nullopt;
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return exit_status_;
+  }
+
+  bool running() {
+    if (pid_ <= 0 || exit_status_.has_value()) return false;
+    int status = 0;
+    const pid_t done = ::waitpid(pid_, &status, WNOHANG);
+    if (done == 0) return true;
+    if (done == pid_) {
+      exit_status_ = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    } else {
+      exit_status_ = -1;
+    }
+    return false;
+  }
+
+ private:
+  fs::path port_file_;
+  fs::path log_file_;
+  pid_t pid_ = -1;
+  int port_ = 0;
+  std::optional<int> exit_status_;
+};
+
+class ServerProcessTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    spdlog::set_level(spdlog::level::warn);
+    capture_ = new inverse::testing::SmallCapture(
+        inverse::testing::MakeSmallCapture("torus-drop", /*duration=*/0.2, /*cameras=*/1));
+  }
+  static void TearDownTestSuite() {
+    delete capture_;
+    capture_ = nullptr;
+  }
+
+  void SetUp() override { ASSERT_TRUE(capture_->ok) << capture_->error; }
+
+  // Starts a server on the test's data directory and waits until it serves.
+  std::unique_ptr<ServerProcess> Start(const ServerProcess::Flags& flags) {
+    auto server = std::make_unique<ServerProcess>(data_dir(), log_file(), flags);
+    if (!server->WaitUntilServing()) return nullptr;
+    return server;
+  }
+
+  // SIGTERM, then the exit status must be 0 within a few seconds.
+  void StopCleanly(ServerProcess& server) {
+    server.Signal(SIGTERM);
+    const std::optional<int> status = server.Wait(std::chrono::seconds(20));
+    ASSERT_TRUE(status.has_value()) << "no exit 20 s after SIGTERM; log:\n" << ReadFile(log_file());
+    EXPECT_EQ(*status, 0) << ReadFile(log_file());
+  }
+
+  fs::path data_dir() const { return root_.path() / "data"; }
+  fs::path log_file() const { return root_.path() / "server.log"; }
+
+  static client::CaptureFiles CaptureFiles() {
+    client::CaptureFiles files;
+    std::string error;
+    EXPECT_TRUE(client::ReadCaptureFiles(capture_->directory, &files, &error)) << error;
+    return files;
+  }
+
+  static std::string Upload(ReconstructionClient& client, const std::string& request_id = "") {
+    v1::Capture capture;
+    const grpc::Status status = client.UploadCapture(CaptureFiles(), request_id, &capture);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return capture.id();
+  }
+
+  static grpc::Status Create(ReconstructionClient& client, const std::string& capture_id,
+                             const std::string& config, const std::string& request_id,
+                             v1::Job* job) {
+    v1::CreateJobRequest request;
+    request.set_capture_id(capture_id);
+    request.set_config_json(config);
+    request.set_request_id(request_id);
+    return client.CreateJob(request, job);
+  }
+
+  static v1::Job CreateOk(ReconstructionClient& client, const std::string& capture_id,
+                          const std::string& config, const std::string& request_id = "") {
+    v1::Job job;
+    const grpc::Status status = Create(client, capture_id, config, request_id, &job);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return job;
+  }
+
+  // Reads the job's event stream until its first ITERATION event (the fit is running), which it
+  // returns with every event before it.
+  static std::vector<v1::JobEvent> WatchUntilFirstIteration(ServerProcess& server,
+                                                            const std::string& job_id) {
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+    v1::WatchJobRequest request;
+    request.set_job_id(job_id);
+    auto stub = server.Stub();
+    auto reader = stub->WatchJob(&context, request);
+    std::vector<v1::JobEvent> events;
+    v1::JobEvent event;
+    while (reader->Read(&event)) {
+      events.push_back(event);
+      if (event.kind() == v1::JobEvent::ITERATION) break;
+    }
+    context.TryCancel();
+    (void)reader->Finish();
+    return events;
+  }
+
+  static std::vector<v1::JobEvent> WatchToEnd(ReconstructionClient& client,
+                                              const std::string& job_id) {
+    std::vector<v1::JobEvent> events;
+    const grpc::Status status =
+        client.WatchJob(job_id, 0, [&](const v1::JobEvent& e) { events.push_back(e); });
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return events;
+  }
+
+  static v1::Job GetJob(ReconstructionClient& client, const std::string& job_id) {
+    v1::Job job;
+    const grpc::Status status = client.GetJob(job_id, &job);
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    return job;
+  }
+
+  static int CountBlobs(const fs::path& data) {
+    int n = 0;
+    for (const auto& entry : fs::recursive_directory_iterator(data / "blobs")) {
+      if (entry.is_regular_file() && entry.path().parent_path().filename() != "tmp") ++n;
+    }
+    return n;
+  }
+
+  static inverse::testing::SmallCapture* capture_;
+  TempDir root_;
+};
+
+inverse::testing::SmallCapture* ServerProcessTest::capture_ = nullptr;
+
+// kill -9 while a job runs: the restarted server requeues it, the job then completes, and its
+// history still holds every event of the lost attempt, in order, with nothing renumbered.
+TEST_F(ServerProcessTest, KillNineWhileRunningThenRestartCompletesTheJob) {
+  std::vector<v1::JobEvent> before;
+  std::string job_id;
+  {
+    std::unique_ptr<ServerProcess> server = Start({.workers = 1});
+    ASSERT_NE(server, nullptr);
+    ReconstructionClient client = server->Client();
+    job_id = CreateOk(client, Upload(client), FitConfig(/*max_iterations=*/3)).id();
+    before = WatchUntilFirstIteration(*server, job_id);
+    ASSERT_FALSE(before.empty());
+    ASSERT_EQ(before.back().kind(), v1::JobEvent::ITERATION);
+    server->Signal(SIGKILL);
+    EXPECT_EQ(server->Wait(std::chrono::seconds(10)), 128 + SIGKILL);
+  }
+
+  std::unique_ptr<ServerProcess> server = Start({.workers = 1});
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient client = server->Client();
+  const std::vector<v1::JobEvent> history = WatchToEnd(client, job_id);
+  ASSERT_GT(history.size(), before.size());
+  EXPECT_EQ(history.back().state(), v1::SUCCEEDED);
+  for (size_t i = 0; i < history.size(); ++i) {
+    EXPECT_EQ(history[i].seq(), static_cast<int64_t>(i + 1)) << "history has a gap";
+  }
+  for (size_t i = 0; i < before.size(); ++i) {
+    EXPECT_EQ(history[i].kind(), before[i].kind()) << "event " << i;
+    EXPECT_EQ(history[i].iteration(), before[i].iteration()) << "event " << i;
+    EXPECT_EQ(history[i].attempt(), before[i].attempt()) << "event " << i;
+    EXPECT_LE(history[i].attempt(), 1) << "event " << i;  // 0 before the first claim
+    EXPECT_EQ(history[i].message(), before[i].message()) << "event " << i;
+  }
+  EXPECT_DOUBLE_EQ(history[before.size() - 1].cost(), before.back().cost());
+  const v1::JobEvent& requeued = history[before.size()];
+  EXPECT_EQ(requeued.state(), v1::QUEUED);
+  EXPECT_NE(requeued.message().find("requeued: its worker was lost"), std::string::npos)
+      << requeued.message();
+  bool second_attempt_iteration = false;
+  for (const v1::JobEvent& e : history) {
+    if (e.kind() == v1::JobEvent::ITERATION && e.attempt() == 2) second_attempt_iteration = true;
+  }
+  EXPECT_TRUE(second_attempt_iteration);
+  EXPECT_EQ(GetJob(client, job_id).attempts(), 2);
+  v1::Result result;
+  ASSERT_TRUE(client.GetResult(job_id, &result).ok());
+  EXPECT_TRUE(nlohmann::json::parse(result.result_json())["parameters"].contains("youngs_modulus"));
+  StopCleanly(*server);
+}
+
+// SIGTERM while a job runs: exit status 0, the job QUEUED at once (nothing left RUNNING, so the
+// next start recovers nothing), and the interrupted attempt is not held against max_attempts:
+// with --max-attempts 1 the job still runs to SUCCEEDED afterwards.
+TEST_F(ServerProcessTest, SigtermRequeuesTheRunningJobWithoutUsingAnAttempt) {
+  std::string job_id;
+  {
+    std::unique_ptr<ServerProcess> server = Start({.workers = 1, .max_attempts = 1});
+    ASSERT_NE(server, nullptr);
+    ReconstructionClient client = server->Client();
+    job_id = CreateOk(client, Upload(client), FitConfig(/*max_iterations=*/3)).id();
+    ASSERT_FALSE(WatchUntilFirstIteration(*server, job_id).empty());
+    StopCleanly(*server);
+  }
+  {
+    std::unique_ptr<ServerProcess> server = Start({.workers = 0, .max_attempts = 1});
+    ASSERT_NE(server, nullptr);
+    ReconstructionClient client = server->Client();
+    const v1::Job job = GetJob(client, job_id);
+    EXPECT_EQ(job.state(), v1::QUEUED);
+    EXPECT_EQ(job.attempts(), 1);
+    StopCleanly(*server);
+  }
+  EXPECT_EQ(ReadFile(log_file()).find("recovered"), std::string::npos)
+      << "a start found jobs left RUNNING:\n"
+      << ReadFile(log_file());
+
+  std::unique_ptr<ServerProcess> server = Start({.workers = 1, .max_attempts = 1});
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient client = server->Client();
+  const std::vector<v1::JobEvent> history = WatchToEnd(client, job_id);
+  ASSERT_FALSE(history.empty());
+  EXPECT_EQ(history.back().state(), v1::SUCCEEDED) << history.back().message();
+  bool released = false;
+  for (const v1::JobEvent& e : history) {
+    if (e.state() == v1::QUEUED &&
+        e.message().find("requeued: the server shut down during attempt 1") != std::string::npos) {
+      released = true;
+    }
+  }
+  EXPECT_TRUE(released);
+  EXPECT_EQ(GetJob(client, job_id).attempts(), 2);
+  StopCleanly(*server);
+}
+
+// Cancelling a RUNNING job stops its fit: the job ends CANCELLED long before its 8 starts of up to
+// 200 iterations could finish, and has no result.
+TEST_F(ServerProcessTest, CancelStopsARunningJob) {
+  std::unique_ptr<ServerProcess> server = Start({.workers = 1});
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient client = server->Client();
+  const std::string job_id =
+      CreateOk(client, Upload(client), FitConfig(/*max_iterations=*/200, /*starts=*/8)).id();
+  ASSERT_FALSE(WatchUntilFirstIteration(*server, job_id).empty());
+  v1::Job cancelled;
+  ASSERT_TRUE(client.CancelJob(job_id, &cancelled).ok());
+  EXPECT_TRUE(cancelled.cancel_requested());
+  const Clock::time_point asked = Clock::now();
+  const std::vector<v1::JobEvent> history = WatchToEnd(client, job_id);
+  ASSERT_FALSE(history.empty());
+  EXPECT_EQ(history.back().state(), v1::CANCELLED);
+  EXPECT_LT(Clock::now() - asked, std::chrono::seconds(30));
+  v1::Result result;
+  EXPECT_EQ(client.GetResult(job_id, &result).error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  StopCleanly(*server);
+}
+
+// Five jobs on two workers: never more than two RUNNING at once, all five SUCCEEDED.
+TEST_F(ServerProcessTest, JobsQueuedBeyondTheWorkersAllFinish) {
+  std::unique_ptr<ServerProcess> server = Start({.workers = 2});
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient client = server->Client();
+  const std::string capture_id = Upload(client);
+  std::vector<std::string> ids;
+  for (int i = 0; i < 5; ++i) ids.push_back(CreateOk(client, capture_id, FitConfig(1)).id());
+
+  const Clock::time_point give_up = Clock::now() + std::chrono::seconds(150);
+  int max_running = 0;
+  int succeeded = 0;
+  while (Clock::now() < give_up) {
+    v1::ListJobsResponse page;
+    ASSERT_TRUE(client.ListJobs(v1::ListJobsRequest(), &page).ok());
+    ASSERT_EQ(page.jobs_size(), 5);
+    int running = 0;
+    succeeded = 0;
+    for (const v1::Job& job : page.jobs()) {
+      running += job.state() == v1::RUNNING;
+      succeeded += job.state() == v1::SUCCEEDED;
+      ASSERT_NE(job.state(), v1::FAILED) << job.id() << ": " << job.error();
+    }
+    max_running = std::max(max_running, running);
+    if (succeeded == 5) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  EXPECT_EQ(succeeded, 5);
+  EXPECT_LE(max_running, 2);
+  EXPECT_GE(max_running, 1);
+  for (const std::string& id : ids) EXPECT_EQ(GetJob(client, id).attempts(), 1);
+  StopCleanly(*server);
+}
+
+// A repeated request_id returns the job created the first time, also when the queue is full
+// (RESOURCE_EXHAUSTED for anything new, naming the bound); reused with another config it is
+// ALREADY_EXISTS.
+TEST_F(ServerProcessTest, RequestIdIsIdempotentAndTheQueueIsBounded) {
+  std::unique_ptr<ServerProcess> server = Start({.workers = 0, .max_queued = 2});
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient client = server->Client();
+  const std::string capture_id = Upload(client, "station-1/take-1");
+  EXPECT_EQ(Upload(client, "station-1/take-1"), capture_id);
+
+  const v1::Job first = CreateOk(client, capture_id, FitConfig(2), "take-1/job");
+  EXPECT_EQ(first.state(), v1::QUEUED);
+  EXPECT_EQ(CreateOk(client, capture_id, FitConfig(2), "take-1/job").id(), first.id());
+  CreateOk(client, capture_id, FitConfig(2));
+
+  v1::Job job;
+  const grpc::Status full = Create(client, capture_id, FitConfig(2), "take-2/job", &job);
+  EXPECT_EQ(full.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(full.error_message().find("max_queued = 2"), std::string::npos) << full.error_message();
+  const grpc::Status repeat = Create(client, capture_id, FitConfig(2), "take-1/job", &job);
+  ASSERT_TRUE(repeat.ok()) << repeat.error_message();
+  EXPECT_EQ(job.id(), first.id());
+
+  const grpc::Status reused = Create(client, capture_id, FitConfig(5), "take-1/job", &job);
+  EXPECT_EQ(reused.error_code(), grpc::StatusCode::ALREADY_EXISTS);
+  EXPECT_NE(reused.error_message().find(first.id()), std::string::npos) << reused.error_message();
+
+  v1::ListJobsResponse page;
+  ASSERT_TRUE(client.ListJobs(v1::ListJobsRequest(), &page).ok());
+  EXPECT_EQ(page.jobs_size(), 2);
+  StopCleanly(*server);
+}
+
+// Each malformed job config field is INVALID_ARGUMENT naming the field and the value; nothing is
+// queued.
+TEST_F(ServerProcessTest, BadJobConfigNamesTheFieldAndValue) {
+  std::unique_ptr<ServerProcess> server = Start({.workers = 0});
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient client = server->Client();
+  const std::string capture_id = Upload(client);
+  struct Case {
+    std::string config;
+    std::vector<std::string> expected;  // substrings of the message
+  };
+  const std::vector<Case> cases = {
+      {R"({"max_iterations": -3})", {"max_iterations", "-3"}},
+      {R"({"fit": ["youngs_modulo"]})", {"fit[0]", "youngs_modulo"}},
+      {R"({"cells": "many"})", {"cells", "many"}},
+      {R"({"starts": 0})", {"starts", "0"}},
+      {R"({"gradient": "guess"})", {"gradient", "guess"}},
+      {R"({"max_iteration": 5})", {"max_iteration"}},
+      {R"({"fit": )", {"config_json", "invalid JSON"}},
+  };
+  for (const Case& c : cases) {
+    v1::Job job;
+    const grpc::Status status = Create(client, capture_id, c.config, "", &job);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << c.config;
+    for (const std::string& part : c.expected) {
+      EXPECT_NE(status.error_message().find(part), std::string::npos)
+          << c.config << " -> " << status.error_message();
+    }
+  }
+  v1::Job job;
+  EXPECT_EQ(Create(client, "cap-0123456789abcdef", "", "", &job).error_code(),
+            grpc::StatusCode::NOT_FOUND);
+  v1::ListJobsResponse page;
+  ASSERT_TRUE(client.ListJobs(v1::ListJobsRequest(), &page).ok());
+  EXPECT_EQ(page.jobs_size(), 0);
+  StopCleanly(*server);
+}
+
+// Each malformed capture manifest is INVALID_ARGUMENT naming the field (or file) and the value,
+// and stores nothing.
+TEST_F(ServerProcessTest, BadCaptureManifestNamesTheFieldAndValue) {
+  std::unique_ptr<ServerProcess> server = Start({.workers = 0});
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient client = server->Client();
+  const client::CaptureFiles good = CaptureFiles();
+  ASSERT_GE(good.files.size(), 2u);
+  nlohmann::json capture_json = nlohmann::json::parse(good.capture_json);
+
+  struct Case {
+    std::string name;
+    client::CaptureFiles files;
+    std::vector<std::string> expected;
+  };
+  std::vector<Case> cases;
+  {
+    Case c{"not JSON", good, {"capture_json", "invalid JSON"}};
+    c.files.capture_json = "{\"format\": ";
+    cases.push_back(c);
+  }
+  {
+    Case c{"negative fps", good, {"fps", "-30"}};
+    nlohmann::json bad = capture_json;
+    bad["fps"] = -30;
+    c.files.capture_json = bad.dump();
+    cases.push_back(c);
+  }
+  {
+    Case c{"unknown format", good, {"format", "softid-capture/9"}};
+    nlohmann::json bad = capture_json;
+    bad["format"] = "softid-capture/9";
+    c.files.capture_json = bad.dump();
+    cases.push_back(c);
+  }
+  {
+    const std::string missing = good.files.back().path();
+    Case c{"frame not listed", good, {missing, "is not listed"}};
+    c.files.files.pop_back();
+    cases.push_back(c);
+  }
+  {
+    Case c{"bad sha256", good, {"sha256", "xyz"}};
+    c.files.files[0].set_sha256("xyz");
+    cases.push_back(c);
+  }
+  {
+    Case c{"negative size", good, {"size_bytes", "-1"}};
+    c.files.files[0].set_size_bytes(-1);
+    cases.push_back(c);
+  }
+  {
+    Case c{"path escapes", good, {"path", "../x.png"}};
+    c.files.files[0].set_path("../x.png");
+    cases.push_back(c);
+  }
+  for (const Case& c : cases) {
+    v1::Capture capture;
+    const grpc::Status status = client.UploadCapture(c.files, "", &capture);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << c.name;
+    for (const std::string& part : c.expected) {
+      EXPECT_NE(status.error_message().find(part), std::string::npos)
+          << c.name << " -> " << status.error_message();
+    }
+  }
+  EXPECT_EQ(CountBlobs(data_dir()), 0);
+  EXPECT_TRUE(fs::is_empty(data_dir() / "uploads"));
+  StopCleanly(*server);
+}
+
+// An upload that fails after its files were stored as blobs (here: a request_id reused for other
+// bytes, ALREADY_EXISTS) removes the blobs it added, and keeps those another capture uses.
+TEST_F(ServerProcessTest, FailedUploadLeavesNoOrphanedBlobs) {
+  std::unique_ptr<ServerProcess> server = Start({.workers = 0});
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient client = server->Client();
+  Upload(client, "take-1");
+  const int stored = CountBlobs(data_dir());
+  ASSERT_GT(stored, 2);
+
+  // The same capture with its mesh file changed by a comment line: a different blob.
+  TempDir copy;
+  fs::copy(capture_->directory, copy.path(), fs::copy_options::recursive);
+  client::CaptureFiles files;
+  std::string error;
+  ASSERT_TRUE(client::ReadCaptureFiles(copy.path(), &files, &error)) << error;
+  const nlohmann::json capture_json = nlohmann::json::parse(files.capture_json);
+  const fs::path mesh = copy.path() / capture_json["mesh"].get<std::string>();
+  {
+    std::ofstream out(mesh, std::ios::app);
+    out << "# changed\n";
+  }
+  files = client::CaptureFiles();
+  ASSERT_TRUE(client::ReadCaptureFiles(copy.path(), &files, &error)) << error;
+
+  v1::Capture capture;
+  const grpc::Status reused = client.UploadCapture(files, "take-1", &capture);
+  EXPECT_EQ(reused.error_code(), grpc::StatusCode::ALREADY_EXISTS) << reused.error_message();
+  EXPECT_EQ(CountBlobs(data_dir()), stored);
+
+  // Without the clash the same files are stored: one new blob.
+  const grpc::Status fresh = client.UploadCapture(files, "take-2", &capture);
+  ASSERT_TRUE(fresh.ok()) << fresh.error_message();
+  EXPECT_EQ(CountBlobs(data_dir()), stored + 1);
+  StopCleanly(*server);
+}
+
+}  // namespace
+}  // namespace softid::server
