@@ -152,6 +152,16 @@ int RunBench(const BenchFlags& flags) {
         "at ~3000 cells: %.2f ms per forward+adjoint step = %.2fx the 40 ms target (paper: ~600 "
         "ms on an RTX 2070)\n",
         adjoint_ms_at_3000, adjoint_ms_at_3000 / 40.0);
+    // A teddy-sized job: 80 frames, 50 L-BFGS iterations; a Wolfe line search needs ~1.3
+    // evaluations (forward + adjoint) per iteration on our fits.
+    constexpr int kFrames = 80, kIterations = 50;
+    constexpr double kEvaluationsPerIteration = 1.3;
+    const double minutes = adjoint_ms_at_3000 * 1e-3 * kFrames * flags.substeps * kIterations *
+                           kEvaluationsPerIteration / 60.0;
+    std::printf(
+        "teddy-sized job (3000 cells, %d frames x %d substeps, %d iterations, ~%.1f evaluations "
+        "per iteration): projected %.1f min per start = %.1fx the 3 min target (paper: ~40 min)\n",
+        kFrames, flags.substeps, kIterations, kEvaluationsPerIteration, minutes, minutes / 3.0);
   }
   return kExitOk;
 }
