@@ -1,0 +1,77 @@
+// The pre-registered decision rule: fixed before any data is seen, in DecisionOptions.
+//
+//   0. No phase and no patch of the base fit is above misfit_threshold x noise floor -> "none".
+//   1. A refitted candidate (every base parameter free as well) is accepted only if all hold:
+//      a. likelihood ratio: LR = n_eff log(C0 / C1) > the chi-bar-square critical value at level
+//         alpha / (variants the screening chose among) (likelihood_ratio.h);
+//      b. held-out frames improve: H1 <= (1 - min_heldout_improvement) H0;
+//      c. every phase and patch flagged at the base fit is back at or below the threshold;
+//      d. the fitted value is physically plausible (candidate_library.h);
+//      e. the motion determines the found value: moving it by +-25 % (the other parameters at
+//         the refit) is rejected by the same likelihood-ratio test (its profile).
+//   2. Among accepted candidates the largest LR wins. A nuisance (initial spin) that wins means
+//      the mismatch was the nuisance: "none", with the nuisance reported as such.
+//   3. Flagged, nothing accepted -> "unexplained", with where and when.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/diagnosis/candidate_library.h"
+
+namespace softid::diagnosis {
+
+struct DecisionOptions {
+  // A phase or patch misfits when its RMS residual exceeds this multiple of the noise floor [-],
+  // > 1. 1.5: the floor's own frame-to-frame scatter is ~10 % with a few hundred points per frame,
+  // and the fit grid's dynamic discretisation adds a few tens of percent on impact; a misfit half
+  // again as large as the noise is visible in a depth image.
+  double misfit_threshold = 1.5;
+  // Level of the likelihood-ratio test [-], in (0, 0.5). 1 %: five candidates are tested per
+  // capture, so 5 % each would raise false alarms to ~20 %.
+  double alpha = 0.01;
+  // Held-out cost must fall by at least this fraction [-], in [0, 1). 10 %: an extension that only
+  // fits noise in the fitted frames does not move the held-out frames at all.
+  double min_heldout_improvement = 0.1;
+  // Phases need this many frames, patches this many points, to be flagged (decision step 0).
+  int min_phase_frames = 2;
+  long long min_patch_points = 50;
+  // Candidates refitted after screening (the best scores), >= 1. Each refit costs a fit.
+  int max_refits = 2;
+  Status Validate() const;
+};
+
+// The outcome of testing one refitted candidate.
+struct CandidateTest {
+  Extension extension = Extension::kFriction;
+  bool nuisance = false;
+  double cost_before = 0.0, cost_after = 0.0;        // fitted frames [m^2]
+  double heldout_before = 0.0, heldout_after = 0.0;  // held-out frames [m^2]
+  double n_eff = 0.0, tau_pixels = 1.0, tau_frames = 1.0;
+  double lr = 0.0, critical_value = 0.0;
+  bool lr_passed = false;
+  bool heldout_passed = false;
+  bool returned_to_noise = false;
+  std::vector<std::string> still_flagged;  // phases/patches still above the threshold
+  bool plausible = false;
+  std::string plausibility_note;
+  bool identifiability_checked = false;
+  bool identifiable = true;
+  std::string identifiability_note;
+  bool accepted = false;
+  std::string refit_error;  // the refit failed (the candidate is then rejected)
+  // Why it was rejected, e.g. "held-out cost fell by 3 % < 10 %" (empty when accepted).
+  std::string Reason() const;
+};
+
+// Fills the pass flags and `accepted` of `test` from its numbers (steps 1a-1e).
+void ApplyDecisionRule(const DecisionOptions& options, const Candidate& candidate,
+                       CandidateTest* test);
+
+// "none" | "unexplained" | the physics name of the winner (steps 0, 2, 3); `flagged` is step 0.
+// *winner is the index of the accepted test that decided, -1 when none did (a winning nuisance
+// gives "none" with *winner >= 0).
+std::string Decide(bool flagged, const std::vector<CandidateTest>& tests, int* winner);
+
+}  // namespace softid::diagnosis

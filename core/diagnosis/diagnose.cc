@@ -1,0 +1,459 @@
+#include "core/diagnosis/diagnose.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include "core/common/json_fields.h"
+#include "core/diagnosis/likelihood_ratio.h"
+#include "core/diagnosis/plots.h"
+#include "core/inverse/identifiability.h"
+#include "core/inverse/objective_settings.h"
+#include "core/inverse/trajectory_objective.h"
+
+namespace softid::diagnosis {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// Everything needed to evaluate any parameters on the capture as the fit does.
+struct Context {
+  geometry::TriangleMesh mesh;
+  Observations observations;
+  std::unique_ptr<inverse::TrajectoryObjective> objective;
+  Eigen::AlignedBox3d rest_bounds;
+  Patches patches;
+  double truncation = 0.0;
+  std::vector<int> frame_indices;
+};
+
+struct ModelResiduals {
+  double cost = 0.0, heldout = 0.0;
+  ResidualMap map;
+};
+
+Result<ModelResiduals> ResidualsAt(Context& context, const fem::PhysicalParameters& p) {
+  SOFTID_ASSIGN_OR_RETURN(inverse::ObjectiveEvaluation evaluation,
+                          context.objective->Evaluate(p, false));
+  if (evaluation.diverged) return Status::FailedPrecondition("the simulation diverged");
+  SOFTID_ASSIGN_OR_RETURN(auto matches, context.objective->MatchPoints(p));
+  ModelResiduals out;
+  out.cost = evaluation.cost;
+  out.heldout = evaluation.heldout_cost;
+  out.map = BuildResidualMap(context.observations, matches, context.patches, context.truncation);
+  return out;
+}
+
+// The refit of a candidate: the base config with the candidate's parameters freed and every
+// fitted parameter starting from `start` (one start: the base optimum plus the screened value).
+inverse::JobConfig RefitConfig(const inverse::JobConfig& base, const Candidate& candidate,
+                               const fem::PhysicalParameters& start) {
+  inverse::JobConfig out = base;
+  for (const std::string& name : candidate.parameters) {
+    if (!out.IsFitted(name)) out.fit.push_back(name);
+    out.fixed.erase(std::string(inverse::PhysicalParameterKey(name)));
+  }
+  out.initial.clear();
+  for (const std::string& name : out.fit) {
+    inverse::InitialValue value;
+    value.value = inverse::ParameterValueJson(start, name);
+    out.initial[name] = value;
+  }
+  out.starts = 1;
+  return out;
+}
+
+// Standard uncertainties of the extension's values from the identifiability analysis, and
+// whether the motion determines them: finite, sensitive, relative uncertainty <= 50 %.
+nlohmann::json ExtensionUncertainty(const Candidate& candidate,
+                                    const inverse::IdentifiabilityReport& report, bool* ok,
+                                    std::string* note) {
+  nlohmann::json out = nlohmann::json::object();
+  *ok = true;
+  for (const inverse::VariableIdentifiability& v : report.variables) {
+    if (std::find(candidate.parameters.begin(), candidate.parameters.end(), v.parameter) ==
+        candidate.parameters.end())
+      continue;
+    const bool finite = std::isfinite(v.standard_uncertainty);
+    out[v.name] = finite ? nlohmann::json(v.standard_uncertainty) : nlohmann::json(nullptr);
+    const bool insensitive =
+        std::find(v.flags.begin(), v.flags.end(), inverse::IdentifiabilityFlag::kNoSensitivity) !=
+        v.flags.end();
+    const bool vague = v.relative_uncertainty >= 0.0 && v.relative_uncertainty > 0.5;
+    if (!finite || insensitive || vague) {
+      *ok = false;
+      *note += (note->empty() ? "" : ", ") + v.name +
+               (insensitive ? ": no sensitivity"
+                : !finite   ? ": unbounded"
+                            : ": > 50 % uncertain");
+    }
+  }
+  return out;
+}
+
+// `p` with the extension's value moved by the relative `change` (log-scale quantities, the
+// stiffness ratio, in log space).
+fem::PhysicalParameters MoveExtension(Extension extension, fem::PhysicalParameters p, double change,
+                                      double default_contact_stiffness) {
+  switch (extension) {
+    case Extension::kFriction: p.friction_coefficient *= 1.0 + change; break;
+    case Extension::kAirDrag: p.drag_quadratic *= 1.0 + change; break;
+    case Extension::kHeterogeneousStiffness:
+      if (p.stiffness_field.regions.size() == 1) {
+        double& r = p.stiffness_field.regions[0].scale;
+        r = std::pow(r, 1.0 + change);
+      }
+      break;
+    case Extension::kContact:
+      if (!(p.contact_stiffness > 0.0)) p.contact_stiffness = default_contact_stiffness;
+      p.contact_stiffness *= 1.0 + change;
+      break;
+    case Extension::kInitialSpin: p.initial_angular_velocity *= 1.0 + change; break;
+  }
+  return p;
+}
+
+// The profile of the found value: the cost with it moved by +-`change` (the other parameters at
+// the refit). Determined when both moves are rejected by the likelihood-ratio test at the
+// candidate's critical value; the standard uncertainty of the moved quantity (mu, drag, log ratio,
+// log k, spin rate) follows from the curvature, sigma = change |value| / sqrt(LR).
+struct Profile {
+  bool determined = false;
+  double lr_minus = 0.0, lr_plus = 0.0;
+  double relative_uncertainty = -1.0;  // of the moved quantity [-]; -1 when not determined
+};
+
+Profile ProfileExtension(inverse::TrajectoryObjective& objective, Extension extension,
+                         const fem::PhysicalParameters& fitted, double cost, double n_eff,
+                         double critical_value, double change, double k0) {
+  Profile out;
+  auto lr_at = [&](double c) {
+    const fem::PhysicalParameters p = MoveExtension(extension, fitted, c, k0);
+    if (!p.Validate().ok()) return 0.0;
+    Result<inverse::ObjectiveEvaluation> e = objective.Evaluate(p, false);
+    if (!e.ok() || e->diverged) return std::numeric_limits<double>::infinity();
+    return LikelihoodRatioStatistic(e->cost, cost, n_eff);
+  };
+  out.lr_minus = lr_at(-change);
+  out.lr_plus = lr_at(change);
+  out.determined = std::min(out.lr_minus, out.lr_plus) > critical_value;
+  const double mean = 0.5 * (out.lr_minus + out.lr_plus);
+  if (out.determined && std::isfinite(mean)) out.relative_uncertainty = change / std::sqrt(mean);
+  return out;
+}
+
+// Identifiability with the diagnosis' effective sample size (correlated residuals count less).
+inverse::IdentifiabilityOptions IdentifiabilityOptionsFor(const inverse::JobConfig& config,
+                                                          double n_eff) {
+  inverse::IdentifiabilityOptions options;
+  options.threads = config.threads;
+  options.num_effective_samples = n_eff;
+  return options;
+}
+
+}  // namespace
+
+Status DiagnoseOptions::Validate() const {
+  SOFTID_RETURN_IF_ERROR(noise_floor.Validate());
+  SOFTID_RETURN_IF_ERROR(phases.Validate());
+  SOFTID_RETURN_IF_ERROR(screening.Validate());
+  SOFTID_RETURN_IF_ERROR(decision.Validate());
+  if (patches < 1) return json::Invalid("patches", patches, "must be >= 1");
+  if (default_heldout_every < 2)
+    return json::Invalid("default_heldout_every", default_heldout_every, "must be >= 2");
+  return Status::Ok();
+}
+
+Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
+                                 const inverse::JobConfig& config_in,
+                                 const DiagnoseOptions& options,
+                                 const inverse::FitResult* base_fit) {
+  const auto begin = Clock::now();
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  auto stage = [&](const std::string& message) {
+    if (options.on_stage) options.on_stage(message);
+  };
+  inverse::JobConfig config = config_in;
+  config.diagnose = false;
+  if (config.heldout_every == 0) config.heldout_every = options.default_heldout_every;
+  SOFTID_RETURN_IF_ERROR(config.Validate());
+  DiagnosisReport report;
+
+  // 1. The base model.
+  inverse::FitResult base;
+  if (base_fit != nullptr && config_in.heldout_every > 0) {
+    base = *base_fit;
+  } else {
+    stage("base fit: " + std::to_string(config.fit.size()) + " parameter(s)");
+    SOFTID_ASSIGN_OR_RETURN(base, inverse::Fit(capture, config, options.fit));
+  }
+  report.base_fit = inverse::ToJson(base);
+  const fem::PhysicalParameters p0 = base.Best().final;
+
+  Context context;
+  SOFTID_ASSIGN_OR_RETURN(context.mesh, capture::LoadCaptureMesh(capture));
+  SOFTID_ASSIGN_OR_RETURN(
+      context.observations,
+      LoadObservations(capture, config.frames.first, config.frames.last, config.heldout_every));
+  auto frames =
+      std::make_shared<const std::vector<inverse::ObservedFrame>>(context.observations.frames);
+  try {
+    context.objective = std::make_unique<inverse::TrajectoryObjective>(
+        context.mesh, capture.fixed_region, p0, inverse::SimulationOptionsFor(config),
+        inverse::CostOptionsFor(config), frames, capture.fps, config.substeps);
+  } catch (const std::invalid_argument& e) {
+    return Status::InvalidArgument(e.what());
+  }
+  context.rest_bounds = context.mesh.Bounds();
+  const double h = context.objective->simulator().hex_mesh().CellSize();
+  context.truncation = config.cost.truncation_cells * h;
+  context.patches =
+      MakePatches(context.objective->simulator().rest_surface(), options.patches, -p0.gravity);
+  for (const auto& f : context.observations.frames) {
+    context.frame_indices.push_back(f.frame);
+    report.frames.push_back(f.frame);
+    report.heldout.push_back(f.heldout);
+  }
+
+  // 2. Locate the mismatch.
+  stage("residual map, noise floor and motion phases");
+  SOFTID_ASSIGN_OR_RETURN(ModelResiduals r0, ResidualsAt(context, p0));
+  report.base_cost = r0.cost;
+  report.base_heldout = r0.heldout;
+  SOFTID_ASSIGN_OR_RETURN(report.noise_floor, EstimateNoiseFloor(r0.map, options.noise_floor));
+  const double sigma = report.noise_floor.sigma;
+  SOFTID_ASSIGN_OR_RETURN(
+      report.motion, SplitMotionPhases(context.objective->simulator(), p0, context.frame_indices,
+                                       capture.fps, config.substeps, options.phases));
+  const DecisionOptions& rule = options.decision;
+  report.before = Locate(r0.map, report.motion, sigma, rule.misfit_threshold, rule.min_phase_frames,
+                         rule.min_patch_points);
+  report.after = report.before;
+  const EffectiveSampleSize ess0 = ComputeEffectiveSampleSize(FittedResiduals(r0.map));
+  report.n_eff = ess0.n_eff;
+  if (report.noise_floor.frame0_excess) {
+    report.nuisances.push_back(
+        {{"nuisance", "camera_pose_or_time_offset"},
+         {"evidence", "frame 0, whose pose is given, misfits " +
+                          std::to_string(report.noise_floor.frame0_misfit /
+                                         report.noise_floor.quantile_misfit) +
+                          " x the floor of the moving frames"},
+         {"modelled", false}});
+  }
+
+  ModelResiduals final_residuals = r0;
+  nlohmann::json base_identifiability;  // computed when the base misfits (screening needs H_bb)
+
+  if (report.before.flagged) {
+    // 3-4. Screen (around the base fit with its parameters profiled out), then refit the best.
+    std::vector<double> excess;
+    for (const FrameResiduals& f : r0.map.frames)
+      excess.push_back(std::max(0.0, f.misfit * f.misfit - sigma * sigma));
+    SOFTID_ASSIGN_OR_RETURN(inverse::ParameterSpace space,
+                            inverse::ParameterSpace::Create(
+                                base.fitted, base.base, context.rest_bounds.sizes().maxCoeff()));
+    ScreeningBase screening_base;
+    screening_base.parameters = p0;
+    screening_base.fitted = base.fitted;
+    screening_base.space = &space;
+    screening_base.cost = r0.cost;
+    screening_base.n_eff = ess0.n_eff;
+    screening_base.floor_cost = 0.5 * sigma * sigma;
+    screening_base.rest_bounds = context.rest_bounds;
+    stage("curvature of the base fit (identifiability)");
+    Result<inverse::IdentifiabilityReport> base_id = inverse::AnalyzeIdentifiability(
+        capture, config, base, IdentifiabilityOptionsFor(config, ess0.n_eff));
+    if (base_id.ok()) {
+      screening_base.hessian = base_id->hessian;
+      base_identifiability = inverse::ToJson(*base_id);
+    } else {
+      base_identifiability = {{"error", base_id.status().message()}};
+    }
+    stage("screening " + std::to_string(CandidateLibrary().size()) + " candidates");
+    SOFTID_ASSIGN_OR_RETURN(report.screening,
+                            ScreenCandidates(*context.objective, screening_base, report.motion,
+                                             excess, options.screening));
+    for (const ScreenedCandidate& s : report.screening) {
+      if (static_cast<int>(report.tested.size()) >= rule.max_refits) break;
+      if (!s.applicable || !(s.predicted_lr > 0.0)) continue;
+      // One refit per extension (the stiffness split is screened once per axis).
+      if (std::any_of(report.tested.begin(), report.tested.end(),
+                      [&](const TestedCandidate& t) { return t.test.extension == s.extension; }))
+        continue;
+      if (options.fit.cancel != nullptr && options.fit.cancel->load()) break;
+      const Candidate& candidate = GetCandidate(s.extension);
+      stage(std::string("refit with ") + ToString(s.extension));
+      fem::PhysicalParameters start = s.start;
+      if (s.extension == Extension::kContact && !(start.contact_stiffness > 0.0)) {
+        start.contact_stiffness =
+            DefaultContactStiffness(p0, context.rest_bounds.sizes().maxCoeff());
+      }
+      TestedCandidate tested;
+      tested.test.extension = s.extension;
+      tested.test.cost_before = r0.cost;
+      tested.test.heldout_before = r0.heldout;
+      const inverse::JobConfig refit_config = RefitConfig(config, candidate, start);
+      Result<inverse::FitResult> refit = inverse::Fit(capture, refit_config, options.fit);
+      Result<ModelResiduals> r1 = Status::Internal("not evaluated");
+      if (refit.ok()) {
+        tested.parameters = refit->Best().final;
+        r1 = ResidualsAt(context, tested.parameters);
+      }
+      if (!refit.ok() || !r1.ok()) {
+        tested.test.refit_error = !refit.ok() ? refit.status().message() : r1.status().message();
+        ApplyDecisionRule(rule, candidate, &tested.test);
+        report.tested.push_back(std::move(tested));
+        continue;
+      }
+      tested.fit = inverse::ToJson(*refit);
+      tested.test.cost_after = r1->cost;
+      tested.test.heldout_after = r1->heldout;
+      const EffectiveSampleSize ess = ComputeEffectiveSampleSize(FittedResiduals(r1->map));
+      tested.test.n_eff = ess.n_eff;
+      tested.test.tau_pixels = ess.tau_pixels;
+      tested.test.tau_frames = ess.tau_frames;
+      tested.test.lr = LikelihoodRatioStatistic(r0.cost, r1->cost, ess.n_eff);
+      tested.after = Locate(r1->map, report.motion, sigma, rule.misfit_threshold,
+                            rule.min_phase_frames, rule.min_patch_points);
+      // The phases and patches flagged at the base fit must be back at the noise level.
+      for (size_t i = 0; i < report.before.phases.size(); ++i) {
+        if (!report.before.phases[i].flagged) continue;
+        for (const PhaseMisfit& after : tested.after.phases)
+          if (after.phase == report.before.phases[i].phase &&
+              after.normalised > rule.misfit_threshold)
+            tested.test.still_flagged.push_back(ToString(after.phase));
+      }
+      for (size_t i = 0; i < report.before.patches.size(); ++i) {
+        if (report.before.patches[i].flagged &&
+            tested.after.patches[i].normalised > rule.misfit_threshold)
+          tested.test.still_flagged.push_back("patch " + std::to_string(i) + " (" +
+                                              tested.after.patches[i].label + ")");
+      }
+      const double k0 =
+          DefaultContactStiffness(tested.parameters, context.rest_bounds.sizes().maxCoeff());
+      tested.test.plausible =
+          IsPlausible(s.extension, tested.parameters, k0, &tested.test.plausibility_note);
+      tested.values = ExtensionValues(s.extension, tested.parameters, k0);
+      tested.uncertainty = nullptr;
+      ApplyDecisionRule(rule, candidate, &tested.test);
+      // 6a. Does the motion determine the found value? Its profile at +-25 %.
+      if (tested.test.accepted) {
+        const Profile profile =
+            ProfileExtension(*context.objective, s.extension, tested.parameters, r1->cost,
+                             ess.n_eff, tested.test.critical_value, 0.25, k0);
+        tested.profile = {{"change", 0.25},
+                          {"lr_minus", profile.lr_minus},
+                          {"lr_plus", profile.lr_plus},
+                          {"determined", profile.determined},
+                          {"relative_uncertainty", profile.relative_uncertainty}};
+        tested.test.identifiability_checked = true;
+        tested.test.identifiable = profile.determined;
+        if (!profile.determined) {
+          tested.test.identifiability_note = "a 25 % change of the value is not rejected (LR " +
+                                             std::to_string(profile.lr_minus) + ", " +
+                                             std::to_string(profile.lr_plus) + ")";
+        }
+        ApplyDecisionRule(rule, candidate, &tested.test);
+      }
+      // 6. Identifiability, only where everything else passed (it costs 2 runs per variable).
+      if (tested.test.accepted && options.identifiability) {
+        stage(std::string("identifiability of ") + ToString(s.extension));
+        Result<inverse::IdentifiabilityReport> id = inverse::AnalyzeIdentifiability(
+            capture, refit_config, *refit, IdentifiabilityOptionsFor(config, ess.n_eff));
+        if (id.ok()) {
+          bool ok = true;
+          std::string note;
+          tested.uncertainty = ExtensionUncertainty(candidate, *id, &ok, &note);
+          // Reported, not a gate: a Hessian from differences of adjoint gradients can miss the
+          // curvature of a piecewise-smooth cost (contact switching), the profile above cannot.
+          if (!ok) tested.profile["hessian_note"] = note;
+          tested.fit["identifiability"] = inverse::ToJson(*id);
+        } else {
+          tested.profile["hessian_note"] = id.status().message();
+        }
+      }
+      tested.cost_history.push_back(refit->Best().initial_cost);
+      for (double c : refit->Best().cost_history) tested.cost_history.push_back(c);
+      report.tested.push_back(std::move(tested));
+    }
+  }
+
+  // 5. Decide and report.
+  std::vector<CandidateTest> tests;
+  for (const TestedCandidate& t : report.tested) tests.push_back(t.test);
+  report.decision = Decide(report.before.flagged, tests, &report.winner);
+  for (const TestedCandidate& t : report.tested) {
+    if (t.test.nuisance && t.test.accepted) {
+      report.nuisances.push_back(
+          {{"nuisance", ToString(t.test.extension)},
+           {"parameters", t.values},
+           {"uncertainty", t.uncertainty},
+           {"modelled", true},
+           {"explains_mismatch", report.winner >= 0 && &report.tested[report.winner] == &t}});
+    }
+  }
+  if (report.winner >= 0) {
+    TestedCandidate& w = report.tested[report.winner];
+    report.after = w.after;
+    report.final_fit = w.fit;
+    report.identifiability =
+        w.fit.contains("identifiability") ? w.fit["identifiability"] : nlohmann::json(nullptr);
+    SOFTID_ASSIGN_OR_RETURN(final_residuals, ResidualsAt(context, w.parameters));
+  } else {
+    report.final_fit = report.base_fit;
+    final_residuals = r0;
+    if (!base_identifiability.is_null()) {
+      report.identifiability = base_identifiability;
+    } else if (options.identifiability) {
+      stage("identifiability of the base model");
+      Result<inverse::IdentifiabilityReport> id = inverse::AnalyzeIdentifiability(
+          capture, config, base, IdentifiabilityOptionsFor(config, ess0.n_eff));
+      report.identifiability =
+          id.ok() ? inverse::ToJson(*id) : nlohmann::json{{"error", id.status().message()}};
+    }
+  }
+
+  if (!options.plot_directory.empty()) {
+    stage("plots");
+    const std::filesystem::path dir = options.plot_directory;
+    const bool changed = report.winner >= 0;
+    const std::string misfit_png = (dir / "residual_per_frame.png").string();
+    SOFTID_RETURN_IF_ERROR(
+        WriteFrameMisfitPlot(misfit_png, report.frames, report.before.frame_normalised,
+                             changed ? report.after.frame_normalised : std::vector<double>{},
+                             report.motion, rule.misfit_threshold));
+    report.plots.push_back(misfit_png);
+    int worst = 0;
+    for (size_t k = 0; k < report.frames.size(); ++k)
+      if (report.frames[k] == report.before.worst_frame) worst = static_cast<int>(k);
+    std::vector<std::pair<std::string, const ResidualMap*>> rows = {{"before", &r0.map}};
+    if (changed) rows.emplace_back("after", &final_residuals.map);
+    const std::string painting_png = (dir / "residual_on_object.png").string();
+    SOFTID_RETURN_IF_ERROR(
+        WriteResidualPainting(painting_png, capture, context.observations, worst, rows, sigma));
+    report.plots.push_back(painting_png);
+    std::vector<Series> series;
+    auto history = [](const std::string& label, const std::vector<double>& y) {
+      Series out;
+      out.label = label;
+      out.y = y;
+      for (size_t i = 0; i < out.y.size(); ++i) out.x.push_back(static_cast<double>(i));
+      return out;
+    };
+    std::vector<double> base_history = {base.Best().initial_cost};
+    for (double c : base.Best().cost_history) base_history.push_back(c);
+    series.push_back(history("base fit", base_history));
+    for (const TestedCandidate& t : report.tested) {
+      if (!t.cost_history.empty())
+        series.push_back(history(std::string("+ ") + ToString(t.test.extension), t.cost_history));
+    }
+    const std::string cost_png = (dir / "cost_per_iteration.png").string();
+    SOFTID_RETURN_IF_ERROR(WriteCostHistoryPlot(cost_png, series));
+    report.plots.push_back(cost_png);
+  }
+  report.seconds = std::chrono::duration<double>(Clock::now() - begin).count();
+  return report;
+}
+
+}  // namespace softid::diagnosis

@@ -1,0 +1,103 @@
+// Diagnosis of left-out physics (issue 5): fit the base model, locate where and when it misses
+// the recording, screen the candidate extensions, refit the best with every base parameter free,
+// and decide with the pre-registered rule (decision.h).
+//
+//   Diagnose(capture, config, options) -> DiagnosisReport, with ToJson (diagnosis.json) and
+//   ToText in report.h. Callers that honour a job config's "diagnose": true (softid-lab fit,
+//   softid-lab diagnose, the service) call Diagnose instead of, or after, inverse::Fit; Fit itself
+//   ignores the key.
+//
+// Cost: the base fit, one adjoint and ~20 forward runs of screening, max_refits fits, and the
+// identifiability analysis (2 adjoint runs per fitted variable) of the final model. A capture whose
+// base fit is at the noise floor stops after the base fit and its identifiability.
+#pragma once
+
+#include <atomic>
+#include <filesystem>
+#include <functional>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "core/capture/capture.h"
+#include "core/common/status.h"
+#include "core/diagnosis/decision.h"
+#include "core/diagnosis/localization.h"
+#include "core/diagnosis/motion_phases.h"
+#include "core/diagnosis/noise_floor.h"
+#include "core/diagnosis/screening.h"
+#include "core/inverse/fit.h"
+#include "core/inverse/job_config.h"
+
+namespace softid::diagnosis {
+
+struct DiagnoseOptions {
+  NoiseFloorOptions noise_floor;
+  MotionPhaseOptions phases;
+  ScreeningOptions screening;
+  DecisionOptions decision;
+  // Surface patches of the residual map [-], >= 1. 8: the corners of a box-like body, coarse
+  // enough for ~50 points each per frame at the usual resolutions.
+  int patches = 8;
+  // Held-out frames when the job holds none out (every k-th frame) [-], >= 2: the decision rule
+  // needs frames the fits did not see.
+  int default_heldout_every = 4;
+  // Run the identifiability analysis of the final model (2 adjoint runs per fitted variable).
+  bool identifiability = true;
+  // Folder for the PNG plots; empty = no plots.
+  std::filesystem::path plot_directory;
+  // Stage messages ("base fit", "screening", ...), and the fits' progress and cancellation.
+  std::function<void(const std::string&)> on_stage;
+  inverse::FitOptions fit;
+  Status Validate() const;
+};
+
+// One refitted candidate.
+struct TestedCandidate {
+  CandidateTest test;
+  nlohmann::json values;  // ExtensionValues of the refit
+  // Per optimiser variable of the extension: standard uncertainty from the identifiability
+  // analysis (Hessian of the cost), null when unbounded or not run.
+  nlohmann::json uncertainty;
+  // The profile check of the found value (decision gate e): {"change", "lr_minus", "lr_plus",
+  // "determined", "relative_uncertainty"}; null when not run.
+  nlohmann::json profile;
+  nlohmann::json fit;  // result.json of the refit
+  Localization after;  // residuals of the refit, normalised by the base noise floor
+  fem::PhysicalParameters parameters;
+  std::vector<double> cost_history;  // initial cost, then after each iteration [m^2]
+};
+
+struct DiagnosisReport {
+  std::string decision;  // "friction" | "heterogeneous_stiffness" | "air_drag" | "contact" |
+                         // "none" | "unexplained"
+  int winner = -1;       // index into `tested` of the deciding test, -1 when none decided
+  NoiseFloor noise_floor;
+  std::vector<FrameMotion> motion;  // per observed frame, at the base fit
+  std::vector<int> frames;          // capture frame indices
+  std::vector<bool> heldout;
+  Localization before;                         // base fit
+  Localization after;                          // final model (= before when nothing was accepted)
+  double base_cost = 0.0, base_heldout = 0.0;  // [m^2]
+  double n_eff = 0.0;                          // of the base residuals
+  std::vector<ScreenedCandidate> screening;
+  std::vector<TestedCandidate> tested;
+  nlohmann::json nuisances = nlohmann::json::array();
+  nlohmann::json base_fit, final_fit;  // result.json
+  nlohmann::json identifiability;      // of the final model, or null
+  std::vector<std::string> plots;
+  double seconds = 0.0;
+};
+
+// Runs the diagnosis. The config's fit set is the base model; heldout_every 0 is replaced by
+// options.default_heldout_every; config.diagnose is ignored.
+// @param base_fit optional: the finished fit of `capture` under `config` (a caller that has just
+//   run it, like the service); used as the base model when config.heldout_every > 0, otherwise
+//   the base is refitted with held-out frames (the decision needs frames the fits did not see).
+// Errors: InvalidArgument for invalid options or a config that does not fit the capture (as
+// inverse::Fit), FailedPrecondition when the base fit fails.
+Result<DiagnosisReport> Diagnose(const capture::Capture& capture, const inverse::JobConfig& config,
+                                 const DiagnoseOptions& options = {},
+                                 const inverse::FitResult* base_fit = nullptr);
+
+}  // namespace softid::diagnosis

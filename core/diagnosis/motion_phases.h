@@ -1,0 +1,51 @@
+// The phases of the motion, read off the simulated trajectory at the fitted parameters: flight (no
+// contact), impact (contact while the body moves into or out of the ground), sliding (contact
+// while it moves along the ground), rest (contact, almost still). Missing physics shows in
+// particular phases (friction while sliding, drag in flight, ...), so residuals are summarised per
+// phase.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/fem/physical_parameters.h"
+#include "core/fem/simulator.h"
+
+namespace softid::diagnosis {
+
+enum class Phase { kFlight, kImpact, kSliding, kRest };
+inline constexpr int kNumPhases = 4;
+// "flight" | "impact" | "sliding" | "rest".
+const char* ToString(Phase phase);
+
+struct MotionPhaseOptions {
+  // In contact when the lowest surface point is within this many grid cells of the ground [-]:
+  // penalty contact lets the surface sink a little, and the surface is resolved to about a cell.
+  double contact_cells = 0.5;  // > 0
+  // Speeds below rest_speed_fraction sqrt(|g| L) count as still [-] (L the body size; 5 % of the
+  // speed of a fall from its own height).
+  double rest_speed_fraction = 0.05;  // > 0
+  Status Validate() const;
+};
+
+struct FrameMotion {
+  int frame = 0;
+  double time = 0.0;              // [s]
+  double ground_distance = 0.0;   // lowest surface point above the ground [m] (inf: no ground)
+  double normal_speed = 0.0;      // centre-of-mass velocity along the ground normal [m/s]
+  double tangential_speed = 0.0;  // along the ground [m/s]
+  double speed = 0.0;             // [m/s]
+  Phase phase = Phase::kFlight;
+};
+
+// Simulates `parameters` on `simulator` (which it resets) up to the last of `frames` (capture
+// frame indices, ascending) with `substeps` steps per frame, and classifies each frame.
+// FailedPrecondition when the simulation diverges.
+Result<std::vector<FrameMotion>> SplitMotionPhases(fem::Simulator& simulator,
+                                                   const fem::PhysicalParameters& parameters,
+                                                   const std::vector<int>& frames, double fps,
+                                                   int substeps,
+                                                   const MotionPhaseOptions& options = {});
+
+}  // namespace softid::diagnosis

@@ -1,0 +1,206 @@
+#include "core/diagnosis/report.h"
+
+#include <cmath>
+#include <sstream>
+
+#include "core/common/json_fields.h"
+
+namespace softid::diagnosis {
+namespace {
+
+nlohmann::json Number(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+}
+
+nlohmann::json ToJson(const Localization& l) {
+  nlohmann::json phases = nlohmann::json::array();
+  for (const PhaseMisfit& p : l.phases) {
+    phases.push_back({{"phase", ToString(p.phase)},
+                      {"frames", p.frames},
+                      {"first_frame", p.first_frame},
+                      {"last_frame", p.last_frame},
+                      {"misfit", p.normalised},
+                      {"flagged", p.flagged}});
+  }
+  nlohmann::json patches = nlohmann::json::array();
+  for (const PatchMisfit& p : l.patches) {
+    patches.push_back({{"patch", p.patch},
+                       {"label", p.label},
+                       {"centre", json::FromVector3(p.centre)},
+                       {"points", p.points},
+                       {"misfit", p.normalised},
+                       {"flagged", p.flagged}});
+  }
+  return {{"flagged", l.flagged},
+          {"onset_frame", l.onset_frame},
+          {"worst_frame", l.worst_frame},
+          {"threshold", l.threshold},
+          {"phases", phases},
+          {"patches", patches}};
+}
+
+nlohmann::json ToJson(const CandidateTest& t) {
+  return {{"lr", t.lr},
+          {"critical_value", t.critical_value},
+          {"n_eff", t.n_eff},
+          {"tau_pixels", t.tau_pixels},
+          {"tau_frames", t.tau_frames},
+          {"lr_passed", t.lr_passed},
+          {"heldout_passed", t.heldout_passed},
+          {"returned_to_noise", t.returned_to_noise},
+          {"still_flagged", t.still_flagged},
+          {"plausible", t.plausible},
+          {"plausibility_note", t.plausibility_note},
+          {"identifiability_checked", t.identifiability_checked},
+          {"identifiable", t.identifiable},
+          {"identifiability_note", t.identifiability_note},
+          {"accepted", t.accepted},
+          {"reason", t.Reason()}};
+}
+
+std::string Fixed(double v, int digits = 3) {
+  std::ostringstream s;
+  s.precision(digits);
+  s << v;
+  return s.str();
+}
+
+std::string Join(const std::vector<std::string>& v) {
+  std::string out;
+  for (const std::string& s : v) out += (out.empty() ? "" : ", ") + s;
+  return out.empty() ? "-" : out;
+}
+
+}  // namespace
+
+nlohmann::json ToJson(const DiagnosisReport& r) {
+  nlohmann::json out;
+  out["format"] = kDiagnosisFormat;
+  out["decision"] = r.decision;
+  out["findings"] = nlohmann::json::array();
+  if (r.winner >= 0 && !r.tested[r.winner].test.nuisance) {
+    const TestedCandidate& w = r.tested[r.winner];
+    out["findings"].push_back({{"physics", ToString(w.test.extension)},
+                               {"parameters", w.values},
+                               {"uncertainty", w.uncertainty},
+                               {"profile", w.profile},
+                               {"cost_before", w.test.cost_before},
+                               {"cost_after", w.test.cost_after},
+                               {"heldout_before", w.test.heldout_before},
+                               {"heldout_after", w.test.heldout_after},
+                               {"onset_frame", r.before.onset_frame},
+                               {"phases", r.before.FlaggedPhaseNames()},
+                               {"regions", r.before.FlaggedPatchLabels()},
+                               {"test", ToJson(w.test)}});
+  }
+  out["nuisances"] = r.nuisances;
+  nlohmann::json frames = nlohmann::json::array();
+  for (size_t k = 0; k < r.frames.size(); ++k) {
+    frames.push_back({{"frame", r.frames[k]},
+                      {"heldout", static_cast<bool>(r.heldout[k])},
+                      {"phase", k < r.motion.size() ? ToString(r.motion[k].phase) : "?"},
+                      {"time", k < r.motion.size() ? r.motion[k].time : 0.0},
+                      {"before", r.before.frame_normalised.at(k)},
+                      {"after", r.after.frame_normalised.at(k)}});
+  }
+  out["mismatch"] = ToJson(r.before);
+  out["mismatch"]["frames"] = frames;
+  out["residual_after"] = ToJson(r.after);
+  out["noise_floor"] = {{"sigma", r.noise_floor.sigma},
+                        {"method", r.noise_floor.method},
+                        {"frame0_misfit", r.noise_floor.frame0_misfit},
+                        {"quantile_misfit", r.noise_floor.quantile_misfit},
+                        {"frame0_excess", r.noise_floor.frame0_excess}};
+  out["base"] = {{"cost", r.base_cost}, {"heldout", r.base_heldout}, {"n_eff", r.n_eff}};
+  out["screening"] = nlohmann::json::array();
+  for (const ScreenedCandidate& s : r.screening) {
+    out["screening"].push_back({{"extension", ToString(s.extension)},
+                                {"axis", s.axis >= 0 ? nlohmann::json(std::string(1, "xyz"[s.axis]))
+                                                     : nlohmann::json(nullptr)},
+                                {"applicable", s.applicable},
+                                {"note", s.note},
+                                {"gradient", s.gradient},
+                                {"curvature", s.curvature},
+                                {"efficient_curvature", s.efficient_curvature},
+                                {"start_theta", s.theta},
+                                {"start_cost", Number(s.start_cost)},
+                                {"predicted_lr", s.predicted_lr},
+                                {"signature_share", s.signature_share},
+                                {"score", s.score}});
+  }
+  out["candidates"] = nlohmann::json::array();
+  for (const TestedCandidate& t : r.tested) {
+    out["candidates"].push_back({{"extension", ToString(t.test.extension)},
+                                 {"nuisance", t.test.nuisance},
+                                 {"parameters", t.values},
+                                 {"uncertainty", t.uncertainty},
+                                 {"profile", t.profile},
+                                 {"cost_before", t.test.cost_before},
+                                 {"cost_after", t.test.cost_after},
+                                 {"heldout_before", t.test.heldout_before},
+                                 {"heldout_after", t.test.heldout_after},
+                                 {"refit_error", t.test.refit_error},
+                                 {"fit", t.fit},
+                                 {"test", ToJson(t.test)},
+                                 {"residual_after", ToJson(t.after)}});
+  }
+  out["base_fit"] = r.base_fit;
+  out["final_fit"] = r.final_fit;
+  out["identifiability"] = r.identifiability;
+  out["plots"] = r.plots;
+  out["seconds"] = r.seconds;
+  return out;
+}
+
+std::string ToText(const DiagnosisReport& r) {
+  std::ostringstream out;
+  out << "decision: " << r.decision << "\n";
+  out << "noise floor: " << Fixed(1e3 * r.noise_floor.sigma) << " mm (" << r.noise_floor.method
+      << "); base cost " << Fixed(r.base_cost) << " m^2, held-out " << Fixed(r.base_heldout)
+      << " m^2, n_eff " << Fixed(r.n_eff) << "\n";
+  const Localization& b = r.before;
+  if (!b.flagged) {
+    out << "the base model fits to the noise level: no phase or patch above " << b.threshold
+        << " x the floor (worst frame " << b.worst_frame << ")\n";
+  } else {
+    out << "mismatch: begins at frame " << b.onset_frame << ", worst at frame " << b.worst_frame
+        << "; phases " << Join(b.FlaggedPhaseNames()) << "; patches "
+        << Join(b.FlaggedPatchLabels()) << "\n";
+    for (const PhaseMisfit& p : b.phases) {
+      out << "  " << ToString(p.phase) << " (frames " << p.first_frame << "-" << p.last_frame
+          << "): " << Fixed(p.normalised) << " x floor" << (p.flagged ? "  <-" : "") << "\n";
+    }
+  }
+  for (const ScreenedCandidate& s : r.screening) {
+    out << "  screened " << ToString(s.extension)
+        << (s.axis >= 0 ? std::string(" (") + "xyz"[s.axis] + ")" : std::string()) << ": "
+        << (s.applicable ? "score " + Fixed(s.score) + ", predicted LR " + Fixed(s.predicted_lr) +
+                               ", signature " + Fixed(s.signature_share, 2)
+                         : "not applicable")
+        << (s.note.empty() ? "" : " (" + s.note + ")") << "\n";
+  }
+  for (size_t i = 0; i < r.tested.size(); ++i) {
+    const TestedCandidate& t = r.tested[i];
+    out << "  refit " << ToString(t.test.extension) << ": " << t.values.dump();
+    if (!t.uncertainty.is_null()) out << " +- " << t.uncertainty.dump();
+    if (t.profile.is_object() && t.profile.value("relative_uncertainty", -1.0) > 0.0)
+      out << " (profile: +- " << Fixed(100.0 * t.profile["relative_uncertainty"].get<double>(), 2)
+          << " %)";
+    out << "\n    cost " << Fixed(t.test.cost_before) << " -> " << Fixed(t.test.cost_after)
+        << " m^2, held-out " << Fixed(t.test.heldout_before) << " -> "
+        << Fixed(t.test.heldout_after) << " m^2, LR " << Fixed(t.test.lr) << " (critical "
+        << Fixed(t.test.critical_value) << ")"
+        << (t.test.accepted ? ": accepted" : ": rejected: " + t.test.Reason()) << "\n";
+  }
+  if (r.winner >= 0 && !r.tested[r.winner].test.nuisance) {
+    const TestedCandidate& w = r.tested[r.winner];
+    out << "missing physics: " << ToString(w.test.extension) << " " << w.values.dump()
+        << "; held-out cost down "
+        << Fixed(100.0 * (1.0 - w.test.heldout_after / w.test.heldout_before)) << " %\n";
+  }
+  for (const auto& n : r.nuisances) out << "nuisance: " << n.dump() << "\n";
+  if (!r.plots.empty()) out << "plots: " << Join(r.plots) << "\n";
+  return out.str();
+}
+
+}  // namespace softid::diagnosis

@@ -1,0 +1,36 @@
+// The diagnosis report as JSON (diagnosis.json, format "softid-diagnosis/1") and as text.
+//
+// diagnosis.json:
+//   {"format": "softid-diagnosis/1",
+//    "decision": "friction" | "heterogeneous_stiffness" | "air_drag" | "contact" | "none" |
+//                "unexplained",
+//    "findings": [{"physics": "friction", "parameters": {"friction_coefficient": 0.29},
+//                  "uncertainty": {"friction_coefficient": 0.01}, "cost_before": .., "cost_after":
+//                  .., "heldout_before": .., "heldout_after": .., "onset_frame": 4, "phases":
+//                  ["sliding"], "regions": ["patch 2 (-x bottom)"], "test": {..}}],
+//    "nuisances": [{"nuisance": "initial_spin", "parameters": {..}, ..}],
+//    "mismatch": {"flagged": .., "onset_frame": .., "worst_frame": .., "phases": [..],
+//                 "patches": [..], "frames": [{"frame", "time", "heldout", "phase", "before",
+//                 "after"}]},
+//    "noise_floor": {"sigma": .., "method": .., "frame0_misfit": .., "quantile_misfit": ..},
+//    "screening": [..], "candidates": [..],      // every screened / refitted candidate
+//    "base_fit": {result.json}, "final_fit": {result.json}, "identifiability": {..} | null,
+//    "plots": [..], "seconds": ..}
+// Costs are in m^2 (mean Tukey loss over the frames' points), misfits normalised by the floor.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "core/diagnosis/diagnose.h"
+
+namespace softid::diagnosis {
+
+inline constexpr const char* kDiagnosisFormat = "softid-diagnosis/1";
+
+nlohmann::json ToJson(const DiagnosisReport& report);
+// A few paragraphs for people: decision, where and when, what was missing and its value with
+// uncertainty, costs before and after on fitted and held-out frames, and why others were rejected.
+std::string ToText(const DiagnosisReport& report);
+
+}  // namespace softid::diagnosis

@@ -1,0 +1,372 @@
+#include "core/diagnosis/screening.h"
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <limits>
+
+#include "core/common/check.h"
+#include "core/common/json_fields.h"
+#include "core/diagnosis/likelihood_ratio.h"
+
+namespace softid::diagnosis {
+namespace {
+
+bool Contains(const std::vector<std::string>& names, const std::string& name) {
+  return std::find(names.begin(), names.end(), name) != names.end();
+}
+
+// One way of leaving the null: parameters at theta (base variables at x), and dC/dtheta from the
+// adjoint's gradient at those parameters.
+struct Variant {
+  Extension extension;
+  int axis = -1;
+  bool boundary = false;   // theta >= 0
+  bool central = false;    // curvature from theta = +-delta (else from 0 and delta)
+  double step = 0.0;       // delta
+  double max_start = 0.0;  // |theta| bound of the refit start
+  std::function<fem::PhysicalParameters(const fem::PhysicalParameters&, double)> make;
+  std::function<double(const fem::ParameterGradient&, const fem::PhysicalParameters&)> dtheta;
+};
+
+struct Point {
+  double dtheta = 0.0;
+  Eigen::VectorXd gx;  // dC/dx_b
+  double cost = 0.0;
+};
+
+}  // namespace
+
+Status ScreeningOptions::Validate() const {
+  if (!(signature_weight >= 0.0 && signature_weight <= 1.0))
+    return json::Invalid("screening.signature_weight", signature_weight, "must lie in [0, 1]");
+  const std::pair<double, const char*> positive[] = {
+      {friction_step, "screening.friction_step"},
+      {drag_step, "screening.drag_step"},
+      {log_ratio_step, "screening.log_ratio_step"},
+      {log_contact_step, "screening.log_contact_step"},
+      {spin_step, "screening.spin_step"},
+      {max_friction_start, "screening.max_friction_start"},
+      {max_drag_start, "screening.max_drag_start"},
+      {max_log_ratio_start, "screening.max_log_ratio_start"},
+      {max_log_contact_start, "screening.max_log_contact_start"},
+      {max_spin_start, "screening.max_spin_start"}};
+  for (const auto& [value, field] : positive) {
+    if (!(value > 0.0) || !std::isfinite(value))
+      return json::Invalid(field, value, "must be positive");
+  }
+  return Status::Ok();
+}
+
+double DefaultContactStiffness(const fem::PhysicalParameters& p, double body_size) {
+  return 100.0 * p.youngs_modulus / body_size;
+}
+
+std::vector<bool> SignatureFrames(const Candidate& candidate,
+                                  const std::vector<FrameMotion>& motion) {
+  std::vector<bool> out(motion.size(), false);
+  bool contact_seen = false;
+  for (size_t k = 0; k < motion.size(); ++k) {
+    contact_seen |= motion[k].phase != Phase::kFlight;
+    out[k] = candidate.all_frames || (candidate.after_contact && contact_seen) ||
+             std::find(candidate.phases.begin(), candidate.phases.end(), motion[k].phase) !=
+                 candidate.phases.end();
+  }
+  return out;
+}
+
+Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjective& objective,
+                                                        const ScreeningBase& base,
+                                                        const std::vector<FrameMotion>& motion,
+                                                        const std::vector<double>& excess,
+                                                        const ScreeningOptions& options) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  SOFTID_DEMAND(base.space != nullptr);
+  const inverse::ParameterSpace& space = *base.space;
+  const fem::PhysicalParameters& p0 = base.parameters;
+  const std::vector<double> x0 = space.ToVariables(p0);
+  const int nb = space.NumVariables();
+  const double body_size = base.rest_bounds.sizes().maxCoeff();
+  const double k0 =
+      p0.contact_stiffness > 0.0 ? p0.contact_stiffness : DefaultContactStiffness(p0, body_size);
+
+  // H_bb^+ (pseudo-inverse over its positive eigenvalues): base directions the data do not fix
+  // cannot absorb anything to second order.
+  Eigen::MatrixXd hbb_inverse = Eigen::MatrixXd::Zero(nb, nb);
+  if (base.hessian.rows() == nb && base.hessian.cols() == nb && nb > 0) {
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(0.5 *
+                                                         (base.hessian + base.hessian.transpose()));
+    const double top = eigen.eigenvalues().cwiseAbs().maxCoeff();
+    for (int i = 0; i < nb; ++i) {
+      const double lambda = eigen.eigenvalues()[i];
+      if (lambda > 1e-8 * top) {
+        hbb_inverse +=
+            eigen.eigenvectors().col(i) * eigen.eigenvectors().col(i).transpose() / lambda;
+      }
+    }
+  }
+
+  auto evaluate = [&](const fem::PhysicalParameters& p, const Variant& v,
+                      Point* out) -> Result<bool> {
+    if (!p.Validate().ok()) return false;
+    SOFTID_ASSIGN_OR_RETURN(inverse::ObjectiveEvaluation e, objective.Evaluate(p, true));
+    if (e.diverged) return false;
+    out->cost = e.cost;
+    out->dtheta = v.dtheta(e.gradient, p);
+    out->gx.resize(nb);
+    if (nb > 0) space.ChainGradient(e.gradient, x0.data(), out->gx.data());
+    return true;
+  };
+
+  // The null, shared by the variants whose null is the base model itself.
+  SOFTID_ASSIGN_OR_RETURN(inverse::ObjectiveEvaluation null_eval, objective.Evaluate(p0, true));
+  if (null_eval.diverged)
+    return Status::FailedPrecondition("the base fit's simulation diverges: cannot screen");
+  const fem::ParameterGradient& g0 = null_eval.gradient;
+  Point null_point;
+  null_point.cost = null_eval.cost;
+  null_point.gx.resize(nb);
+  if (nb > 0) space.ChainGradient(g0, x0.data(), null_point.gx.data());
+
+  std::vector<Variant> variants;
+  {
+    Variant v;
+    v.extension = Extension::kFriction;
+    v.boundary = true;
+    v.step = options.friction_step;
+    v.max_start = options.max_friction_start;
+    v.make = [](fem::PhysicalParameters p, double t) {
+      p.friction_coefficient = t;
+      return p;
+    };
+    v.dtheta = [](const fem::ParameterGradient& g, const fem::PhysicalParameters&) {
+      return g.friction_coefficient;
+    };
+    variants.push_back(v);
+    v.extension = Extension::kAirDrag;
+    v.step = options.drag_step;
+    v.max_start = options.max_drag_start;
+    v.make = [](fem::PhysicalParameters p, double t) {
+      p.drag_quadratic = t;
+      return p;
+    };
+    v.dtheta = [](const fem::ParameterGradient& g, const fem::PhysicalParameters&) {
+      return g.drag_quadratic;
+    };
+    variants.push_back(v);
+  }
+  for (int axis = 0; axis < 3; ++axis) {
+    Variant v;
+    v.extension = Extension::kHeterogeneousStiffness;
+    v.axis = axis;
+    v.central = true;
+    v.step = options.log_ratio_step;
+    v.max_start = options.max_log_ratio_start;
+    const Eigen::AlignedBox3d bounds = base.rest_bounds;
+    v.make = [bounds, axis](fem::PhysicalParameters p, double t) {
+      p.stiffness_field = HalvesField(bounds, axis, std::exp(t));
+      return p;
+    };
+    v.dtheta = [](const fem::ParameterGradient& g, const fem::PhysicalParameters& p) {
+      return g.stiffness_field.size() == 1
+                 ? g.stiffness_field[0] * p.stiffness_field.regions[0].scale
+                 : 0.0;
+    };
+    variants.push_back(v);
+  }
+  {
+    Variant v;
+    v.extension = Extension::kContact;
+    v.central = true;
+    v.step = options.log_contact_step;
+    v.max_start = options.max_log_contact_start;
+    v.make = [k0](fem::PhysicalParameters p, double t) {
+      p.contact_stiffness = k0 * std::exp(t);
+      return p;
+    };
+    v.dtheta = [](const fem::ParameterGradient& g, const fem::PhysicalParameters& p) {
+      return g.contact_stiffness * p.contact_stiffness;
+    };
+    variants.push_back(v);
+  }
+  Eigen::Vector3d spin_direction = Eigen::Vector3d::Zero();
+  if (g0.initial_angular_velocity.norm() > 0.0)
+    spin_direction = -g0.initial_angular_velocity.normalized();
+  {
+    Variant v;
+    v.extension = Extension::kInitialSpin;
+    v.boundary = true;  // a rate along the descent direction
+    v.step = options.spin_step;
+    v.max_start = options.max_spin_start;
+    v.make = [spin_direction](fem::PhysicalParameters p, double t) {
+      p.initial_angular_velocity = t * spin_direction;
+      return p;
+    };
+    v.dtheta = [spin_direction](const fem::ParameterGradient& g, const fem::PhysicalParameters&) {
+      return g.initial_angular_velocity.dot(spin_direction);
+    };
+    variants.push_back(v);
+  }
+
+  double total_excess = 0.0;
+  for (double e : excess) total_excess += e;
+  const bool uniform_field = p0.stiffness_field.kind == fem::StiffnessField::Kind::kUniform;
+
+  std::vector<ScreenedCandidate> out;
+  for (const Variant& v : variants) {
+    const Candidate& candidate = GetCandidate(v.extension);
+    ScreenedCandidate s;
+    s.extension = v.extension;
+    s.axis = v.axis;
+    s.start = p0;
+    s.start_cost = base.cost;
+    if (v.extension == Extension::kInitialSpin) s.direction = spin_direction;
+    for (const std::string& name : candidate.parameters) {
+      if (Contains(base.fitted, name)) {
+        s.applicable = false;
+        s.note = name + " is already fitted by the base model";
+      }
+    }
+    if (candidate.needs_ground && !p0.ground) {
+      s.applicable = false;
+      s.note = "no ground plane: no contact";
+    }
+    // A value the job fixed away from the null is the job's claim; leave it alone.
+    const bool off_null =
+        (v.extension == Extension::kFriction && p0.friction_coefficient != 0.0) ||
+        (v.extension == Extension::kAirDrag && p0.drag_quadratic != 0.0) ||
+        (v.extension == Extension::kHeterogeneousStiffness && !uniform_field) ||
+        (v.extension == Extension::kContact && p0.contact_damping != 0.0) ||
+        (v.extension == Extension::kInitialSpin && p0.initial_angular_velocity.norm() != 0.0);
+    if (s.applicable && off_null) {
+      s.applicable = false;
+      s.note = "fixed by the job away from its null value";
+    }
+    if (v.extension == Extension::kInitialSpin && spin_direction.norm() == 0.0) {
+      s.applicable = false;
+      s.note = "score: zero gradient";
+    }
+    if (!s.applicable) {
+      out.push_back(s);
+      continue;
+    }
+    // Score and curvatures.
+    Point a, b;
+    double separation = v.step;
+    if (v.central) {
+      SOFTID_ASSIGN_OR_RETURN(bool ok_a, evaluate(v.make(p0, -v.step), v, &a));
+      SOFTID_ASSIGN_OR_RETURN(bool ok_b, evaluate(v.make(p0, v.step), v, &b));
+      if (!ok_a || !ok_b) {
+        s.applicable = false;
+        s.note = "the simulation diverges next to the null";
+        out.push_back(s);
+        continue;
+      }
+      separation = 2.0 * v.step;
+      s.gradient = 0.5 * (a.dtheta + b.dtheta);
+    } else {
+      a = null_point;
+      a.dtheta = v.dtheta(g0, p0);
+      SOFTID_ASSIGN_OR_RETURN(bool ok_b, evaluate(v.make(p0, v.step), v, &b));
+      if (!ok_b) {
+        s.applicable = false;
+        s.note = "the simulation diverges next to the null";
+        out.push_back(s);
+        continue;
+      }
+      s.gradient = a.dtheta;
+    }
+    s.curvature = (b.dtheta - a.dtheta) / separation;
+    const Eigen::VectorXd h =
+        nb > 0 ? Eigen::VectorXd((b.gx - a.gx) / separation) : Eigen::VectorXd();
+    const Eigen::VectorXd absorb = nb > 0 ? Eigen::VectorXd(hbb_inverse * h) : Eigen::VectorXd();
+    s.efficient_curvature = nb > 0 ? s.curvature - h.dot(absorb) : s.curvature;
+    if (v.boundary && !(s.gradient < 0.0)) {
+      s.note = "score: the cost rises as the parameter leaves 0";
+      out.push_back(s);
+      continue;
+    }
+    // Newton's step on the profiled quadratic model, or a few steps downhill without curvature.
+    double curvature = s.efficient_curvature;
+    if (!(curvature > 0.01 * std::abs(s.curvature))) {
+      s.note = "the base parameters absorb most of it (profiled curvature ~0)";
+      curvature = 0.01 * std::abs(s.curvature);
+    }
+    double theta =
+        curvature > 0.0 ? -s.gradient / curvature : -4.0 * v.step * (s.gradient > 0 ? 1 : -1);
+    theta = std::clamp(theta, v.boundary ? 0.5 * v.step : -v.max_start, v.max_start);
+    const double predicted_drop =
+        curvature > 0.0 ? 0.5 * s.gradient * s.gradient / curvature : std::abs(s.gradient * theta);
+    // Refit start: the best of the joint step (base variables re-adjusted), the extension alone,
+    // and half the joint step.
+    std::vector<fem::PhysicalParameters> tries;
+    Eigen::VectorXd dx = nb > 0 ? Eigen::VectorXd(-absorb * theta) : Eigen::VectorXd();
+    for (int i = 0; i < nb; ++i) dx[i] = std::clamp(dx[i], -1.0, 1.0);
+    auto with_base = [&](double t, double fraction) {
+      std::vector<double> x = x0;
+      for (int i = 0; i < nb; ++i) x[i] += fraction * dx[i];
+      return v.make(space.ToParameters(x.data(), p0), t);
+    };
+    tries.push_back(with_base(theta, 1.0));
+    tries.push_back(with_base(theta, 0.0));
+    tries.push_back(with_base(0.5 * theta, 0.5));
+    // And a ladder of the extension alone over its start range: the cost is far from quadratic
+    // for large effects (stick-slip, a spinning cube that looks the same every quarter turn), and
+    // a start in the wrong basin stalls the refit.
+    const double downhill = v.boundary ? 1.0 : (s.gradient > 0.0 ? -1.0 : 1.0);
+    for (double f : {1.0 / 16, 1.0 / 8, 3.0 / 16, 1.0 / 4, 3.0 / 8, 1.0 / 2, 3.0 / 4})
+      tries.push_back(with_base(downhill * f * v.max_start, 0.0));
+    s.start_cost = std::numeric_limits<double>::infinity();
+    for (const fem::PhysicalParameters& p : tries) {
+      if (!p.Validate().ok()) continue;
+      Result<inverse::ObjectiveEvaluation> e = objective.Evaluate(p, false);
+      if (!e.ok() || e->diverged) continue;
+      if (e->cost < s.start_cost) {
+        s.start_cost = e->cost;
+        s.start = p;
+      }
+    }
+    if (!std::isfinite(s.start_cost)) {
+      s.applicable = false;
+      s.note = "the simulation diverges at every refit start";
+      out.push_back(s);
+      continue;
+    }
+    switch (v.extension) {
+      case Extension::kFriction: s.theta = s.start.friction_coefficient; break;
+      case Extension::kAirDrag: s.theta = s.start.drag_quadratic; break;
+      case Extension::kInitialSpin: s.theta = s.start.initial_angular_velocity.norm(); break;
+      case Extension::kContact: s.theta = std::log(s.start.contact_stiffness / k0); break;
+      case Extension::kHeterogeneousStiffness:
+        s.theta = s.start.stiffness_field.regions.empty()
+                      ? 0.0
+                      : std::log(s.start.stiffness_field.regions[0].scale);
+        break;
+    }
+    // The quadratic model's prediction where the profiled curvature is positive (a cost cannot
+    // fall below the noise floor), otherwise only what the start actually achieved.
+    const bool quadratic = s.efficient_curvature > 0.01 * std::abs(s.curvature);
+    const double predicted_cost =
+        quadratic ? std::min(std::max(base.cost - predicted_drop, base.floor_cost), s.start_cost)
+                  : s.start_cost;
+    s.predicted_lr =
+        LikelihoodRatioStatistic(base.cost, std::max(predicted_cost, 1e-30), base.n_eff);
+    if (total_excess > 0.0) {
+      const std::vector<bool> frames = SignatureFrames(candidate, motion);
+      double inside = 0.0;
+      for (size_t k = 0; k < frames.size() && k < excess.size(); ++k)
+        if (frames[k]) inside += excess[k];
+      s.signature_share = inside / total_excess;
+    }
+    s.score = s.predicted_lr *
+              ((1.0 - options.signature_weight) + options.signature_weight * s.signature_share);
+    out.push_back(s);
+  }
+  std::stable_sort(
+      out.begin(), out.end(),
+      [](const ScreenedCandidate& a, const ScreenedCandidate& b) { return a.score > b.score; });
+  return out;
+}
+
+}  // namespace softid::diagnosis

@@ -1,0 +1,103 @@
+// Screening the candidate extensions at the base fit, before any costly refit: Rao's score test
+// with the base parameters profiled out.
+//
+// Each candidate (variant) is reduced to one new variable theta along which it leaves its null:
+// friction mu, drag c2, the log of the stiffness ratio of two halves along x, y or z (three
+// variants), the log of the contact stiffness, the spin rate along the direction the gradient
+// points. The adjoint gives g = dC/dtheta at the null (the score) and, one run at theta = delta
+// later, the curvature H_tt and the cross-curvature h = d(dC/dx_b)/dtheta with the base variables
+// x_b. With the base Hessian H_bb (identifiability analysis of the base fit) the efficient
+// curvature is the Schur complement
+//   H_eff = H_tt - h^T H_bb^-1 h,
+// i.e. the curvature left once the base parameters re-adjust (a drag partly absorbed by a slower
+// throw, friction partly by a stiffer body). Predicted cost drop: g^2 / (2 H_eff), at
+// theta* = -g / H_eff with the base at x_b - H_bb^-1 h theta*; the predicted LR follows
+// (likelihood_ratio.h). The refit starts from the best (forward cost) of that step, the extension
+// alone at theta*, and a ladder of the extension alone over its start range (1/16 ... 3/4 of it):
+// large effects are far from quadratic (stick-slip; a cube spinning looks alike every quarter
+// turn). A boundary parameter whose score says "the cost rises as it leaves 0" is
+// dropped: the one-sided test has nothing to offer.
+// Signature: the share of the base fit's excess misfit (above the noise floor) in the phases where
+// the extension acts (candidate_library.h). score = predicted LR x ((1 - w) + w x share).
+#pragma once
+
+#include <Eigen/Core>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/diagnosis/candidate_library.h"
+#include "core/diagnosis/motion_phases.h"
+#include "core/fem/physical_parameters.h"
+#include "core/inverse/parameter_space.h"
+#include "core/inverse/trajectory_objective.h"
+
+namespace softid::diagnosis {
+
+struct ScreeningOptions {
+  // delta, the step of the curvature run in each extension's variable: small against the values
+  // that matter (mu ~ 0.1, drag ~ 0.6 kg/m^3, a 2x stiffness ratio), large against the cost's
+  // piecewise-smooth wrinkles. Units: mu [-], drag [kg/m^3], log ratio, log k, spin [rad/s].
+  double friction_step = 0.02;
+  double drag_step = 0.05;
+  double log_ratio_step = 0.1;
+  double log_contact_step = 0.1;
+  double spin_step = 0.2;
+  // Refit starts are clamped to these bounds of theta* (the plausible ranges, trimmed: a start
+  // far out makes a long way back for the optimiser).
+  double max_friction_start = 0.8;
+  double max_drag_start = 3.0;
+  double max_log_ratio_start = 2.3;  // ratio 10
+  double max_log_contact_start = 3.0;
+  double max_spin_start = 10.0;  // [rad/s]
+  // Weight w of the signature share in the score [-], in [0, 1].
+  double signature_weight = 0.75;
+  Status Validate() const;
+};
+
+struct ScreenedCandidate {
+  Extension extension = Extension::kFriction;
+  int axis = -1;  // heterogeneous_stiffness: the split axis of this variant
+  bool applicable = true;
+  std::string note;                  // why not applicable, or what the score said
+  double gradient = 0.0;             // g = dC/dtheta at the null [m^2 / unit of theta]
+  double curvature = 0.0;            // H_tt [m^2 / unit^2]
+  double efficient_curvature = 0.0;  // H_eff
+  double theta = 0.0;                // theta of the refit start
+  Eigen::Vector3d direction = Eigen::Vector3d::Zero();  // spin axis (initial_spin)
+  double start_cost = 0.0;                              // forward cost at the refit start [m^2]
+  fem::PhysicalParameters start;  // the refit start (base variables moved too)
+  double predicted_lr = 0.0;
+  double signature_share = 0.0;  // [0, 1]
+  double score = 0.0;
+};
+
+// Per observed frame, whether the extension's signature covers it (motion aligned with frames).
+std::vector<bool> SignatureFrames(const Candidate& candidate,
+                                  const std::vector<FrameMotion>& motion);
+
+// The base model around which candidates are screened.
+struct ScreeningBase {
+  fem::PhysicalParameters parameters;              // the base fit
+  std::vector<std::string> fitted;                 // its canonical fitted names
+  const inverse::ParameterSpace* space = nullptr;  // of `fitted` at `parameters`
+  Eigen::MatrixXd hessian;  // H_bb in space's variables [m^2]; empty: base not profiled out
+  double cost = 0.0;        // C0 [m^2]
+  double n_eff = 0.0;
+  double floor_cost = 0.0;  // sigma^2 / 2, the cost of a perfect model [m^2]
+  Eigen::AlignedBox3d rest_bounds;
+};
+
+// Screens every candidate of CandidateLibrary() (the stiffness split once per axis) around
+// `base`. @param excess per observed frame, max(0, misfit^2 - sigma^2) [m^2]. Results are sorted by
+// score, best first. FailedPrecondition when the base simulation diverges; adjoint errors are
+// passed on.
+Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjective& objective,
+                                                        const ScreeningBase& base,
+                                                        const std::vector<FrameMotion>& motion,
+                                                        const std::vector<double>& excess,
+                                                        const ScreeningOptions& options = {});
+
+// The default penalty stiffness 100 E / L [Pa/m] (physical_parameters.h).
+double DefaultContactStiffness(const fem::PhysicalParameters& p, double body_size);
+
+}  // namespace softid::diagnosis

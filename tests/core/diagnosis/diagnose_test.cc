@@ -1,0 +1,119 @@
+#include "core/diagnosis/diagnose.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+
+#include "core/diagnosis/report.h"
+#include "core/scenes/diagnosis_scenes.h"
+#include "core/scenes/synthesize.h"
+
+namespace softid::diagnosis {
+namespace {
+
+// A small ramp-block capture (friction `mu`), generated on a finer grid and with a smaller time
+// step than the fit uses, with realistic depth noise.
+struct RampCapture {
+  std::filesystem::path dir;
+  capture::Capture capture;
+  fem::PhysicalParameters truth;
+  explicit RampCapture(double mu) {
+    dir = std::filesystem::temp_directory_path() /
+          ("softid_diagnosis_ramp_" + std::to_string(mu) + "_" + std::to_string(::getpid()));
+    std::filesystem::remove_all(dir);
+    Result<scenes::ConcealedScene> scene = scenes::MakeDiagnosisScene(
+        "ramp-block", mu > 0 ? scenes::ConcealedEffect::kFriction : scenes::ConcealedEffect::kNone,
+        mu);
+    EXPECT_TRUE(scene.ok());
+    truth = scene->scene.parameters;
+    scenes::SynthesisOptions options;
+    options.run.simulation.cells_along_longest_side = 12;
+    options.run.substeps_per_frame = 4;
+    options.run.duration = 0.3;
+    options.cameras = scene->cameras;
+    options.cameras.width = 48;
+    options.cameras.height = 40;
+    options.noise.sigma_constant = 1.5e-3;
+    options.noise.sigma_quadratic = 2.5e-3;
+    options.noise.dropout_probability = 0.01;
+    options.noise.seed = 5;
+    options.depth_scale = 1e-3;
+    Result<scenes::SynthesisSummary> summary = scenes::Synthesize(scene->scene, options, dir);
+    EXPECT_TRUE(summary.ok()) << summary.status().ToString();
+    capture = *capture::ReadCapture(dir);
+  }
+  ~RampCapture() {
+    std::error_code ignored;
+    std::filesystem::remove_all(dir, ignored);
+  }
+  // The base model: E and stiffness damping, ground known.
+  inverse::JobConfig BaseConfig() const {
+    inverse::JobConfig config;
+    config.fit = {"youngs_modulus", "stiffness_damping"};
+    inverse::InitialValue e, beta;
+    e.value = 1e4;
+    beta.value = 0.005;
+    config.initial = {{"youngs_modulus", e}, {"stiffness_damping", beta}};
+    config.fixed = {{"poisson_ratio", 0.3}, {"ground", fem::ToJson(*truth.ground)}};
+    config.cells = 8;
+    config.substeps = 2;
+    config.starts = 1;
+    config.threads = 1;
+    config.max_iterations = 15;
+    return config;
+  }
+};
+
+DiagnoseOptions SmallOptions() {
+  DiagnoseOptions options;
+  options.decision.max_refits = 1;
+  options.identifiability = false;  // covered by core/inverse's tests; costs 2 runs per variable
+  return options;
+}
+
+// Friction concealed on a ramp is found, named, valued near the truth, and the held-out frames
+// improve; diagnosis.json carries the decision and the finding.
+TEST(Diagnose, FindsConcealedFrictionOnARamp) {
+  RampCapture ramp(0.3);
+  Result<DiagnosisReport> report = Diagnose(ramp.capture, ramp.BaseConfig(), SmallOptions());
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  EXPECT_EQ(report->decision, "friction") << ToText(*report);
+  ASSERT_GE(report->winner, 0);
+  const TestedCandidate& w = report->tested[report->winner];
+  EXPECT_NEAR(w.values["friction_coefficient"].get<double>(), 0.3, 0.1);
+  EXPECT_LT(w.test.heldout_after, 0.7 * w.test.heldout_before);
+  const nlohmann::json json = ToJson(*report);
+  EXPECT_EQ(json["decision"], "friction");
+  ASSERT_EQ(json["findings"].size(), 1u);
+  EXPECT_EQ(json["findings"][0]["physics"], "friction");
+  EXPECT_EQ(json["base_fit"]["format"], "softid-result/1");
+  EXPECT_TRUE(json["final_fit"]["parameters"].contains("friction_coefficient"));
+}
+
+// The same ramp without friction: the base model is the truth, the decision is "none".
+TEST(Diagnose, ControlWithoutEffectGivesNone) {
+  RampCapture ramp(0.0);
+  Result<DiagnosisReport> report = Diagnose(ramp.capture, ramp.BaseConfig(), SmallOptions());
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  EXPECT_EQ(report->decision, "none") << ToText(*report);
+  EXPECT_TRUE(ToJson(*report)["findings"].empty());
+}
+
+TEST(Diagnose, RejectsBadOptionsAndConfigs) {
+  DiagnoseOptions options;
+  options.patches = 0;
+  capture::Capture empty;
+  EXPECT_NE(Diagnose(empty, inverse::JobConfig(), options).status().message().find("patches = 0"),
+            std::string::npos);
+  options = DiagnoseOptions();
+  options.default_heldout_every = 1;
+  EXPECT_NE(Diagnose(empty, inverse::JobConfig(), options)
+                .status()
+                .message()
+                .find("default_heldout_every = 1"),
+            std::string::npos);
+}
+
+}  // namespace
+}  // namespace softid::diagnosis
