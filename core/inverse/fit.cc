@@ -236,6 +236,17 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
   result->termination = summary.message;
   result->failed = summary.iterations.empty() || !std::isfinite(summary.initial_cost) ||
                    summary.termination_type == ceres::FAILURE;
+  // Converged without a single step: the gradient vanished at the start, i.e. nothing in the
+  // fitted frames responds to the fitted parameters there (typically the simulated object misses
+  // the observations, e.g. falls through where the recording shows a floor). Not a result.
+  if (summary.termination_type == ceres::CONVERGENCE && result->iterations == 0) {
+    result->failed = true;
+    result->termination =
+        "the cost does not change with the fitted parameters at the start values (" +
+        summary.message +
+        "): the fitted frames show nothing these parameters move; if the object touches a floor, "
+        "give ground_plane in \"fixed\" or fit it";
+  }
   result->initial_cost = summary.initial_cost * scale;
   result->final_cost = summary.final_cost * scale;
   if (result->cost_history.size() > 1)
@@ -302,9 +313,7 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
                       const FitOptions& options) {
   const auto begin = Clock::now();
   SOFTID_RETURN_IF_ERROR(config.Validate());
-  if (config.diagnose) {
-    return json::Invalid("diagnose", true, "the diagnosis is not available in this version yet");
-  }
+  // config.diagnose is for the callers (core/diagnosis runs after the fit); the fit ignores it.
   SOFTID_ASSIGN_OR_RETURN(geometry::TriangleMesh mesh, capture::LoadCaptureMesh(capture));
   SOFTID_ASSIGN_OR_RETURN(std::vector<ObservedFrame> loaded,
                           LoadObservedFrames(capture, config.frames.first, config.frames.last));
@@ -365,10 +374,7 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   if (result.best < 0) {
     if (result.cancelled) return Status::FailedPrecondition("the fit was cancelled");
     std::string why = result.starts.empty() ? "no start" : result.starts[0].termination;
-    return Status::FailedPrecondition(
-        "every start failed: the simulation diverged or could not be evaluated at the starting "
-        "values (first start: " +
-        why + ")");
+    return Status::FailedPrecondition("every start failed (first start: " + why + ")");
   }
   return result;
 }

@@ -83,7 +83,8 @@ Result<fem::PhysicalParameters> BaseParameters(const capture::Capture& capture,
                                                const std::vector<ObservedFrame>& frames,
                                                const JobConfig& config);
 
-// Runs the fit. InvalidArgument naming the field for a config that does not fit the capture
+// Runs the fit (config.diagnose is ignored: the diagnosis is core/diagnosis, run by callers).
+// InvalidArgument naming the field for a config that does not fit the capture
 // (frame range, density fitted although the capture gives the mass, ...). A start whose
 // simulation diverges at its initial values is reported as failed; if every start fails the fit
 // fails (FailedPrecondition).

@@ -74,12 +74,6 @@ TEST(Fit, RejectsConfigsThatDoNotFitTheCapture) {
   EXPECT_NE(density.status().message().find("mass_kg"), std::string::npos);
 
   config = YoungsModulusConfig(small.truth);
-  config.diagnose = true;
-  Result<FitResult> diagnose = Fit(small.capture, config);
-  ASSERT_FALSE(diagnose.ok());
-  EXPECT_NE(diagnose.status().message().find("diagnose = true"), std::string::npos);
-
-  config = YoungsModulusConfig(small.truth);
   config.frames.last = 500;
   Result<FitResult> frames = Fit(small.capture, config);
   ASSERT_FALSE(frames.ok());
