@@ -18,6 +18,8 @@ Command RegisterSynth(CLI::App* app);
 Command RegisterSimulate(CLI::App* app);
 Command RegisterBench(CLI::App* app);
 Command RegisterFit(CLI::App* app);
+Command RegisterDiagnose(CLI::App* app);
+Command RegisterProveDiagnosis(CLI::App* app);
 Command RegisterReproduce(CLI::App* app);
 
 }  // namespace softid::lab

@@ -1,4 +1,5 @@
-// softid-lab fit: recover physical parameters from a capture (see core/inverse/fit.h).
+// softid-lab fit: recover physical parameters from a capture (see core/inverse/fit.h); with
+// "diagnose": true in the job config, the diagnosis of left-out physics follows (core/diagnosis).
 #include <spdlog/spdlog.h>
 
 #include <cstdio>
@@ -6,9 +7,12 @@
 #include <fstream>
 
 #include "core/capture/capture.h"
+#include "core/diagnosis/diagnose.h"
+#include "core/diagnosis/report.h"
 #include "core/inverse/fit.h"
 #include "core/inverse/job_config.h"
 #include "core/lab/commands.h"
+#include "core/lab/diagnosis_runner.h"
 #include "core/lab/result_report.h"
 
 namespace softid::lab {
@@ -61,6 +65,27 @@ int RunFit(const FitFlags& flags) {
   }
   PrintResultTable(json, std::filesystem::path(flags.capture) / "truth.json");
   std::printf("result written to %s\n", flags.out.c_str());
+  if (!config.diagnose) return kExitOk;
+
+  // "diagnose": true: look for left-out physics after the fit, report next to the result.
+  const std::filesystem::path out(flags.out);
+  const std::filesystem::path dir = out.has_parent_path() ? out.parent_path() : ".";
+  diagnosis::DiagnoseOptions diagnose_options = DiagnoseOptionsForLab(config);
+  diagnose_options.plot_directory = dir / "diagnosis_plots";
+  Result<diagnosis::DiagnosisReport> report =
+      diagnosis::Diagnose(*capture, config, diagnose_options, &*result);
+  if (!report.ok()) {
+    spdlog::error("diagnosis: {}", report.status().message());
+    return kExitFailure;
+  }
+  const std::filesystem::path report_file = dir / "diagnosis.json";
+  const Status report_written = WriteJsonFile(report_file, diagnosis::ToJson(*report));
+  if (!report_written.ok()) {
+    spdlog::error("{}", report_written.message());
+    return kExitFailure;
+  }
+  std::printf("%s", diagnosis::ToText(*report).c_str());
+  std::printf("diagnosis written to %s\n", report_file.string().c_str());
   return kExitOk;
 }
 

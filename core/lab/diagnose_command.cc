@@ -1,0 +1,82 @@
+// softid-lab diagnose: fit the base model and look for left-out physics (core/diagnosis).
+#include <spdlog/spdlog.h>
+
+#include <cstdio>
+#include <filesystem>
+
+#include "core/capture/capture.h"
+#include "core/diagnosis/diagnose.h"
+#include "core/diagnosis/report.h"
+#include "core/inverse/job_config.h"
+#include "core/lab/commands.h"
+#include "core/lab/diagnosis_runner.h"
+#include "core/lab/result_report.h"
+
+namespace softid::lab {
+namespace {
+
+struct DiagnoseFlags {
+  std::string capture;
+  std::string config;
+  std::string out = "diagnosis.json";
+  std::string plots;  // default: <out dir>/diagnosis_plots
+  int max_refits = 2;
+  bool no_identifiability = false;
+};
+
+int RunDiagnose(const DiagnoseFlags& flags) {
+  Result<capture::Capture> capture =
+      capture::ReadCapture(flags.capture, capture::ReadCaptureOptions{.decode_frames = false});
+  if (!capture.ok()) {
+    spdlog::error("{}", capture.status().message());
+    return capture.status().code() == StatusCode::kNotFound ? kExitFailure : kExitInvalidInput;
+  }
+  inverse::JobConfig config;
+  if (!flags.config.empty()) {
+    Result<inverse::JobConfig> read = inverse::ReadJobConfig(flags.config);
+    if (!read.ok()) {
+      spdlog::error("{}", read.status().message());
+      return kExitInvalidInput;
+    }
+    config = *read;
+  }
+  diagnosis::DiagnoseOptions options = DiagnoseOptionsForLab(config);
+  options.decision.max_refits = flags.max_refits;
+  options.identifiability = !flags.no_identifiability;
+  const std::filesystem::path out(flags.out);
+  options.plot_directory =
+      flags.plots.empty() ? (out.has_parent_path() ? out.parent_path() : ".") / "diagnosis_plots"
+                          : std::filesystem::path(flags.plots);
+  Result<diagnosis::DiagnosisReport> report = diagnosis::Diagnose(*capture, config, options);
+  if (!report.ok()) {
+    spdlog::error("{}", report.status().message());
+    return report.status().code() == StatusCode::kInvalidArgument ? kExitInvalidInput
+                                                                  : kExitFailure;
+  }
+  const Status written = WriteJsonFile(out, diagnosis::ToJson(*report));
+  if (!written.ok()) {
+    spdlog::error("{}", written.message());
+    return kExitFailure;
+  }
+  std::printf("%s", diagnosis::ToText(*report).c_str());
+  std::printf("diagnosis written to %s\n", flags.out.c_str());
+  return kExitOk;
+}
+
+}  // namespace
+
+Command RegisterDiagnose(CLI::App* app) {
+  auto flags = std::make_shared<DiagnoseFlags>();
+  app->add_option("capture", flags->capture, "capture folder (with capture.json)")->required();
+  app->add_option("-c,--config", flags->config, "job config JSON: its fit set is the base model");
+  app->add_option("-o,--out", flags->out, "diagnosis JSON to write")->capture_default_str();
+  app->add_option("--plots", flags->plots, "folder for the PNG plots (default: next to --out)");
+  app->add_option("--max-refits", flags->max_refits, "candidates refitted after screening")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 10));
+  app->add_flag("--no-identifiability", flags->no_identifiability,
+                "skip the identifiability analysis of the final model");
+  return [flags] { return RunDiagnose(*flags); };
+}
+
+}  // namespace softid::lab
