@@ -8,6 +8,8 @@
 #include <thread>
 
 #include "core/capture/capture.h"
+#include "core/diagnosis/diagnose.h"
+#include "core/diagnosis/report.h"
 #include "core/inverse/fit.h"
 #include "core/inverse/job_config.h"
 #include "server/materialize_capture.h"
@@ -96,6 +98,34 @@ struct WorkFolder {
   fs::path path;
 };
 
+// The diagnosis of a finished fit ("diagnose": true): its stages are recorded as notes in the
+// job's progress history, and its report goes into the result as "diagnosis". A diagnosis that
+// fails leaves the fit's result standing, with {"error": ...} as its report. No plots: the
+// report's numbers are what a client downloads.
+nlohmann::json RunDiagnosis(const store::Job& job, const capture::Capture& capture,
+                            const inverse::JobConfig& config, const inverse::FitResult& fit,
+                            std::atomic<bool>& cancel, const JobRunnerContext& context) {
+  diagnosis::DiagnoseOptions options;
+  options.fit.cancel = &cancel;
+  options.on_stage = [&](const std::string& stage) {
+    store::ProgressEvent note;
+    note.kind = store::ProgressKind::kState;
+    note.message = "diagnosis: " + stage;
+    if (Result<int64_t> seq = context.jobs->AppendProgress(job.id, note); !seq.ok()) {
+      context.logger->warn("job {}: diagnosis note not recorded: {}", job.id,
+                           seq.status().message());
+    }
+    context.events->Notify(job.id);
+  };
+  Result<diagnosis::DiagnosisReport> report = diagnosis::Diagnose(capture, config, options, &fit);
+  if (!report.ok()) {
+    context.logger->warn("job {}: diagnosis failed: {}", job.id, report.status().message());
+    return {{"error", report.status().message()}};
+  }
+  context.logger->info("job {}: diagnosis: {}", job.id, report->decision);
+  return diagnosis::ToJson(*report);
+}
+
 }  // namespace
 
 const char* ToString(JobOutcome outcome) {
@@ -138,6 +168,7 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   bool lost = false;
   bool cancel_requested = false;
   Result<inverse::FitResult> result = Status::Internal("the fit did not run");
+  nlohmann::json diagnosis_json;  // "diagnose": true only
   {
     Heartbeat heartbeat(job, worker_id, context, cancel);
     inverse::FitOptions options;
@@ -167,6 +198,9 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
       }
     };
     result = inverse::Fit(*capture, *config, options);
+    if (result.ok() && !result->cancelled && config->diagnose) {
+      diagnosis_json = RunDiagnosis(job, *capture, *config, *result, cancel, context);
+    }
     lost = heartbeat.lost();
     cancel_requested = heartbeat.cancel_requested();
   }
@@ -174,7 +208,8 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   if (lost) return JobOutcome::kLost;
   // A fit that ran to its end is recorded whatever was asked meanwhile; only one that stopped
   // early is a cancel or an interruption.
-  const bool stopped_early = result.ok() ? result->cancelled : cancel.load();
+  const bool stopped_early =
+      result.ok() ? result->cancelled || (config->diagnose && cancel.load()) : cancel.load();
   if (stopped_early && !cancel_requested && shutdown.load()) {
     // Handed back at once, so a clean shutdown leaves nothing RUNNING, and the attempt is not
     // held against max_attempts: the job did nothing wrong.
@@ -197,8 +232,9 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
     return JobOutcome::kCancelled;
   }
   if (!result.ok()) return Fail(job, context, result.status().message());
-  if (Status completed = context.jobs->CompleteJob(job.id, inverse::ToJson(*result));
-      !completed.ok()) {
+  nlohmann::json result_json = inverse::ToJson(*result);
+  if (!diagnosis_json.is_null()) result_json["diagnosis"] = std::move(diagnosis_json);
+  if (Status completed = context.jobs->CompleteJob(job.id, result_json); !completed.ok()) {
     log->error("job {}: cannot record the result: {}", job.id, completed.message());
     context.events->Notify(job.id);
     return JobOutcome::kFailed;
