@@ -3,6 +3,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <variant>
 
 #include "core/capture/capture.h"
 #include "core/diagnosis/diagnose.h"
@@ -10,6 +11,7 @@
 #include "core/inverse/job_config.h"
 #include "core/lab/commands.h"
 #include "core/lab/diagnosis_runner.h"
+#include "core/lab/fit_inputs.h"
 #include "core/lab/result_report.h"
 
 namespace softid::lab {
@@ -25,21 +27,10 @@ struct DiagnoseFlags {
 };
 
 int RunDiagnose(const DiagnoseFlags& flags) {
-  Result<capture::Capture> capture =
-      capture::ReadCapture(flags.capture, capture::ReadCaptureOptions{.decode_frames = false});
-  if (!capture.ok()) {
-    spdlog::error("{}", capture.status().message());
-    return capture.status().code() == StatusCode::kNotFound ? kExitFailure : kExitInvalidInput;
-  }
-  inverse::JobConfig config;
-  if (!flags.config.empty()) {
-    Result<inverse::JobConfig> read = inverse::ReadJobConfig(flags.config);
-    if (!read.ok()) {
-      spdlog::error("{}", read.status().message());
-      return kExitInvalidInput;
-    }
-    config = *read;
-  }
+  std::variant<FitInputs, int> loaded = LoadFitInputs(flags.capture, flags.config);
+  if (const int* exit_code = std::get_if<int>(&loaded)) return *exit_code;
+  const FitInputs& inputs = std::get<FitInputs>(loaded);
+  const inverse::JobConfig& config = inputs.config;
   diagnosis::DiagnoseOptions options = DiagnoseOptionsForLab(config);
   options.decision.max_refits = flags.max_refits;
   options.identifiability = !flags.no_identifiability;
@@ -47,7 +38,7 @@ int RunDiagnose(const DiagnoseFlags& flags) {
   options.plot_directory =
       flags.plots.empty() ? (out.has_parent_path() ? out.parent_path() : ".") / "diagnosis_plots"
                           : std::filesystem::path(flags.plots);
-  Result<diagnosis::DiagnosisReport> report = diagnosis::Diagnose(*capture, config, options);
+  Result<diagnosis::DiagnosisReport> report = diagnosis::Diagnose(inputs.capture, config, options);
   if (!report.ok()) {
     spdlog::error("{}", report.status().message());
     return report.status().code() == StatusCode::kInvalidArgument ? kExitInvalidInput

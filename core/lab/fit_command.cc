@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <variant>
 
 #include "core/capture/capture.h"
 #include "core/diagnosis/diagnose.h"
@@ -13,6 +14,7 @@
 #include "core/inverse/job_config.h"
 #include "core/lab/commands.h"
 #include "core/lab/diagnosis_runner.h"
+#include "core/lab/fit_inputs.h"
 #include "core/lab/result_report.h"
 
 namespace softid::lab {
@@ -25,23 +27,12 @@ struct FitFlags {
 };
 
 int RunFit(const FitFlags& flags) {
-  Result<capture::Capture> capture =
-      capture::ReadCapture(flags.capture, capture::ReadCaptureOptions{.decode_frames = false});
-  if (!capture.ok()) {
-    spdlog::error("{}", capture.status().message());
-    return capture.status().code() == StatusCode::kNotFound ? kExitFailure : kExitInvalidInput;
-  }
-  inverse::JobConfig config;
-  if (!flags.config.empty()) {
-    Result<inverse::JobConfig> read = inverse::ReadJobConfig(flags.config);
-    if (!read.ok()) {
-      spdlog::error("{}", read.status().message());
-      return kExitInvalidInput;
-    }
-    config = *read;
-  }
+  std::variant<FitInputs, int> loaded = LoadFitInputs(flags.capture, flags.config);
+  if (const int* exit_code = std::get_if<int>(&loaded)) return *exit_code;
+  const FitInputs& inputs = std::get<FitInputs>(loaded);
+  const inverse::JobConfig& config = inputs.config;
   spdlog::info("fit: {} ({} frames, {} camera(s)); fitting {}; {} start(s), {} iterations max",
-               flags.capture, capture->NumFrames(), capture->NumCameras(),
+               flags.capture, inputs.capture.NumFrames(), inputs.capture.NumCameras(),
                fmt::join(config.fit, ", "), config.starts, config.max_iterations);
 
   inverse::FitOptions options;
@@ -51,7 +42,7 @@ int RunFit(const FitFlags& flags) {
                  FormatParameters(p.parameters, config.fit), p.elapsed_seconds,
                  p.remaining_seconds);
   };
-  Result<inverse::FitResult> result = inverse::Fit(*capture, config, options);
+  Result<inverse::FitResult> result = inverse::Fit(inputs.capture, config, options);
   if (!result.ok()) {
     spdlog::error("{}", result.status().message());
     return result.status().code() == StatusCode::kInvalidArgument ? kExitInvalidInput
@@ -73,7 +64,7 @@ int RunFit(const FitFlags& flags) {
   diagnosis::DiagnoseOptions diagnose_options = DiagnoseOptionsForLab(config);
   diagnose_options.plot_directory = dir / "diagnosis_plots";
   Result<diagnosis::DiagnosisReport> report =
-      diagnosis::Diagnose(*capture, config, diagnose_options, &*result);
+      diagnosis::Diagnose(inputs.capture, config, diagnose_options, &*result);
   if (!report.ok()) {
     spdlog::error("diagnosis: {}", report.status().message());
     return kExitFailure;
