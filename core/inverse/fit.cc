@@ -201,6 +201,20 @@ std::vector<fem::PhysicalParameters> DrawStarts(const JobConfig& config,
   return starts;
 }
 
+// The starts' centre: ranged scalars at the middle of their range (geometric for log-scaled
+// parameters). The time step is chosen here, at neither extreme of the random starts.
+fem::PhysicalParameters CentralStart(const JobConfig& config, const fem::PhysicalParameters& base) {
+  fem::PhysicalParameters p = base;
+  for (const auto& [name, initial] : config.initial) {
+    if (!initial.range) continue;
+    double* value = ScalarParameter(p, name);
+    if (value == nullptr) continue;
+    const double lo = initial.range->min, hi = initial.range->max;
+    *value = IsLogParameter(name) && lo > 0.0 ? std::sqrt(lo * hi) : 0.5 * (lo + hi);
+  }
+  return p;
+}
+
 void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjective& objective,
               const ParameterSpace& space, const fem::PhysicalParameters& base,
               const JobConfig& config, const FitOptions& options, ProgressBoard& board,
@@ -334,6 +348,15 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   threads = std::clamp(threads, 1, static_cast<int>(starts.size()));
   const fem::SimulationOptions simulation = SimulationOptionsFor(config);
   const cost::SurfaceCostOptions cost_options = CostOptionsFor(config);
+  result.substeps = config.substeps;
+  if (config.substeps == kAutoSubsteps) {
+    SOFTID_ASSIGN_OR_RETURN(
+        SubstepSelection selection,
+        SelectSubsteps(mesh, capture.fixed_region, CentralStart(config, result.base), simulation,
+                       capture.fps, frames->back().frame));
+    result.substeps = selection.substeps;
+    result.substep_selection = std::move(selection);
+  }
 
   ProgressBoard board(options, config, static_cast<int>(starts.size()), threads);
   std::atomic<int> next_start{0};
@@ -344,7 +367,7 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
     try {
       objective =
           std::make_unique<TrajectoryObjective>(mesh, capture.fixed_region, starts[0], simulation,
-                                                cost_options, frames, capture.fps, config.substeps);
+                                                cost_options, frames, capture.fps, result.substeps);
     } catch (const std::invalid_argument& e) {
       std::lock_guard lock(error_mutex);
       error = Status::InvalidArgument(e.what());
@@ -433,6 +456,9 @@ nlohmann::json ToJson(const FitResult& result) {
   for (const std::string& name : result.fitted)
     fixed.erase(name == "ground_plane" ? std::string("ground") : name);
   out["fixed"] = fixed;
+  // How finely time was resolved; "selection" only when the job asked for "auto".
+  out["time_step"] = {{"substeps", result.substeps}};
+  if (result.substep_selection) out["time_step"]["selection"] = ToJson(*result.substep_selection);
   int evaluations = 0;
   long long steps = 0;
   double forward = 0.0, backward = 0.0;

@@ -11,6 +11,7 @@
 //    "starts": [{"index": 0, "parameters": {..}, "cost": {..}, "iterations": .., ...}, ...],
 //    "cost_history": [..],           // best start: cost after each iteration
 //    "fixed": {..},                  // every parameter the fit did not change, public JSON
+//    "time_step": {"substeps": 4, "selection": {..}},  // selection: when chosen ("auto")
 //    "timing": {"total_seconds": .., "evaluations": .., "ms_per_forward_adjoint_step": .., ..}}
 // Vectors are arrays and the ground plane is {"normal": [..], "offset": ..}.
 #pragma once
@@ -18,6 +19,7 @@
 #include <atomic>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -27,6 +29,7 @@
 #include "core/geometry/triangle_mesh.h"
 #include "core/inverse/job_config.h"
 #include "core/inverse/observed_frames.h"
+#include "core/inverse/time_step_selection.h"
 
 namespace softid::inverse {
 
@@ -71,6 +74,8 @@ struct FitResult {
   int best = -1;  // index into starts
   bool cancelled = false;
   double total_seconds = 0.0;
+  int substeps = 0;  // simulation steps per frame used (config's, or chosen when "auto")
+  std::optional<SubstepSelection> substep_selection;  // when chosen
 
   const StartResult& Best() const { return starts.at(best); }
 };

@@ -98,8 +98,8 @@ struct Evaluation {
 
 Status IdentifiabilityOptions::Validate() const {
   const auto positive = [](double v) { return v > 0.0 && std::isfinite(v); };
-  if (!positive(step)) return json::Invalid("IdentifiabilityOptions.step", step,
-                                            "must be positive and finite");
+  if (!positive(step))
+    return json::Invalid("IdentifiabilityOptions.step", step, "must be positive and finite");
   if (threads < 0) return json::Invalid("IdentifiabilityOptions.threads", threads, "must be >= 0");
   if (!(num_effective_samples >= 0.0) || !std::isfinite(num_effective_samples)) {
     return json::Invalid("IdentifiabilityOptions.num_effective_samples", num_effective_samples,
@@ -184,9 +184,10 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
       if (task > 0) x[(task - 1) / 2] += (task % 2 == 1 ? -s : s);
       const fem::PhysicalParameters at = space.ToParameters(x.data(), parameters);
       if (Status valid = at.Validate(); !valid.ok()) {
-        fail(Status::FailedPrecondition("identifiability: invalid parameters at a difference "
-                                        "step (lower IdentifiabilityOptions.step): " +
-                                        valid.message()));
+        fail(
+            Status::FailedPrecondition("identifiability: invalid parameters at a difference "
+                                       "step (lower IdentifiabilityOptions.step): " +
+                                       valid.message()));
         return;
       }
       Result<ObjectiveEvaluation> evaluation = objective->Evaluate(at, /*with_gradient=*/true);
@@ -196,11 +197,11 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
       }
       if (evaluation->diverged) {
         fail(Status::FailedPrecondition(
-            task == 0 ? std::string("identifiability: the simulation diverges at the optimum")
-                      : "identifiability: the simulation diverges at " +
-                            space.variable_names()[(task - 1) / 2] +
-                            (task % 2 == 1 ? " - " : " + ") + std::to_string(s) +
-                            " (lower IdentifiabilityOptions.step)"));
+            task == 0
+                ? std::string("identifiability: the simulation diverges at the optimum")
+                : "identifiability: the simulation diverges at " +
+                      space.variable_names()[(task - 1) / 2] + (task % 2 == 1 ? " - " : " + ") +
+                      std::to_string(s) + " (lower IdentifiabilityOptions.step)"));
         return;
       }
       Evaluation& out = results[task];
@@ -214,8 +215,8 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
       }
     }
   };
-  int threads = options.threads > 0 ? options.threads
-                                    : static_cast<int>(std::thread::hardware_concurrency());
+  int threads =
+      options.threads > 0 ? options.threads : static_cast<int>(std::thread::hardware_concurrency());
   threads = std::clamp(threads, 1, num_tasks);
   {
     std::vector<std::jthread> pool;
@@ -235,8 +236,8 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
   report.hessian_asymmetry = norm > 0.0 ? (h - h.transpose()).norm() / norm : 0.0;
   h = 0.5 * (h + h.transpose()).eval();
   report.hessian = h;
-  report.hessian_positive_definite = p > 0 && h.llt().info() == Eigen::Success &&
-                                     (h.diagonal().array() > 0.0).all();
+  report.hessian_positive_definite =
+      p > 0 && h.llt().info() == Eigen::Success && (h.diagonal().array() > 0.0).all();
 
   // Noise scale: sigma^2 = 2 C_min N / (N - p), floored (see the header).
   const double n_eff =
@@ -317,9 +318,8 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
     const double minus = ValueOf(space, parameters, x, i).value;
     const double slope = std::abs(plus - minus) / (2.0 * dx);
     v.variable_uncertainty = std::sqrt(report.covariance(i, i));
-    v.standard_uncertainty = std::isfinite(v.variable_uncertainty)
-                                 ? slope * v.variable_uncertainty
-                                 : kInfinity;
+    v.standard_uncertainty =
+        std::isfinite(v.variable_uncertainty) ? slope * v.variable_uncertainty : kInfinity;
     v.relative_uncertainty = value.scale > 0.0 ? v.standard_uncertainty / value.scale : -1.0;
     if (v.relative_uncertainty > options.max_relative_uncertainty &&
         v.flags.empty()) {  // (no sensitivity already says more)
@@ -351,8 +351,8 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
       if (std::abs(vectors(a, e)) < options.min_loading) continue;
       VariableIdentifiability& v = report.variables[kept[a]];
       combination.loadings.emplace_back(v.name, vectors(a, e));
-      if (std::find(v.flags.begin(), v.flags.end(),
-                    IdentifiabilityFlag::kDegenerateCombination) == v.flags.end())
+      if (std::find(v.flags.begin(), v.flags.end(), IdentifiabilityFlag::kDegenerateCombination) ==
+          v.flags.end())
         v.flags.push_back(IdentifiabilityFlag::kDegenerateCombination);
     }
     report.degenerate_combinations.push_back(std::move(combination));
@@ -362,10 +362,10 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
 }
 
 Result<IdentifiabilityReport> AnalyzeIdentifiability(const capture::Capture& capture,
-                                                     const JobConfig& config,
-                                                     const FitResult& fit,
+                                                     const JobConfig& config, const FitResult& fit,
                                                      const IdentifiabilityOptions& options) {
   SOFTID_RETURN_IF_ERROR(config.Validate());
+  SOFTID_RETURN_IF_ERROR(options.Validate());
   if (fit.best < 0 || fit.best >= static_cast<int>(fit.starts.size()))
     return Status::FailedPrecondition("identifiability: the fit has no usable start");
   SOFTID_ASSIGN_OR_RETURN(geometry::TriangleMesh mesh, capture::LoadCaptureMesh(capture));
@@ -376,18 +376,24 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const capture::Capture& cap
   const double length = mesh.Bounds().sizes().maxCoeff();
   // The fit's own variables: the same reference (the base parameters) fixes the ground plane's
   // tangent basis.
-  SOFTID_ASSIGN_OR_RETURN(ParameterSpace space, ParameterSpace::Create(fit.fitted, fit.base,
-                                                                       length));
+  SOFTID_ASSIGN_OR_RETURN(ParameterSpace space,
+                          ParameterSpace::Create(fit.fitted, fit.base, length));
   const fem::PhysicalParameters& optimum = fit.Best().final;
   const fem::SimulationOptions simulation = SimulationOptionsFor(config);
   const cost::SurfaceCostOptions cost_options = CostOptionsFor(config);
+  // The fit's time step (config.substeps may say "auto"; the fit resolved it).
+  const int substeps = fit.substeps > 0 ? fit.substeps : config.substeps;
+  if (substeps < 1) {
+    return Status::InvalidArgument(
+        "fit.substeps: the fit result does not say which time step it used");
+  }
   IdentifiabilityOptions resolved = options;
   if (resolved.threads == 0) resolved.threads = config.threads;
   return AnalyzeIdentifiability(
       [&]() {
         return std::make_unique<TrajectoryObjective>(mesh, capture.fixed_region, optimum,
-                                                     simulation, cost_options, frames,
-                                                     capture.fps, config.substeps);
+                                                     simulation, cost_options, frames, capture.fps,
+                                                     substeps);
       },
       space, optimum, resolved);
 }
@@ -414,18 +420,18 @@ nlohmann::json ToJson(const IdentifiabilityReport& report) {
   for (const VariableIdentifiability& v : report.variables) {
     nlohmann::json flags = nlohmann::json::array();
     for (IdentifiabilityFlag f : v.flags) flags.push_back(ToString(f));
-    variables.push_back({{"name", v.name},
-                         {"parameter", v.parameter},
-                         {"unit", v.unit},
-                         {"value", number(v.value)},
-                         {"variable", number(v.variable)},
-                         {"variable_uncertainty", number(v.variable_uncertainty)},
-                         {"standard_uncertainty", number(v.standard_uncertainty)},
-                         {"relative_uncertainty", v.relative_uncertainty >= 0.0
-                                                      ? number(v.relative_uncertainty)
-                                                      : nlohmann::json(nullptr)},
-                         {"identifiable", v.identifiable()},
-                         {"flags", flags}});
+    variables.push_back(
+        {{"name", v.name},
+         {"parameter", v.parameter},
+         {"unit", v.unit},
+         {"value", number(v.value)},
+         {"variable", number(v.variable)},
+         {"variable_uncertainty", number(v.variable_uncertainty)},
+         {"standard_uncertainty", number(v.standard_uncertainty)},
+         {"relative_uncertainty",
+          v.relative_uncertainty >= 0.0 ? number(v.relative_uncertainty) : nlohmann::json(nullptr)},
+         {"identifiable", v.identifiable()},
+         {"flags", flags}});
   }
   nlohmann::json pairs = nlohmann::json::array();
   for (const auto& [a, b] : report.correlated_pairs) pairs.push_back({a, b});

@@ -285,9 +285,9 @@ Result<CostSettings> ParseCost(const Json& value) {
         "cost", value,
         "must be an object {\"band_cells\": n, \"truncation_cells\": x, \"rest_sdf\": s}");
   }
-  SOFTID_RETURN_IF_ERROR(CheckKeys(
-      value, "cost",
-      std::array<std::string_view, 3>{"band_cells", "truncation_cells", "rest_sdf"}));
+  SOFTID_RETURN_IF_ERROR(
+      CheckKeys(value, "cost",
+                std::array<std::string_view, 3>{"band_cells", "truncation_cells", "rest_sdf"}));
   CostSettings settings;
   if (value.contains("band_cells")) {
     SOFTID_ASSIGN_OR_RETURN(settings.band_cells,
@@ -423,7 +423,12 @@ Result<JobConfig> JobConfigFromJson(const Json& j) {
     SOFTID_ASSIGN_OR_RETURN(config.cell_size, ReadPositive(j["cell_size"], "cell_size"));
   }
   if (j.contains("substeps")) {
-    SOFTID_ASSIGN_OR_RETURN(config.substeps, ReadIntAtLeast(j["substeps"], "substeps", 1));
+    if (j["substeps"] == Json("auto")) {
+      config.substeps = kAutoSubsteps;
+    } else {
+      SOFTID_ASSIGN_OR_RETURN(config.substeps, ReadInt(j["substeps"], "substeps", 1,
+                                                       "must be \"auto\" or an integer >= 1"));
+    }
   }
   if (j.contains("frames")) {
     SOFTID_ASSIGN_OR_RETURN(config.frames, ParseFrames(j["frames"]));
@@ -530,7 +535,7 @@ Json ToJson(const JobConfig& config) {
       {"initial", initial},
       {"fixed", config.fixed},
       {"cells", config.cells},
-      {"substeps", config.substeps},
+      {"substeps", config.substeps == kAutoSubsteps ? Json("auto") : Json(config.substeps)},
       {"frames", {{"first", config.frames.first}, {"last", config.frames.last}}},
       {"heldout_every", config.heldout_every},
       {"starts", config.starts},

@@ -81,5 +81,37 @@ TEST(Fit, RejectsConfigsThatDoNotFitTheCapture) {
       << frames.status().message();
 }
 
+// "substeps": "auto" chooses the time step by step doubling, fits on it and reports it; the
+// capture was made at 2 substeps, so the choice can differ from it but must meet its tolerance.
+TEST(Fit, AutoSubstepsChoosesAndReportsTheTimeStep) {
+  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.25);
+  ASSERT_TRUE(small.ok) << small.error;
+  JobConfig config = YoungsModulusConfig(small.truth);
+  config.substeps = kAutoSubsteps;
+  config.starts = 1;
+  config.max_iterations = 2;
+  Result<FitResult> result = Fit(small.capture, config);
+  ASSERT_TRUE(result.ok()) << result.status().ToString();
+  ASSERT_TRUE(result->substep_selection.has_value());
+  const SubstepSelection& selection = *result->substep_selection;
+  EXPECT_EQ(result->substeps, selection.substeps);
+  EXPECT_GE(result->substeps, SubstepSelectionOptions{}.min_substeps);
+  ASSERT_FALSE(selection.trials.empty());
+  if (selection.within_tolerance) {
+    EXPECT_LE(selection.trials.back().difference_m, selection.tolerance_m);
+  }
+  const nlohmann::json json = ToJson(*result);
+  EXPECT_EQ(json["time_step"]["substeps"], result->substeps);
+  EXPECT_EQ(json["time_step"]["selection"]["trials"].size(), selection.trials.size());
+
+  // An explicit choice is used as given, with no selection.
+  config.substeps = 3;
+  result = Fit(small.capture, config);
+  ASSERT_TRUE(result.ok()) << result.status().ToString();
+  EXPECT_EQ(result->substeps, 3);
+  EXPECT_FALSE(result->substep_selection.has_value());
+  EXPECT_FALSE(ToJson(*result)["time_step"].contains("selection"));
+}
+
 }  // namespace
 }  // namespace softid::inverse

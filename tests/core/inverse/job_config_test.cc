@@ -119,7 +119,7 @@ TEST(JobConfig, DefaultsFromEmptyObject) {
   EXPECT_EQ(config->fixed, json::object());
   EXPECT_EQ(config->cells, 16);
   EXPECT_EQ(config->cell_size, 0.0);
-  EXPECT_EQ(config->substeps, 2);
+  EXPECT_EQ(config->substeps, kAutoSubsteps);
   EXPECT_EQ(config->frames.first, 0);
   EXPECT_EQ(config->frames.last, -1);
   EXPECT_EQ(config->heldout_every, 0);
@@ -342,7 +342,10 @@ TEST(JobConfigRejects, NumericalSettings) {
                 "cells = 10000000000: ", "must be an integer >= 2");
   ExpectInvalid(json::parse(R"({"cell_size": 0})"),
                 "cell_size = 0: ", "must be a finite number > 0");
-  ExpectInvalid(json::parse(R"({"substeps": 0})"), "substeps = 0: ", "must be an integer >= 1");
+  ExpectInvalid(json::parse(R"({"substeps": 0})"),
+                "substeps = 0: ", "must be \"auto\" or an integer >= 1");
+  ExpectInvalid(json::parse(R"({"substeps": "fast"})"),
+                "substeps = \"fast\": ", "must be \"auto\" or an integer >= 1");
   ExpectInvalid(json::parse(R"({"starts": 0})"), "starts = 0: ", "must be an integer >= 1");
   ExpectInvalid(json::parse(R"({"threads": -1})"), "threads = -1: ", "must be an integer >= 0");
   ExpectInvalid(json::parse(R"({"seed": -3})"), "seed = -3: ", "must be an integer >= 0");
@@ -546,7 +549,7 @@ TEST(ReadJobConfig, InvalidContentNamesFileFieldAndValue) {
   ASSERT_FALSE(config.ok());
   EXPECT_EQ(config.status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(config.status().message(),
-            file.path().string() + ": substeps = 0: must be an integer >= 1");
+            file.path().string() + ": substeps = 0: must be \"auto\" or an integer >= 1");
 }
 
 TEST(JobConfigFromString, NamesTheSource) {
@@ -565,6 +568,17 @@ TEST(JobConfigFromString, NamesTheSource) {
   EXPECT_EQ(overflow.status().code(), StatusCode::kInvalidArgument);
   EXPECT_EQ(overflow.status().message().rfind("request: invalid JSON: number overflow", 0), 0u)
       << overflow.status().message();
+}
+
+TEST(JobConfig, SubstepsAutoIsTheDefaultAndRoundTrips) {
+  const Result<JobConfig> automatic = JobConfigFromJson(json::parse(R"({"substeps": "auto"})"));
+  ASSERT_TRUE(automatic.ok()) << automatic.status().ToString();
+  EXPECT_EQ(automatic->substeps, kAutoSubsteps);
+  EXPECT_EQ(ToJson(*automatic)["substeps"], "auto");
+  EXPECT_EQ(ToJson(JobConfig{})["substeps"], "auto");
+  const Result<JobConfig> explicit_steps = JobConfigFromJson(json::parse(R"({"substeps": 5})"));
+  ASSERT_TRUE(explicit_steps.ok());
+  EXPECT_EQ(ToJson(*explicit_steps)["substeps"], 5);
 }
 
 }  // namespace

@@ -1,0 +1,128 @@
+#include "core/inverse/time_step_selection.h"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "core/fem/simulator.h"
+
+namespace softid::inverse {
+namespace {
+
+// Surface vertex positions at every frame 0..last_frame; empty when the run diverges.
+std::vector<std::vector<Eigen::Vector3d>> SurfaceTrajectory(
+    const geometry::TriangleMesh& rest_mesh, const std::optional<Eigen::AlignedBox3d>& fixed_region,
+    const fem::PhysicalParameters& parameters, fem::SimulationOptions simulation, double fps,
+    int last_frame, int substeps) {
+  simulation.time_step = 1.0 / (fps * substeps);
+  fem::Simulator sim(rest_mesh, parameters, simulation, fixed_region);
+  std::vector<std::vector<Eigen::Vector3d>> frames;
+  frames.reserve(last_frame + 1);
+  frames.push_back(sim.SurfacePositions());
+  for (int frame = 1; frame <= last_frame; ++frame) {
+    for (int s = 0; s < substeps; ++s) {
+      const fem::StepSummary step = sim.Step();
+      if (step.diverged || !sim.state().u.allFinite()) return {};
+    }
+    frames.push_back(sim.SurfacePositions());
+  }
+  return frames;
+}
+
+}  // namespace
+
+Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
+                                        const std::optional<Eigen::AlignedBox3d>& fixed_region,
+                                        const fem::PhysicalParameters& parameters,
+                                        const fem::SimulationOptions& simulation, double fps,
+                                        int last_frame, const SubstepSelectionOptions& options) {
+  if (options.min_substeps < 1) {
+    return Status::InvalidArgument("min_substeps = " + std::to_string(options.min_substeps) +
+                                   ": must be at least 1");
+  }
+  if (options.max_substeps < options.min_substeps) {
+    return Status::InvalidArgument("max_substeps = " + std::to_string(options.max_substeps) +
+                                   ": must be at least min_substeps");
+  }
+  if (!(options.tolerance_fraction > 0.0)) {
+    return Status::InvalidArgument(
+        fmt::format("tolerance_fraction = {}: must be positive", options.tolerance_fraction));
+  }
+  if (!(fps > 0.0)) return Status::InvalidArgument(fmt::format("fps = {}: must be > 0", fps));
+  if (last_frame < 1) {
+    return Status::InvalidArgument("last_frame = " + std::to_string(last_frame) +
+                                   ": need at least one frame after the first");
+  }
+  SubstepSelection selection;
+  selection.tolerance_m = options.tolerance_fraction * rest_mesh.Bounds().sizes().maxCoeff();
+  try {
+    int substeps = options.min_substeps;
+    auto coarse = SurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps,
+                                    last_frame, substeps);
+    while (true) {
+      if (substeps >= options.max_substeps) {
+        selection.substeps = options.max_substeps;
+        break;
+      }
+      const int finer = std::min(2 * substeps, options.max_substeps);
+      auto fine = SurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps,
+                                    last_frame, finer);
+      SubstepTrial trial;
+      trial.substeps = substeps;
+      trial.diverged = coarse.empty() || fine.empty();
+      if (!trial.diverged) {
+        for (int frame = 0; frame <= last_frame; ++frame) {
+          double sum = 0.0;
+          for (size_t i = 0; i < coarse[frame].size(); ++i)
+            sum += (coarse[frame][i] - fine[frame][i]).squaredNorm();
+          const double rms = std::sqrt(sum / static_cast<double>(coarse[frame].size()));
+          if (rms > trial.difference_m) {
+            trial.difference_m = rms;
+            trial.worst_frame = frame;
+          }
+        }
+      }
+      selection.trials.push_back(trial);
+      spdlog::info("time step: {} vs {} substeps per frame: surface differs by {:.3g} mm{}",
+                   substeps, finer, 1e3 * trial.difference_m,
+                   trial.diverged ? " (a run diverged)" : "");
+      if (!trial.diverged && trial.difference_m <= selection.tolerance_m) {
+        selection.substeps = substeps;
+        selection.within_tolerance = true;
+        break;
+      }
+      substeps = finer;
+      coarse = std::move(fine);
+    }
+  } catch (const std::invalid_argument& error) {
+    return Status::InvalidArgument(error.what());
+  }
+  if (!selection.within_tolerance) {
+    spdlog::warn(
+        "time step: even {} substeps per frame leave the surface {:.3g} mm from a run at half the "
+        "step (tolerance {:.3g} mm); the fit may be biased by the time discretisation",
+        selection.substeps,
+        selection.trials.empty() ? 0.0 : 1e3 * selection.trials.back().difference_m,
+        1e3 * selection.tolerance_m);
+  }
+  return selection;
+}
+
+nlohmann::json ToJson(const SubstepSelection& selection) {
+  nlohmann::json trials = nlohmann::json::array();
+  for (const SubstepTrial& t : selection.trials) {
+    trials.push_back({{"substeps", t.substeps},
+                      {"difference_m", t.difference_m},
+                      {"worst_frame", t.worst_frame},
+                      {"diverged", t.diverged}});
+  }
+  return {{"substeps", selection.substeps},
+          {"tolerance_m", selection.tolerance_m},
+          {"within_tolerance", selection.within_tolerance},
+          {"trials", trials}};
+}
+
+}  // namespace softid::inverse

@@ -1,0 +1,87 @@
+#include "core/inverse/time_step_selection.h"
+
+#include <gtest/gtest.h>
+
+#include "core/scenes/scene.h"
+
+namespace softid::inverse {
+namespace {
+
+fem::SimulationOptions CoarseGrid() {
+  fem::SimulationOptions options;
+  options.cells_along_longest_side = 8;
+  return options;
+}
+
+// A soft ball thrown onto the floor: the impact is what a coarse step gets wrong.
+TEST(SelectSubsteps, StepDoublingDifferencesShrinkAndTheChoiceMeetsTheTolerance) {
+  const Result<scenes::Scene> scene = scenes::MakeBuiltinScene("ball-bounce");
+  ASSERT_TRUE(scene.ok());
+  SubstepSelectionOptions options;
+  options.min_substeps = 1;
+  options.max_substeps = 8;
+  options.tolerance_fraction = 1e-9;  // unreachable: every candidate is tried
+  const Result<SubstepSelection> all = SelectSubsteps(
+      scene->mesh, scene->fixed_region, scene->parameters, CoarseGrid(), 60.0, 30, options);
+  ASSERT_TRUE(all.ok()) << all.status().ToString();
+  ASSERT_EQ(all->trials.size(), 3u);  // 1 vs 2, 2 vs 4, 4 vs 8
+  EXPECT_FALSE(all->within_tolerance);
+  EXPECT_EQ(all->substeps, 8);
+  for (size_t i = 0; i < all->trials.size(); ++i) {
+    EXPECT_FALSE(all->trials[i].diverged);
+    EXPECT_GT(all->trials[i].difference_m, 0.0);
+    EXPECT_GT(all->trials[i].worst_frame, 0);
+  }
+  // The time discretisation error converges: each halving of the step at least halves it.
+  EXPECT_LT(all->trials[1].difference_m, 0.5 * all->trials[0].difference_m);
+  EXPECT_LT(all->trials[2].difference_m, 0.5 * all->trials[1].difference_m);
+
+  // A tolerance between the second and third differences selects 4 substeps, after two trials.
+  const double length = scene->mesh.Bounds().sizes().maxCoeff();
+  options.tolerance_fraction =
+      0.5 * (all->trials[1].difference_m + all->trials[2].difference_m) / length;
+  const Result<SubstepSelection> chosen = SelectSubsteps(
+      scene->mesh, scene->fixed_region, scene->parameters, CoarseGrid(), 60.0, 30, options);
+  ASSERT_TRUE(chosen.ok());
+  EXPECT_TRUE(chosen->within_tolerance);
+  EXPECT_EQ(chosen->substeps, 4);
+  ASSERT_EQ(chosen->trials.size(), 3u);
+  EXPECT_LE(chosen->trials.back().difference_m, chosen->tolerance_m);
+  EXPECT_GT(chosen->trials[1].difference_m, chosen->tolerance_m);
+}
+
+// Newmark integrates a constant acceleration exactly: in free fall the first candidate passes.
+TEST(SelectSubsteps, FreeFallNeedsNoRefinement) {
+  Result<scenes::Scene> scene = scenes::MakeBuiltinScene("ball-bounce");
+  ASSERT_TRUE(scene.ok());
+  scene->parameters.ground.reset();
+  const Result<SubstepSelection> selection =
+      SelectSubsteps(scene->mesh, scene->fixed_region, scene->parameters, CoarseGrid(), 60.0, 12);
+  ASSERT_TRUE(selection.ok()) << selection.status().ToString();
+  EXPECT_TRUE(selection->within_tolerance);
+  EXPECT_EQ(selection->substeps, SubstepSelectionOptions{}.min_substeps);
+  ASSERT_EQ(selection->trials.size(), 1u);
+  EXPECT_LT(selection->trials[0].difference_m, 1e-6);
+}
+
+TEST(SelectSubsteps, RejectsInvalidOptionsNamingThem) {
+  const Result<scenes::Scene> scene = scenes::MakeBuiltinScene("ball-bounce");
+  ASSERT_TRUE(scene.ok());
+  SubstepSelectionOptions options;
+  options.max_substeps = 1;
+  Result<SubstepSelection> selection = SelectSubsteps(
+      scene->mesh, scene->fixed_region, scene->parameters, CoarseGrid(), 60.0, 10, options);
+  ASSERT_FALSE(selection.ok());
+  EXPECT_NE(selection.status().message().find("max_substeps = 1"), std::string::npos);
+  selection =
+      SelectSubsteps(scene->mesh, scene->fixed_region, scene->parameters, CoarseGrid(), 0.0, 10);
+  ASSERT_FALSE(selection.ok());
+  EXPECT_NE(selection.status().message().find("fps = 0"), std::string::npos);
+  selection =
+      SelectSubsteps(scene->mesh, scene->fixed_region, scene->parameters, CoarseGrid(), 60.0, 0);
+  ASSERT_FALSE(selection.ok());
+  EXPECT_NE(selection.status().message().find("last_frame = 0"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace softid::inverse
