@@ -42,7 +42,7 @@ const std::vector<Candidate>& CandidateLibrary() {
     c[2].extension = Extension::kAirDrag;
     c[2].parameters = {"drag_quadratic"};
     c[2].num_boundary = 1;
-    c[2].phases = {Phase::kFlight};
+    c[2].phases = {Phase::kFlight, Phase::kRebound};
     c[2].description = "quadratic air drag: a lag against the velocity growing in flight";
     c[3].extension = Extension::kContact;
     c[3].parameters = {"contact_stiffness", "contact_damping"};

@@ -14,6 +14,7 @@ const char* ToString(Phase phase) {
     case Phase::kImpact: return "impact";
     case Phase::kSliding: return "sliding";
     case Phase::kRest: return "rest";
+    case Phase::kRebound: return "rebound";
   }
   return "?";
 }
@@ -43,6 +44,7 @@ Result<std::vector<FrameMotion>> SplitMotionPhases(fem::Simulator& sim,
   std::vector<FrameMotion> out;
   int step = 0;
   bool was_in_contact = false;
+  bool contact_seen = false;
   for (int frame : frames) {
     for (; step < frame * substeps; ++step) {
       if (sim.Step().diverged || !sim.state().u.allFinite()) {
@@ -67,7 +69,7 @@ Result<std::vector<FrameMotion>> SplitMotionPhases(fem::Simulator& sim,
     }
     const bool contact = m.ground_distance < options.contact_cells * h;
     if (!contact) {
-      m.phase = Phase::kFlight;
+      m.phase = contact_seen ? Phase::kRebound : Phase::kFlight;
     } else if (!was_in_contact || std::abs(m.normal_speed) > still) {
       m.phase = Phase::kImpact;
     } else if (m.tangential_speed > still) {
@@ -76,6 +78,7 @@ Result<std::vector<FrameMotion>> SplitMotionPhases(fem::Simulator& sim,
       m.phase = Phase::kRest;
     }
     was_in_contact = contact;
+    contact_seen |= contact;
     out.push_back(m);
   }
   return out;

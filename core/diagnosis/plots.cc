@@ -82,7 +82,8 @@ Status WriteFrameMisfitPlot(const std::filesystem::path& path, const std::vector
             double(std::max(frames.back(), frames.front() + 1)), 0.0, top * 1.05};
   // Phase bands.
   const cv::Scalar phase_tint[] = {cv::Scalar(250, 245, 235), cv::Scalar(215, 215, 255),
-                                   cv::Scalar(215, 245, 215), cv::Scalar(235, 235, 235)};
+                                   cv::Scalar(215, 245, 215), cv::Scalar(235, 235, 235),
+                                   cv::Scalar(245, 230, 250)};
   for (size_t k = 0; k < frames.size() && k < motion.size(); ++k) {
     const double half = 0.5;
     cv::Point a = axes.Map(frames[k] - half, axes.y1), b = axes.Map(frames[k] + half, 0.0);
@@ -91,9 +92,9 @@ Status WriteFrameMisfitPlot(const std::filesystem::path& path, const std::vector
     cv::rectangle(image, cv::Rect(a, b), phase_tint[static_cast<int>(motion[k].phase)], cv::FILLED);
   }
   for (int ph = 0; ph < kNumPhases; ++ph) {
-    cv::rectangle(image, cv::Rect(430 + 80 * ph, 8, 14, 14), phase_tint[ph], cv::FILLED);
-    cv::rectangle(image, cv::Rect(430 + 80 * ph, 8, 14, 14), kGrey, 1);
-    Text(image, ToString(static_cast<Phase>(ph)), {448 + 80 * ph, 20}, 0.4);
+    cv::rectangle(image, cv::Rect(350 + 80 * ph, 8, 14, 14), phase_tint[ph], cv::FILLED);
+    cv::rectangle(image, cv::Rect(350 + 80 * ph, 8, 14, 14), kGrey, 1);
+    Text(image, ToString(static_cast<Phase>(ph)), {368 + 80 * ph, 20}, 0.4);
   }
   // Threshold, dashed.
   for (double x = axes.x0; x < axes.x1; x += (axes.x1 - axes.x0) / 60.0) {

@@ -2,6 +2,7 @@
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <functional>
 #include <limits>
@@ -37,6 +38,56 @@ struct Point {
 };
 
 }  // namespace
+
+std::array<Eigen::Vector3d, 3> PrincipalAxes(const fem::HexMesh& mesh) {
+  // Second moment of the volume about the centroid, from the (cut-)cell volumes.
+  double volume = 0.0;
+  Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+  for (int e = 0; e < mesh.NumElements(); ++e) {
+    const double w = mesh.element_weights[e].volume;
+    volume += w;
+    centroid += w * mesh.ElementCentre(e);
+  }
+  std::array<Eigen::Vector3d, 3> world = {Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(),
+                                          Eigen::Vector3d::UnitZ()};
+  if (!(volume > 0.0)) return world;
+  centroid /= volume;
+  Eigen::Matrix3d moment = Eigen::Matrix3d::Zero();
+  for (int e = 0; e < mesh.NumElements(); ++e) {
+    const Eigen::Vector3d d = mesh.ElementCentre(e) - centroid;
+    moment += mesh.element_weights[e].volume * d * d.transpose();
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eigen(moment);
+  const Eigen::Vector3d lambda = eigen.eigenvalues();  // ascending
+  // Moments within 5 % of each other leave the axes in their plane undefined by the shape (a
+  // cube, the square section of a bar): there the world axes projected into that plane are used,
+  // so that the choice is reproducible and, for a body set square to the capture frame, exact.
+  constexpr double kSame = 0.05;
+  std::array<Eigen::Vector3d, 3> out;
+  int i = 0;
+  while (i < 3) {
+    int j = i + 1;
+    while (j < 3 && lambda[j] - lambda[i] <= kSame * lambda[2]) ++j;
+    const Eigen::MatrixXd basis = eigen.eigenvectors().middleCols(i, j - i);
+    if (j - i == 1) {
+      out[i] = basis.col(0);
+    } else {
+      // The world axes with the largest projections into the plane, orthonormalised.
+      std::array<int, 3> order = {0, 1, 2};
+      std::array<double, 3> projected;
+      for (int a = 0; a < 3; ++a) projected[a] = (basis.transpose() * world[a]).norm();
+      std::sort(order.begin(), order.end(),
+                [&](int a, int b) { return projected[a] > projected[b]; });
+      for (int k = i; k < j; ++k) {
+        Eigen::Vector3d v = basis * (basis.transpose() * world[order[k - i]]);
+        for (int m = i; m < k; ++m) v -= v.dot(out[m]) * out[m];
+        out[k] = v.norm() > 1e-9 ? v.normalized() : basis.col(k - i);
+      }
+    }
+    i = j;
+  }
+  return out;
+}
 
 Status ScreeningOptions::Validate() const {
   if (!(signature_weight >= 0.0 && signature_weight <= 1.0))
@@ -315,8 +366,34 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
     // for large effects (stick-slip, a spinning cube that looks the same every quarter turn), and
     // a start in the wrong basin stalls the refit.
     const double downhill = v.boundary ? 1.0 : (s.gradient > 0.0 ? -1.0 : 1.0);
-    for (double f : {1.0 / 16, 1.0 / 8, 3.0 / 16, 1.0 / 4, 3.0 / 8, 1.0 / 2, 3.0 / 4})
-      tries.push_back(with_base(downhill * f * v.max_start, 0.0));
+    constexpr double kLadder[] = {1.0 / 16, 1.0 / 8, 3.0 / 16, 1.0 / 4, 3.0 / 8, 1.0 / 2, 3.0 / 4};
+    for (double f : kLadder) tries.push_back(with_base(downhill * f * v.max_start, 0.0));
+    // A two-sided variable is laddered uphill of the score too: the score is the slope at the
+    // null, and a large effect's minimum can lie the other way (seen with a 2x stiffness contrast
+    // between the halves of a bouncing bar: the slope at ratio 1 pointed to ratios below 1, the
+    // minimum is at 2). The cost decides between the two sides, not the slope.
+    if (!v.boundary)
+      for (double f : kLadder) tries.push_back(with_base(-downhill * f * v.max_start, 0.0));
+    // A spin also along each principal axis of the body, both ways. The score is the linear
+    // response at rest; a spin of a few rad/s turns the body by tens of degrees, and a symmetric
+    // body looks alike after a quarter turn, so the score's direction mixes in other axes and
+    // even its sign along the true axis can be wrong (a cube turned by 80 degrees looks like one
+    // turned back by 10). A ladder along the score alone then starts the refit in a wrong basin.
+    // A body released with a spin turns about a principal axis of inertia in the common case
+    // (the only steady free rotations), so these six directions are where a start is worth
+    // trying; the refit frees all three components anyway.
+    if (v.extension == Extension::kInitialSpin) {
+      for (const Eigen::Vector3d& axis : PrincipalAxes(objective.simulator().hex_mesh())) {
+        for (const Eigen::Vector3d& turn : {Eigen::Vector3d(axis), Eigen::Vector3d(-axis)}) {
+          if (turn.dot(spin_direction) > 0.99) continue;  // the score's ladder already covers it
+          for (double f : kLadder) {
+            fem::PhysicalParameters p = with_base(0.0, 0.0);
+            p.initial_angular_velocity = f * v.max_start * turn;
+            tries.push_back(p);
+          }
+        }
+      }
+    }
     s.start_cost = std::numeric_limits<double>::infinity();
     for (const fem::PhysicalParameters& p : tries) {
       if (!p.Validate().ok()) continue;
@@ -336,7 +413,10 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
     switch (v.extension) {
       case Extension::kFriction: s.theta = s.start.friction_coefficient; break;
       case Extension::kAirDrag: s.theta = s.start.drag_quadratic; break;
-      case Extension::kInitialSpin: s.theta = s.start.initial_angular_velocity.norm(); break;
+      case Extension::kInitialSpin:
+        s.theta = s.start.initial_angular_velocity.norm();
+        if (s.theta > 0.0) s.direction = s.start.initial_angular_velocity / s.theta;
+        break;
       case Extension::kContact: s.theta = std::log(s.start.contact_stiffness / k0); break;
       case Extension::kHeterogeneousStiffness:
         s.theta = s.start.stiffness_field.regions.empty()

@@ -15,18 +15,24 @@
 // (likelihood_ratio.h). The refit starts from the best (forward cost) of that step, the extension
 // alone at theta*, and a ladder of the extension alone over its start range (1/16 ... 3/4 of it):
 // large effects are far from quadratic (stick-slip; a cube spinning looks alike every quarter
-// turn). A boundary parameter whose score says "the cost rises as it leaves 0" is
-// dropped: the one-sided test has nothing to offer.
+// turn). Two-sided variables (stiffness ratio, contact stiffness) are laddered on both sides of the
+// null: a large effect's minimum can lie against the slope at the null. The spin is laddered also
+// both ways along the body's principal axes (PrincipalAxes): the score's direction is the linear
+// response of the first frames, mixes in other axes and can even have the wrong sign. A boundary
+// parameter whose score says "the cost rises as it leaves 0" is dropped: the one-sided test has
+// nothing to offer.
 // Signature: the share of the base fit's excess misfit (above the noise floor) in the phases where
 // the extension acts (candidate_library.h). score = predicted LR x ((1 - w) + w x share).
 #pragma once
 
 #include <Eigen/Core>
+#include <array>
 #include <vector>
 
 #include "core/common/status.h"
 #include "core/diagnosis/candidate_library.h"
 #include "core/diagnosis/motion_phases.h"
+#include "core/fem/hex_mesh.h"
 #include "core/fem/physical_parameters.h"
 #include "core/inverse/parameter_space.h"
 #include "core/inverse/trajectory_objective.h"
@@ -96,6 +102,11 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
                                                         const std::vector<FrameMotion>& motion,
                                                         const std::vector<double>& excess,
                                                         const ScreeningOptions& options = {});
+
+// Principal axes of the rest body's volume (unit vectors, world frame), by increasing second
+// moment; where two moments agree within 5 % (a cube, a bar of square section) the world axes
+// projected into their plane. The initial-spin screening tries a start along each.
+std::array<Eigen::Vector3d, 3> PrincipalAxes(const fem::HexMesh& mesh);
 
 // The default penalty stiffness 100 E / L [Pa/m] (physical_parameters.h).
 double DefaultContactStiffness(const fem::PhysicalParameters& p, double body_size);

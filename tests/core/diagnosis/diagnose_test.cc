@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <cmath>
 #include <filesystem>
 
 #include "core/diagnosis/report.h"
@@ -98,6 +99,66 @@ TEST(Diagnose, ControlWithoutEffectGivesNone) {
   ASSERT_TRUE(report.ok()) << report.status().ToString();
   EXPECT_EQ(report->decision, "none") << ToText(*report);
   EXPECT_TRUE(ToJson(*report)["findings"].empty());
+}
+
+// A light cube thrown with a spin of 4 rad/s (a nuisance of the release): the screening starts
+// the spin's refit in the right basin (along the cube's axis, not along the score's mixed
+// direction), the refit recovers the spin, and the capture is never labelled as physics. (On this
+// coarse fit grid a patch may stay above the floor, so the decision may be "unexplained"; at the
+// proof's resolution it is "none" with the spin reported as a nuisance.)
+TEST(Diagnose, InitialSpinIsFittedNeverPhysics) {
+  const std::filesystem::path dir = std::filesystem::temp_directory_path() /
+                                    ("softid_diagnosis_spin_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  Result<scenes::ConcealedScene> scene =
+      scenes::MakeDiagnosisScene("light-throw", scenes::ConcealedEffect::kInitialSpin, 4.0);
+  ASSERT_TRUE(scene.ok());
+  scenes::SynthesisOptions synth;
+  synth.run.simulation.cells_along_longest_side = 10;
+  synth.run.substeps_per_frame = 2;
+  synth.run.duration = 0.4;
+  synth.cameras = scene->cameras;
+  synth.cameras.width = 80;
+  synth.cameras.height = 60;
+  synth.noise.sigma_constant = 1.5e-3;
+  synth.noise.sigma_quadratic = 2.5e-3;
+  synth.noise.dropout_probability = 0.01;
+  synth.noise.seed = 3;
+  synth.depth_scale = 1e-3;
+  ASSERT_TRUE(scenes::Synthesize(scene->scene, synth, dir).ok());
+  Result<capture::Capture> capture = capture::ReadCapture(dir);
+  ASSERT_TRUE(capture.ok());
+  inverse::JobConfig config;
+  config.fit = {"initial_velocity"};
+  inverse::InitialValue v;
+  v.value = nlohmann::json::array({1.8, 0.0, 2.6});
+  config.initial["initial_velocity"] = v;
+  config.fixed = {{"youngs_modulus", 3e4},
+                  {"stiffness_damping", 0.01},
+                  {"poisson_ratio", 0.3},
+                  {"ground", fem::ToJson(*scene->scene.parameters.ground)}};
+  config.cells = 8;
+  config.substeps = 1;
+  config.starts = 1;
+  config.threads = 1;
+  config.max_iterations = 20;
+  Result<DiagnosisReport> report = Diagnose(*capture, config, SmallOptions());
+  std::error_code ignored;
+  std::filesystem::remove_all(dir, ignored);
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  EXPECT_TRUE(report->decision == "none" || report->decision == "unexplained") << ToText(*report);
+  ASSERT_FALSE(report->tested.empty()) << ToText(*report);
+  const TestedCandidate& spin = report->tested.front();
+  EXPECT_EQ(spin.test.extension, Extension::kInitialSpin) << ToText(*report);
+  const Eigen::Vector3d omega = spin.parameters.initial_angular_velocity;
+  EXPECT_NEAR(omega.y(), 4.0, 0.4) << omega.transpose() << "\n" << ToText(*report);
+  EXPECT_LT(std::hypot(omega.x(), omega.z()), 0.4) << omega.transpose();
+  EXPECT_LT(spin.test.heldout_after, 0.9 * spin.test.heldout_before);
+  if (report->decision == "none") {
+    ASSERT_EQ(report->nuisances.size(), 1u) << ToText(*report);
+    EXPECT_EQ(report->nuisances[0]["nuisance"], "initial_spin");
+    EXPECT_TRUE(report->nuisances[0]["modelled"].get<bool>());
+  }
 }
 
 TEST(Diagnose, RejectsBadOptionsAndConfigs) {

@@ -40,6 +40,18 @@ TEST(MotionPhases, DropIsFlightThenImpact) {
   EXPECT_NEAR(impact - phases.begin(), 10.5, 1.5);
 }
 
+// The lively foam bar bounces: the frames in the air after the first contact are rebound, not
+// flight, so that a misfit of the bounce is not averaged with the fall before it.
+TEST(MotionPhases, BounceIsRebound) {
+  const std::vector<Phase> phases = PhasesOf("halves-drop", 0.45, /*cells=*/6);
+  const auto impact = std::find(phases.begin(), phases.end(), Phase::kImpact);
+  ASSERT_NE(impact, phases.end());
+  EXPECT_EQ(std::find(impact, phases.end(), Phase::kFlight), phases.end());
+  EXPECT_GE(std::count(impact, phases.end(), Phase::kRebound), 3);
+  EXPECT_EQ(std::count(phases.begin(), impact, Phase::kRebound), 0);
+  EXPECT_STREQ(ToString(Phase::kRebound), "rebound");
+}
+
 // A frictionless block dropped 1 cm onto a 30 degree ramp lands and slides (a grid fine enough
 // that half a cell is below the 1 cm gap).
 TEST(MotionPhases, RampIsImpactThenSliding) {

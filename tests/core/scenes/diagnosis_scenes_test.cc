@@ -2,7 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+
+#include "core/scenes/scene_runner.h"
 
 namespace softid::scenes {
 namespace {
@@ -36,6 +39,44 @@ TEST(DiagnosisScenes, HalvesCarryTheStiffnessRatio) {
   EXPECT_NEAR(p.stiffness_field.Scale(lower) / p.stiffness_field.Scale(upper), 4.0, 1e-12);
   EXPECT_NEAR(p.youngs_modulus * std::sqrt(4.0), control->scene.parameters.youngs_modulus,
               1e-9 * p.youngs_modulus);
+}
+
+// The bar's largest tilt after it first touches the ground: mean height of its -x end minus that
+// of its +x end [m] (surface points within 2 cm of either end of the rest bar).
+double LargestTiltAfterImpact(const ConcealedScene& scene) {
+  RunOptions run;
+  run.simulation.cells_along_longest_side = 8;
+  run.substeps_per_frame = 2;
+  const Eigen::AlignedBox3d rest = scene.scene.mesh.Bounds();
+  double largest = 0.0;
+  bool touched = false;
+  Result<RunSummary> summary = RunScene(scene.scene, run, [&](int, const fem::Simulator& sim) {
+    const std::vector<Eigen::Vector3d> now = sim.SurfacePositions();
+    const std::vector<Eigen::Vector3d>& at_rest = sim.rest_surface().vertices;
+    double low_x = 0.0, high_x = 0.0, bottom = 1e9;
+    int n_low = 0, n_high = 0;
+    for (size_t i = 0; i < now.size(); ++i) {
+      bottom = std::min(bottom, now[i].z());
+      if (at_rest[i].x() < rest.min().x() + 0.02) low_x += now[i].z(), ++n_low;
+      if (at_rest[i].x() > rest.max().x() - 0.02) high_x += now[i].z(), ++n_high;
+    }
+    touched |= bottom < 0.005;
+    if (touched && n_low > 0 && n_high > 0)
+      largest = std::max(largest, std::abs(low_x / n_low - high_x / n_high));
+  });
+  EXPECT_TRUE(summary.ok() && !summary->diverged);
+  return largest;
+}
+
+// The scene shows a 2x contrast in the bounce: the bar leaves the ground tilted by well over the
+// depth noise (1.5-2 mm at its distance) at its ends; a uniform bar lands and leaves flat.
+TEST(DiagnosisScenes, HalvesContrastShowsInTheBounce) {
+  const double uniform =
+      LargestTiltAfterImpact(*MakeDiagnosisScene("halves-drop", ConcealedEffect::kNone, 0.0));
+  const double contrast = LargestTiltAfterImpact(
+      *MakeDiagnosisScene("halves-drop", ConcealedEffect::kHeterogeneousStiffness, 2.0));
+  EXPECT_LT(uniform, 1e-3);
+  EXPECT_GT(contrast, 1e-2) << "uniform " << uniform;
 }
 
 // The effect goes where the name says: friction on the ramp, drag and spin on the throw.
