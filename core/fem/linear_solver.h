@@ -3,7 +3,9 @@
 // lower triangle of a reference matrix A_ref, rotated with the body: P^-1 = Q A_ref^-1 Q^T with
 // Q = blockdiag(R R_ref^T). A tumbling body's matrix is (nearly) R A_rest R^T, so one factor serves
 // many steps; refactorising every step would cost ~0.2-0.4 s at 10k DOFs. The caller renews the
-// factor when RefactorPays().
+// factor when RefactorPays(). The triangular solves run on a single-precision copy of the factor
+// (half the memory traffic); GMRES keeps the preconditioned basis (flexible GMRES), so solutions
+// are as accurate as with the double factor.
 #pragma once
 
 #include <Eigen/Core>
@@ -39,14 +41,19 @@ class LinearSolver {
   Status Factorize(const Matrix& a, const Eigen::Matrix3d& rotation);
   bool HasFactor() const;
   int num_factorizations() const { return num_factorizations_; }
-  // Ski-rental rule for renewing the factor: true once the GMRES time spent beyond what the fresh
-  // factor needed (iterations above the first solve after factorising) exceeds the measured time
-  // of one factorisation. Both costs are measured, so the rule adapts to the problem size.
+  // Ski-rental rule for renewing the factor: true once the GMRES work spent beyond what the fresh
+  // factor needed (iterations above the first solve after factorising) exceeds the work of one
+  // factorisation. Both are counted by a deterministic work model (CHOLMOD's flop count and the
+  // operation counts of an iteration), not timed: the same inputs always refactorise at the same
+  // solves, so a cost evaluated twice is bitwise the same (line searches, finite differences).
   bool RefactorPays() const;
 
   // Which operator Solve inverts: a, or its transpose (the adjoint's systems). The preconditioner
   // approximates the symmetric part, which both share.
   enum class Operator { kMatrix, kTransposed };
+
+  // x = P^-1 b: the preconditioner alone, an estimate of the solution of a x = b. @pre HasFactor()
+  void Precondition(const Eigen::VectorXd& b, const Eigen::Matrix3d& rotation, Eigen::VectorXd* x);
 
   // Solves op(a) x = b; x holds the initial guess on entry. @pre HasFactor()
   Summary Solve(const Matrix& a, const Eigen::VectorXd& b, const Eigen::Matrix3d& rotation,
@@ -63,10 +70,10 @@ class LinearSolver {
   Eigen::Matrix3d reference_rotation_ = Eigen::Matrix3d::Identity();
   Eigen::Matrix3d preconditioner_rotation_ = Eigen::Matrix3d::Identity();
   int num_factorizations_ = 0;
-  double factor_seconds_ = 0.0;         // last factorisation
-  double seconds_per_iteration_ = 0.0;  // running estimate
-  int baseline_iterations_ = -1;        // first solve after the factorisation
-  double excess_seconds_ = 0.0;         // GMRES time beyond the baseline since the factorisation
+  // Work-model units (see kFactorFlopWeight in linear_solver.cc): memory-bound flops.
+  double factor_work_ = 0.0;      // last factorisation, including failed shifted attempts
+  int baseline_iterations_ = -1;  // first solve after the factorisation
+  double excess_work_ = 0.0;      // GMRES work beyond the baseline since the factorisation
   // Work storage, kept to avoid allocation per solve: Krylov basis V, preconditioned basis Z,
   // Hessenberg matrix H, Givens rotations and the rotated residual g.
   Eigen::MatrixXd basis_, preconditioned_;

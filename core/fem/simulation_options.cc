@@ -55,6 +55,8 @@ Status SimulationOptions::Validate() const {
   if (!(surface_edge_fraction > 0.0)) {
     return Invalid("surface_edge_fraction", surface_edge_fraction, "must be positive");
   }
+  if (assembly_threads < 0)
+    return Invalid("assembly_threads", assembly_threads, "must be non-negative");
   return Status::Ok();
 }
 

@@ -7,8 +7,9 @@
 // rotations are recomputed from u, so the adjoint can re-run the assembly of any step from the
 // stored states without storing matrices.
 //
-// Thread-compatibility: one Simulator per thread. The element loop of the assembly runs on up to
-// 4 threads of its own on large meshes, with results independent of their timing.
+// Thread-compatibility: one Simulator per thread. The element loop of the assembly can run on
+// threads of its own (SimulationOptions::assembly_threads), with results independent of their
+// timing.
 #pragma once
 
 #include <Eigen/Core>
@@ -43,7 +44,7 @@ struct StateAdjoint {
 
 struct StepSummary {
   int newton_iterations = 0;
-  int linear_iterations = 0;  // summed over Newton iterations
+  int linear_iterations = 0;  // summed over Newton iterations, with convergence estimates
   bool converged = false;     // Newton met its tolerance
   bool diverged = false;      // non-finite state or a failed linear solve: the run is invalid
   bool refactorized = false;  // the preconditioner was renewed during this step
@@ -128,13 +129,19 @@ class Simulator {
 
  private:
   enum class Mode { kDynamic, kStatic };
-  // Residual r(u) of the step equations and their Jacobian (into assembler_.matrix()); v and a are
-  // the Newmark velocity and acceleration implied by u. Returns the body rotation.
+  // Residual r(u) of the step equations and, unless residual_only, their Jacobian (into
+  // assembler_.matrix(), else left as it was); v and a are the Newmark velocity and acceleration
+  // implied by u. Returns the body rotation.
+  // reuse_rotations: element_rotation_ already holds the rotations at this u (the previous
+  // assembly was at the same u), so the polar decompositions are skipped.
   Eigen::Matrix3d Assemble(Mode mode, const Eigen::VectorXd& u, const Eigen::VectorXd& v,
-                           const Eigen::VectorXd& a);
+                           const Eigen::VectorXd& a, bool residual_only = false,
+                           bool reuse_rotations = false);
   // Coefficients of one assembly shared by all elements.
   struct ElementTerms {
     bool dynamic = false;
+    bool jacobian = true;                // assemble the tangent blocks too
+    bool reuse_rotations = false;        // element_rotation_ is current
     double stiffness_damping = 0.0;      // beta_k, applied when dynamic
     double stiffness_coefficient = 1.0;  // of R K R^T in the tangent
     double mass_coefficient = 0.0;       // of the lumped mass in the tangent
@@ -157,11 +164,12 @@ class Simulator {
   // The adjoint of the step residual r(u, v, a; u_previous, parameters) (u_previous enters through
   // the lagged friction normal force) for multiplier lambda: sets velocity_adjoint = (dr/dv)^T
   // lambda and previous_adjoint = -(dr/du_previous)^T lambda, and adds -lambda^T dr/dparameters
-  // to `gradient`. (dr/da)^T lambda is M lambda.
+  // to `gradient`. (dr/da)^T lambda is M lambda. rotations_current: element_rotation_ holds the
+  // rotations at u (an assembly at u came last), which are then not recomputed.
   void ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd& v, const Eigen::VectorXd& a,
                        const Eigen::VectorXd& u_previous, const Eigen::VectorXd& lambda,
                        Eigen::VectorXd* velocity_adjoint, Eigen::VectorXd* previous_adjoint,
-                       ParameterGradient* gradient);
+                       ParameterGradient* gradient, bool rotations_current = false);
   // Per element the shear part of the stiffness, ElementStiffness(weights, h, 0, 1), without the
   // stiffness field's scale: d K / d poisson_ratio needs it. Built on the first backward pass.
   void BuildShearStiffness();
@@ -208,7 +216,7 @@ class Simulator {
   Eigen::VectorXd adjoint_guess_;
   SimulationState state_;
   // Work vectors of the Newton iteration.
-  Eigen::VectorXd residual_, update_, u_next_, v_next_, a_next_;
+  Eigen::VectorXd residual_, rhs_, update_, u_next_, v_next_, a_next_;
 };
 
 }  // namespace softid::fem

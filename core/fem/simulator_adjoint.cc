@@ -28,7 +28,8 @@ void Simulator::BuildShearStiffness() {
 void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd& v,
                                 const Eigen::VectorXd& a, const Eigen::VectorXd& u_previous,
                                 const Eigen::VectorXd& lambda, Eigen::VectorXd* velocity_adjoint,
-                                Eigen::VectorXd* previous_adjoint, ParameterGradient* gradient) {
+                                Eigen::VectorXd* previous_adjoint, ParameterGradient* gradient,
+                                bool rotations_current) {
   BuildShearStiffness();
   const PhysicalParameters& p = parameters_;
   const double h = mesh_.CellSize();
@@ -61,7 +62,8 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
       lambda_local.segment<3>(3 * c) = lambda.segment<3>(3 * nodes[c]);
     }
     if (lambda_local.isZero(0.0)) continue;
-    const Eigen::Matrix3d r = PolarRotation(DeformationGradient(x, h));
+    const Eigen::Matrix3d r =
+        rotations_current ? element_rotation_[e] : PolarRotation(DeformationGradient(x, h));
     const Eigen::Matrix3d rt = r.transpose();
     Vector24d rotated_lambda;  // R^T lambda_e
     for (int c = 0; c < 8; ++c) {
@@ -221,7 +223,7 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
 
   Eigen::VectorXd velocity_adjoint, previous_adjoint;
   ResidualAdjoint(next.u, next.v, next.a, previous.u, lambda, &velocity_adjoint, &previous_adjoint,
-                  gradient);
+                  gradient, /*rotations_current=*/true);
 
   // Explicit dependence of V and A on the previous state, with the residual's share
   // (dr/dv)^T lambda and (dr/da)^T lambda = M lambda subtracted.

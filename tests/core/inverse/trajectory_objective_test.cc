@@ -94,5 +94,26 @@ TEST(TrajectoryObjective, TruthIsALocalMinimumAndDivergenceIsReported) {
   EXPECT_LT(at_truth, 0.3 * cost_at(0.1));
 }
 
+// An optimiser's line search and finite differences need the same parameters to give the same
+// cost and gradient, bitwise, on the objective it keeps reusing.
+TEST(TrajectoryObjective, EvaluationIsBitwiseRepeatable) {
+  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.3);
+  ASSERT_TRUE(small.ok) << small.error;
+  fem::SimulationOptions options;
+  options.cells_along_longest_side = 8;
+  fem::PhysicalParameters p = small.truth;
+  p.youngs_modulus *= 0.8;
+  p.friction_coefficient = 0.3;
+  TrajectoryObjective objective(small.mesh, std::nullopt, p, options, {}, small.frames,
+                                small.capture.fps, 2);
+  Result<ObjectiveEvaluation> a = objective.Evaluate(p, true);
+  Result<ObjectiveEvaluation> b = objective.Evaluate(p, true);
+  ASSERT_TRUE(a.ok() && b.ok());
+  ASSERT_FALSE(a->diverged || b->diverged);
+  EXPECT_EQ(a->cost, b->cost);
+  EXPECT_EQ(a->frame_costs, b->frame_costs);
+  EXPECT_EQ(fem::ToJson(a->gradient).dump(), fem::ToJson(b->gradient).dump());
+}
+
 }  // namespace
 }  // namespace softid::inverse
