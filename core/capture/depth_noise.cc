@@ -66,4 +66,13 @@ void ApplyDepthNoise(const DepthNoiseOptions& options, int frame_index, int came
   }
 }
 
+DepthNoiseOptions StructuredLightNoise(uint64_t seed) {
+  DepthNoiseOptions noise;
+  noise.sigma_constant = 1.5e-3;
+  noise.sigma_quadratic = 2.5e-3;
+  noise.dropout_probability = 0.01;
+  noise.seed = seed;
+  return noise;
+}
+
 }  // namespace softid::capture

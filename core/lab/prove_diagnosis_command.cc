@@ -164,12 +164,8 @@ Outcome RunCase(const Case& c, const ProveFlags& flags) {
   synth.run.simulation.cells_along_longest_side = flags.generator_cells;
   synth.run.substeps_per_frame = 4;  // half the fit's time step
   synth.cameras = scene->cameras;
-  // A structured-light sensor: 1.5 mm + 2.5 mm (z / 1 m)^2, 1 % dropout, 1 mm quantisation.
-  synth.noise.sigma_constant = 1.5e-3;
-  synth.noise.sigma_quadratic = 2.5e-3;
-  synth.noise.dropout_probability = 0.01;
-  synth.noise.seed = static_cast<uint64_t>(c.seed);
-  synth.depth_scale = 1e-3;
+  synth.noise = capture::StructuredLightNoise(static_cast<uint64_t>(c.seed));
+  synth.depth_scale = capture::kStructuredLightDepthScale;
   Result<scenes::SynthesisSummary> written = scenes::Synthesize(scene->scene, synth, dir);
   if (!written.ok()) {
     o.error = written.status().message();

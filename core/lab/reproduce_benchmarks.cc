@@ -16,12 +16,7 @@ constexpr double kDegree = std::numbers::pi / 180.0;
 // The structured-light sensor of `synth --realistic-noise`: 1.5 mm + 2.5 mm (z / 1 m)^2, 1 %
 // dropout, 1 mm quantisation ("depth noise on" in the issue).
 capture::DepthNoiseOptions RealisticNoise() {
-  capture::DepthNoiseOptions noise;
-  noise.sigma_constant = 1.5e-3;
-  noise.sigma_quadratic = 2.5e-3;
-  noise.dropout_probability = 0.01;
-  noise.seed = 1;
-  return noise;
+  return capture::StructuredLightNoise(/*seed=*/1);
 }
 
 Row MakeRow(std::string id, std::string label, int cameras, int size,
@@ -47,8 +42,8 @@ Benchmark Table1() {
       "falling torus, Young's modulus only, log-uniform starts over [0.1, 10] x truth, depth noise "
       "on (paper: Table 1)";
   b.rows = {
-      MakeRow("c1-50", "1 camera 50x50", 1, 50,
-              PaperFigure{2.621, 100.0, "adjoint, 1 camera 50^2"}, /*in_quick=*/true),
+      MakeRow("c1-50", "1 camera 50x50", 1, 50, PaperFigure{2.621, 100.0, "adjoint, 1 camera 50^2"},
+              /*in_quick=*/true),
       MakeRow("c2-50", "2 cameras 50x50", 2, 50, PaperFigure{8.646, 70.0, "2 cameras 50^2"}),
       MakeRow("c4-50", "4 cameras 50x50", 4, 50, PaperFigure{5.084, 95.0, "4 cameras 50^2"}),
       MakeRow("c8-50", "8 cameras 50x50", 8, 50, PaperFigure{4.104, 95.0, "8 cameras 50^2"}),
@@ -178,14 +173,13 @@ double ScoreError(const Quantity& quantity, const fem::PhysicalParameters& value
       return t.norm() > 0.0 ? (v - t).norm() / t.norm() : kInfinity;
     }
     case Metric::kRatioRelative:
-      return std::abs((value.youngs_modulus / value.density) /
-                          (truth.youngs_modulus / truth.density) -
-                      1.0);
+      return std::abs(
+          (value.youngs_modulus / value.density) / (truth.youngs_modulus / truth.density) - 1.0);
     case Metric::kNormalAngleDegrees:
       if (!value.ground || !truth.ground) return kInfinity;
-      return std::acos(std::clamp(value.ground->normal.normalized().dot(
-                                      truth.ground->normal.normalized()),
-                                  -1.0, 1.0)) /
+      return std::acos(std::clamp(
+                 value.ground->normal.normalized().dot(truth.ground->normal.normalized()), -1.0,
+                 1.0)) /
              kDegree;
     case Metric::kOffsetMillimetres:
       if (!value.ground || !truth.ground) return kInfinity;

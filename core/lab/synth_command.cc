@@ -32,11 +32,8 @@ int RunSynth(const SynthFlags& flags) {
   options.depth_scale = flags.depth_scale;
   options.write_mass = !flags.no_mass;
   if (flags.realistic_noise) {
-    // A structured-light sensor: 1.5 mm + 2.5 mm (z / 1 m)^2, 1 % dropout, 1 mm quantisation.
-    options.noise.sigma_constant = 1.5e-3;
-    options.noise.sigma_quadratic = 2.5e-3;
-    options.noise.dropout_probability = 0.01;
-    options.depth_scale = 1e-3;
+    options.noise = capture::StructuredLightNoise(options.noise.seed);
+    options.depth_scale = capture::kStructuredLightDepthScale;
   }
   const int num_frames = options.run.NumFrames(*scene);
   spdlog::info("synth: scene {} -> {} ({} frames, {} camera(s) {}x{})", scene->name, flags.out,

@@ -35,11 +35,8 @@ struct RampCapture {
     options.cameras = scene->cameras;
     options.cameras.width = 48;
     options.cameras.height = 40;
-    options.noise.sigma_constant = 1.5e-3;
-    options.noise.sigma_quadratic = 2.5e-3;
-    options.noise.dropout_probability = 0.01;
-    options.noise.seed = 5;
-    options.depth_scale = 1e-3;
+    options.noise = capture::StructuredLightNoise(/*seed=*/5);
+    options.depth_scale = capture::kStructuredLightDepthScale;
     Result<scenes::SynthesisSummary> summary = scenes::Synthesize(scene->scene, options, dir);
     EXPECT_TRUE(summary.ok()) << summary.status().ToString();
     capture = *capture::ReadCapture(dir);
@@ -120,11 +117,8 @@ TEST(Diagnose, InitialSpinIsFittedNeverPhysics) {
   synth.cameras = scene->cameras;
   synth.cameras.width = 80;
   synth.cameras.height = 60;
-  synth.noise.sigma_constant = 1.5e-3;
-  synth.noise.sigma_quadratic = 2.5e-3;
-  synth.noise.dropout_probability = 0.01;
-  synth.noise.seed = 3;
-  synth.depth_scale = 1e-3;
+  synth.noise = capture::StructuredLightNoise(/*seed=*/3);
+  synth.depth_scale = capture::kStructuredLightDepthScale;
   ASSERT_TRUE(scenes::Synthesize(scene->scene, synth, dir).ok());
   Result<capture::Capture> capture = capture::ReadCapture(dir);
   ASSERT_TRUE(capture.ok());
