@@ -79,6 +79,23 @@ fem::StiffnessField HalvesField(const Eigen::AlignedBox3d& rest_bounds, int axis
   return field;
 }
 
+fem::PhysicalParameters CopyExtension(Extension extension, const fem::PhysicalParameters& from,
+                                      fem::PhysicalParameters to) {
+  switch (extension) {
+    case Extension::kFriction: to.friction_coefficient = from.friction_coefficient; break;
+    case Extension::kAirDrag: to.drag_quadratic = from.drag_quadratic; break;
+    case Extension::kHeterogeneousStiffness: to.stiffness_field = from.stiffness_field; break;
+    case Extension::kContact:
+      to.contact_stiffness = from.contact_stiffness;
+      to.contact_damping = from.contact_damping;
+      break;
+    case Extension::kInitialSpin:
+      to.initial_angular_velocity = from.initial_angular_velocity;
+      break;
+  }
+  return to;
+}
+
 namespace {
 
 double HalvesRatio(const fem::PhysicalParameters& p) {

@@ -57,6 +57,12 @@ const Candidate& GetCandidate(Extension extension);
 // the upper half's modulus.
 fem::StiffnessField HalvesField(const Eigen::AlignedBox3d& rest_bounds, int axis, double ratio);
 
+// `to` with the extension's parameters taken from `from` (friction_coefficient, drag_quadratic,
+// stiffness_field, contact_stiffness and contact_damping, or initial_angular_velocity): a joint
+// refit of a physics candidate with a nuisance starts from one refit with the other's values.
+fem::PhysicalParameters CopyExtension(Extension extension, const fem::PhysicalParameters& from,
+                                      fem::PhysicalParameters to);
+
 // Whether the fitted value of the extension is physically plausible; `why` says which bound.
 //   friction: mu in [0.01, 1.5]; air_drag: [0.01, 5] kg/m^3 (rho_air C_d / 2 of bluff bodies is
 //   ~0.6); heterogeneous_stiffness: ratio outside [0.8, 1.25] and inside [1/50, 50];

@@ -58,16 +58,77 @@ void ApplyDecisionRule(const DecisionOptions& options, const Candidate& candidat
                    test->returned_to_noise && test->plausible && test->identifiable;
 }
 
+void ApplyNuisanceCheck(const DecisionOptions& options, const Candidate& nuisance,
+                        CandidateTest* conditional) {
+  conditional->nuisance_critical_value = ChiBarSquareCriticalValue(
+      nuisance.num_added, nuisance.num_boundary, options.alpha / nuisance.num_variants);
+  conditional->nuisance_needed =
+      conditional->refit_error.empty() &&
+      conditional->nuisance_lr > conditional->nuisance_critical_value &&
+      conditional->physics_heldout > 0.0 &&
+      conditional->heldout_after <=
+          (1.0 - options.min_heldout_improvement) * conditional->physics_heldout;
+}
+
+namespace {
+
+// The conditional test of physics `physics` given nuisance `nuisance`, -1 when none was run.
+int FindConditional(const std::vector<CandidateTest>& tests, Extension physics,
+                    Extension nuisance) {
+  for (size_t i = 0; i < tests.size(); ++i)
+    if (tests[i].conditional && tests[i].extension == physics && tests[i].given == nuisance)
+      return static_cast<int>(i);
+  return -1;
+}
+
+}  // namespace
+
 std::string Decide(bool flagged, const std::vector<CandidateTest>& tests, int* winner) {
   *winner = -1;
   if (!flagged) return "none";
-  for (size_t i = 0; i < tests.size(); ++i) {
-    if (!tests[i].accepted) continue;
-    if (*winner < 0 || tests[i].lr > tests[*winner].lr) *winner = static_cast<int>(i);
+  // Step 2: per physics extension the test it stands on, if any.
+  std::vector<int> standing;
+  for (const Candidate& physics : CandidateLibrary()) {
+    if (physics.nuisance) continue;
+    int alone = -1;  // accepted against the base
+    for (size_t i = 0; i < tests.size(); ++i)
+      if (!tests[i].conditional && tests[i].extension == physics.extension && tests[i].accepted)
+        alone = static_cast<int>(i);
+    int chosen = alone;
+    bool stands = true;
+    for (const Candidate& nuisance : CandidateLibrary()) {
+      if (!nuisance.nuisance) continue;
+      int accepted_nuisance = -1;
+      for (size_t i = 0; i < tests.size(); ++i)
+        if (!tests[i].conditional && tests[i].extension == nuisance.extension && tests[i].accepted)
+          accepted_nuisance = static_cast<int>(i);
+      const int c = FindConditional(tests, physics.extension, nuisance.extension);
+      if (c < 0) {
+        // No joint fit: only the likelihood ratios against the base can be compared.
+        if (accepted_nuisance >= 0)
+          stands = stands && alone >= 0 && tests[alone].lr > tests[accepted_nuisance].lr;
+        continue;
+      }
+      const CandidateTest& given = tests[c];
+      const bool imitated = alone >= 0 && given.lr_passed && !given.nuisance_needed;
+      if (given.accepted) {
+        // The joint model: the nuisance's parameters stay in whenever it is fitted (they are
+        // nuisance parameters; leaving them out would bias the physics' value).
+        chosen = c;
+      } else if (!imitated && accepted_nuisance >= 0) {
+        stands = false;  // the nuisance explains the mismatch; the physics adds nothing decisive
+      }
+    }
+    if (stands && chosen >= 0) standing.push_back(chosen);
   }
-  if (*winner < 0) return "unexplained";
-  if (tests[*winner].nuisance) return "none";
-  return ToString(tests[*winner].extension);
+  for (int i : standing)
+    if (*winner < 0 || tests[i].lr > tests[*winner].lr) *winner = i;
+  if (*winner >= 0) return ToString(tests[*winner].extension);
+  for (size_t i = 0; i < tests.size(); ++i)
+    if (!tests[i].conditional && tests[i].nuisance && tests[i].accepted &&
+        (*winner < 0 || tests[i].lr > tests[*winner].lr))
+      *winner = static_cast<int>(i);
+  return *winner >= 0 ? "none" : "unexplained";
 }
 
 }  // namespace softid::diagnosis

@@ -9,9 +9,26 @@
 //      d. the fitted value is physically plausible (candidate_library.h);
 //      e. the motion determines the found value: moving it by +-25 % (the other parameters at
 //         the refit) is rejected by the same likelihood-ratio test (its profile).
-//   2. Among accepted candidates the largest LR wins. A nuisance (initial spin) that wins means
-//      the mismatch was the nuisance: "none", with the nuisance reported as such.
-//   3. Flagged, nothing accepted -> "unexplained", with where and when.
+//   2. A physics candidate and a nuisance (initial spin) are not nested: their likelihood ratios
+//      against the base answer different questions, and a small nuisance can soak up part of a
+//      physical signal. When a nuisance N and a physics candidate P both improve the fit (LRs
+//      passed, N plausible), P is refitted jointly with N (every base parameter free) and tested
+//      GIVEN N: the rule of step 1 with the N model as the null (LR of (base+N+P) vs (base+N),
+//      held-out against the N model, flagged cells back to noise, plausible, determined). The same
+//      joint fit tells whether N still adds anything once P is in (its LR against the P model at
+//      N's critical value, and the held-out gate against the P model). P stands on
+//        - the joint model when P given N is accepted (N is then reported as a nuisance alongside
+//          the physics, and whether it is still needed given P);
+//        - P alone when P alone is accepted, P given N passes its LR but not every gate (e.g. the
+//          N model is already close to the noise on held-out frames), and N adds nothing given P:
+//          the nuisance only imitated the physics.
+//      Against an accepted N (a complete explanation on its own) P stands only so (a joint refit
+//      that failed counts as P not standing); when no joint fit was run (cancelled) the larger LR
+//      against the base decides, as before.
+//   3. Among standing physics candidates the largest LR wins. No physics stands but a nuisance is
+//      accepted: the mismatch was the nuisance, "none", with the nuisance reported as such (a
+//      nuisance is never reported as physics).
+//   4. Flagged, nothing accepted -> "unexplained", with where and when.
 #pragma once
 
 #include <string>
@@ -61,6 +78,17 @@ struct CandidateTest {
   std::string identifiability_note;
   bool accepted = false;
   std::string refit_error;  // the refit failed (the candidate is then rejected)
+  // A test of a physics candidate given the accepted nuisance `given` (step 2): the joint refit
+  // (base + nuisance + candidate) against the nuisance's refit, whose costs are cost_before and
+  // heldout_before.
+  bool conditional = false;
+  Extension given = Extension::kInitialSpin;
+  // The same joint fit against the candidate's own refit (costs physics_cost, physics_heldout):
+  // LR = n_eff log(physics_cost / cost_after) at the nuisance's critical value, and the held-out
+  // gate. The nuisance is needed given the physics when both pass.
+  double physics_cost = 0.0, physics_heldout = 0.0;  // [m^2]
+  double nuisance_lr = 0.0, nuisance_critical_value = 0.0;
+  bool nuisance_needed = true;
   // Why it was rejected, e.g. "held-out cost fell by 3 % < 10 %" (empty when accepted).
   std::string Reason() const;
 };
@@ -69,9 +97,16 @@ struct CandidateTest {
 void ApplyDecisionRule(const DecisionOptions& options, const Candidate& candidate,
                        CandidateTest* test);
 
-// "none" | "unexplained" | the physics name of the winner (steps 0, 2, 3); `flagged` is step 0.
+// Fills nuisance_critical_value and nuisance_needed of a conditional test from its numbers (step
+// 2: does `nuisance` still add anything once the physics is in?).
+void ApplyNuisanceCheck(const DecisionOptions& options, const Candidate& nuisance,
+                        CandidateTest* conditional);
+
+// "none" | "unexplained" | the physics name of the winner (steps 0, 2-4); `flagged` is step 0.
+// `tests` holds the candidates tested against the base and the conditional tests of step 2.
 // *winner is the index of the accepted test that decided, -1 when none did (a winning nuisance
-// gives "none" with *winner >= 0).
+// gives "none" with *winner >= 0; a physics found given a nuisance has *winner at its
+// conditional test).
 std::string Decide(bool flagged, const std::vector<CandidateTest>& tests, int* winner);
 
 }  // namespace softid::diagnosis

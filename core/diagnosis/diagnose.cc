@@ -45,12 +45,14 @@ Result<ModelResiduals> ResidualsAt(Context& context, const fem::PhysicalParamete
   return out;
 }
 
-// The refit of a candidate: the base config with the candidate's parameters freed and every
-// fitted parameter starting from `start` (one start: the base optimum plus the screened value).
-inverse::JobConfig RefitConfig(const inverse::JobConfig& base, const Candidate& candidate,
+// The refit of a model extension: the base config with `freed` parameters fitted as well and
+// every fitted parameter starting from `start` (one start: the base optimum plus the extension's
+// screened value).
+inverse::JobConfig RefitConfig(const inverse::JobConfig& base,
+                               const std::vector<std::string>& freed,
                                const fem::PhysicalParameters& start) {
   inverse::JobConfig out = base;
-  for (const std::string& name : candidate.parameters) {
+  for (const std::string& name : freed) {
     if (!out.IsFitted(name)) out.fit.push_back(name);
     out.fixed.erase(std::string(inverse::PhysicalParameterKey(name)));
   }
@@ -277,6 +279,119 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
     SOFTID_ASSIGN_OR_RETURN(report.screening,
                             ScreenCandidates(*context.objective, screening_base, report.motion,
                                              excess, options.screening));
+    // The refit of `freed` from each of `starts` (every base parameter free as well); the lowest
+    // fitted cost wins. *tried lists each start's extension values and fitted cost.
+    auto refit = [&](const Candidate& candidate, const std::vector<std::string>& freed,
+                     const std::vector<fem::PhysicalParameters>& starts, nlohmann::json* tried,
+                     inverse::JobConfig* used) -> Result<inverse::FitResult> {
+      Result<inverse::FitResult> best = Status::Internal("no refit start");
+      const double k0 = DefaultContactStiffness(p0, context.rest_bounds.sizes().maxCoeff());
+      for (const fem::PhysicalParameters& start : starts) {
+        const inverse::JobConfig c = RefitConfig(config, freed, start);
+        Result<inverse::FitResult> fit = inverse::Fit(capture, c, options.fit);
+        nlohmann::json entry = {{"start", ExtensionValues(candidate.extension, start, k0)}};
+        if (fit.ok()) {
+          entry["cost"] = fit->Best().final_cost;
+          entry["found"] = ExtensionValues(candidate.extension, fit->Best().final, k0);
+        } else {
+          entry["error"] = fit.status().message();
+        }
+        tried->push_back(entry);
+        if (fit.ok() && (!best.ok() || fit->Best().final_cost < best->Best().final_cost)) {
+          best = std::move(fit);
+          *used = c;
+        } else if (!best.ok() && !fit.ok()) {
+          best = fit.status();
+        }
+      }
+      return best;
+    };
+    // Steps 1a-1e for a finished refit: `tested.test` holds the null's costs (cost_before,
+    // heldout_before); LR, gates, profile and (when accepted) identifiability follow.
+    auto judge = [&](const Candidate& candidate, const Result<inverse::FitResult>& fit,
+                     const inverse::JobConfig& fit_config, TestedCandidate* tested) {
+      Result<ModelResiduals> r1 = Status::Internal("not evaluated");
+      if (fit.ok()) {
+        tested->parameters = fit->Best().final;
+        r1 = ResidualsAt(context, tested->parameters);
+      }
+      if (!fit.ok() || !r1.ok()) {
+        tested->test.refit_error = !fit.ok() ? fit.status().message() : r1.status().message();
+        ApplyDecisionRule(rule, candidate, &tested->test);
+        return;
+      }
+      tested->fit = inverse::ToJson(*fit);
+      tested->test.cost_after = r1->cost;
+      tested->test.heldout_after = r1->heldout;
+      const EffectiveSampleSize ess = ComputeEffectiveSampleSize(FittedResiduals(r1->map));
+      tested->test.n_eff = ess.n_eff;
+      tested->test.tau_pixels = ess.tau_pixels;
+      tested->test.tau_frames = ess.tau_frames;
+      tested->test.lr = LikelihoodRatioStatistic(tested->test.cost_before, r1->cost, ess.n_eff);
+      tested->after = Locate(r1->map, report.motion, sigma, rule.misfit_threshold,
+                             rule.min_phase_frames, rule.min_patch_points);
+      // The phases and patches flagged at the base fit must be back at the noise level.
+      for (size_t i = 0; i < report.before.phases.size(); ++i) {
+        if (!report.before.phases[i].flagged) continue;
+        for (const PhaseMisfit& after : tested->after.phases)
+          if (after.phase == report.before.phases[i].phase &&
+              after.normalised > rule.misfit_threshold)
+            tested->test.still_flagged.push_back(ToString(after.phase));
+      }
+      for (size_t i = 0; i < report.before.patches.size(); ++i) {
+        if (report.before.patches[i].flagged &&
+            tested->after.patches[i].normalised > rule.misfit_threshold)
+          tested->test.still_flagged.push_back("patch " + std::to_string(i) + " (" +
+                                               tested->after.patches[i].label + ")");
+      }
+      const double k0 =
+          DefaultContactStiffness(tested->parameters, context.rest_bounds.sizes().maxCoeff());
+      tested->test.plausible =
+          IsPlausible(candidate.extension, tested->parameters, k0, &tested->test.plausibility_note);
+      tested->values = ExtensionValues(candidate.extension, tested->parameters, k0);
+      tested->uncertainty = nullptr;
+      ApplyDecisionRule(rule, candidate, &tested->test);
+      // 1e. Does the motion determine the found value? Its profile at +-25 %.
+      if (tested->test.accepted) {
+        const Profile profile =
+            ProfileExtension(*context.objective, candidate.extension, tested->parameters, r1->cost,
+                             ess.n_eff, tested->test.critical_value, 0.25, k0);
+        tested->profile = {{"change", 0.25},
+                           {"lr_minus", profile.lr_minus},
+                           {"lr_plus", profile.lr_plus},
+                           {"determined", profile.determined},
+                           {"relative_uncertainty", profile.relative_uncertainty}};
+        tested->test.identifiability_checked = true;
+        tested->test.identifiable = profile.determined;
+        if (!profile.determined) {
+          tested->test.identifiability_note = "a 25 % change of the value is not rejected (LR " +
+                                              std::to_string(profile.lr_minus) + ", " +
+                                              std::to_string(profile.lr_plus) + ")";
+        }
+        ApplyDecisionRule(rule, candidate, &tested->test);
+      }
+      // Identifiability, only where everything else passed (it costs 2 runs per variable).
+      if (tested->test.accepted && options.identifiability) {
+        stage(std::string("identifiability of ") + ToString(candidate.extension));
+        Result<inverse::IdentifiabilityReport> id = inverse::AnalyzeIdentifiability(
+            capture, fit_config, *fit, IdentifiabilityOptionsFor(config, ess.n_eff));
+        if (id.ok()) {
+          bool ok = true;
+          std::string note;
+          tested->uncertainty = ExtensionUncertainty(candidate, *id, &ok, &note);
+          // Reported, not a gate: a Hessian from differences of adjoint gradients can miss the
+          // curvature of a piecewise-smooth cost (contact switching), the profile above cannot.
+          if (!ok) tested->profile["hessian_note"] = note;
+          tested->fit["identifiability"] = inverse::ToJson(*id);
+        } else {
+          tested->profile["hessian_note"] = id.status().message();
+        }
+      }
+      tested->cost_history.push_back(fit->Best().initial_cost);
+      for (double c : fit->Best().cost_history) tested->cost_history.push_back(c);
+    };
+    auto cancelled = [&] { return options.fit.cancel != nullptr && options.fit.cancel->load(); };
+
     for (const ScreenedCandidate& s : report.screening) {
       if (static_cast<int>(report.tested.size()) >= rule.max_refits) break;
       if (!s.applicable || !(s.predicted_lr > 0.0)) continue;
@@ -284,101 +399,83 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
       if (std::any_of(report.tested.begin(), report.tested.end(),
                       [&](const TestedCandidate& t) { return t.test.extension == s.extension; }))
         continue;
-      if (options.fit.cancel != nullptr && options.fit.cancel->load()) break;
+      if (cancelled()) break;
       const Candidate& candidate = GetCandidate(s.extension);
       stage(std::string("refit with ") + ToString(s.extension));
-      fem::PhysicalParameters start = s.start;
-      if (s.extension == Extension::kContact && !(start.contact_stiffness > 0.0)) {
-        start.contact_stiffness =
-            DefaultContactStiffness(p0, context.rest_bounds.sizes().maxCoeff());
+      // A two-sided variable is refitted from its best start on each side of the null.
+      std::vector<fem::PhysicalParameters> starts = s.refit_starts;
+      if (starts.empty()) starts = {s.start};
+      for (fem::PhysicalParameters& start : starts) {
+        if (s.extension == Extension::kContact && !(start.contact_stiffness > 0.0)) {
+          start.contact_stiffness =
+              DefaultContactStiffness(p0, context.rest_bounds.sizes().maxCoeff());
+        }
       }
       TestedCandidate tested;
       tested.test.extension = s.extension;
       tested.test.cost_before = r0.cost;
       tested.test.heldout_before = r0.heldout;
-      const inverse::JobConfig refit_config = RefitConfig(config, candidate, start);
-      Result<inverse::FitResult> refit = inverse::Fit(capture, refit_config, options.fit);
-      Result<ModelResiduals> r1 = Status::Internal("not evaluated");
-      if (refit.ok()) {
-        tested.parameters = refit->Best().final;
-        r1 = ResidualsAt(context, tested.parameters);
-      }
-      if (!refit.ok() || !r1.ok()) {
-        tested.test.refit_error = !refit.ok() ? refit.status().message() : r1.status().message();
-        ApplyDecisionRule(rule, candidate, &tested.test);
-        report.tested.push_back(std::move(tested));
-        continue;
-      }
-      tested.fit = inverse::ToJson(*refit);
-      tested.test.cost_after = r1->cost;
-      tested.test.heldout_after = r1->heldout;
-      const EffectiveSampleSize ess = ComputeEffectiveSampleSize(FittedResiduals(r1->map));
-      tested.test.n_eff = ess.n_eff;
-      tested.test.tau_pixels = ess.tau_pixels;
-      tested.test.tau_frames = ess.tau_frames;
-      tested.test.lr = LikelihoodRatioStatistic(r0.cost, r1->cost, ess.n_eff);
-      tested.after = Locate(r1->map, report.motion, sigma, rule.misfit_threshold,
-                            rule.min_phase_frames, rule.min_patch_points);
-      // The phases and patches flagged at the base fit must be back at the noise level.
-      for (size_t i = 0; i < report.before.phases.size(); ++i) {
-        if (!report.before.phases[i].flagged) continue;
-        for (const PhaseMisfit& after : tested.after.phases)
-          if (after.phase == report.before.phases[i].phase &&
-              after.normalised > rule.misfit_threshold)
-            tested.test.still_flagged.push_back(ToString(after.phase));
-      }
-      for (size_t i = 0; i < report.before.patches.size(); ++i) {
-        if (report.before.patches[i].flagged &&
-            tested.after.patches[i].normalised > rule.misfit_threshold)
-          tested.test.still_flagged.push_back("patch " + std::to_string(i) + " (" +
-                                              tested.after.patches[i].label + ")");
-      }
-      const double k0 =
-          DefaultContactStiffness(tested.parameters, context.rest_bounds.sizes().maxCoeff());
-      tested.test.plausible =
-          IsPlausible(s.extension, tested.parameters, k0, &tested.test.plausibility_note);
-      tested.values = ExtensionValues(s.extension, tested.parameters, k0);
-      tested.uncertainty = nullptr;
-      ApplyDecisionRule(rule, candidate, &tested.test);
-      // 6a. Does the motion determine the found value? Its profile at +-25 %.
-      if (tested.test.accepted) {
-        const Profile profile =
-            ProfileExtension(*context.objective, s.extension, tested.parameters, r1->cost,
-                             ess.n_eff, tested.test.critical_value, 0.25, k0);
-        tested.profile = {{"change", 0.25},
-                          {"lr_minus", profile.lr_minus},
-                          {"lr_plus", profile.lr_plus},
-                          {"determined", profile.determined},
-                          {"relative_uncertainty", profile.relative_uncertainty}};
-        tested.test.identifiability_checked = true;
-        tested.test.identifiable = profile.determined;
-        if (!profile.determined) {
-          tested.test.identifiability_note = "a 25 % change of the value is not rejected (LR " +
-                                             std::to_string(profile.lr_minus) + ", " +
-                                             std::to_string(profile.lr_plus) + ")";
-        }
-        ApplyDecisionRule(rule, candidate, &tested.test);
-      }
-      // 6. Identifiability, only where everything else passed (it costs 2 runs per variable).
-      if (tested.test.accepted && options.identifiability) {
-        stage(std::string("identifiability of ") + ToString(s.extension));
-        Result<inverse::IdentifiabilityReport> id = inverse::AnalyzeIdentifiability(
-            capture, refit_config, *refit, IdentifiabilityOptionsFor(config, ess.n_eff));
-        if (id.ok()) {
-          bool ok = true;
-          std::string note;
-          tested.uncertainty = ExtensionUncertainty(candidate, *id, &ok, &note);
-          // Reported, not a gate: a Hessian from differences of adjoint gradients can miss the
-          // curvature of a piecewise-smooth cost (contact switching), the profile above cannot.
-          if (!ok) tested.profile["hessian_note"] = note;
-          tested.fit["identifiability"] = inverse::ToJson(*id);
-        } else {
-          tested.profile["hessian_note"] = id.status().message();
-        }
-      }
-      tested.cost_history.push_back(refit->Best().initial_cost);
-      for (double c : refit->Best().cost_history) tested.cost_history.push_back(c);
+      tested.starts = nlohmann::json::array();
+      inverse::JobConfig used = config;
+      const Result<inverse::FitResult> fit =
+          refit(candidate, candidate.parameters, starts, &tested.starts, &used);
+      judge(candidate, fit, used, &tested);
       report.tested.push_back(std::move(tested));
+    }
+
+    // Step 2 of the rule: a physics candidate that improves the fit, tested given each nuisance
+    // that improves it too with a plausible value (the two are not nested). The joint refit starts
+    // from the better (forward cost) of the nuisance's refit with the candidate's found values and
+    // the candidate's refit with the nuisance's found values.
+    const size_t num_single = report.tested.size();
+    report.tested.reserve(num_single * (num_single + 1));  // references below stay valid
+    for (size_t n = 0; n < num_single; ++n) {
+      const CandidateTest& fitted_nuisance = report.tested[n].test;
+      if (!fitted_nuisance.nuisance || !fitted_nuisance.refit_error.empty() ||
+          !fitted_nuisance.lr_passed || !fitted_nuisance.plausible)
+        continue;
+      for (size_t i = 0; i < num_single; ++i) {
+        const CandidateTest& alone = report.tested[i].test;
+        if (alone.nuisance || !alone.refit_error.empty() || !alone.lr_passed) continue;
+        if (cancelled()) break;
+        const TestedCandidate& nuisance = report.tested[n];
+        const TestedCandidate& physics = report.tested[i];
+        const Candidate& candidate = GetCandidate(physics.test.extension);
+        const Candidate& nuisance_candidate = GetCandidate(nuisance.test.extension);
+        stage(std::string("refit with ") + ToString(candidate.extension) + " given " +
+              ToString(nuisance_candidate.extension));
+        fem::PhysicalParameters start =
+            CopyExtension(candidate.extension, physics.parameters, nuisance.parameters);
+        const fem::PhysicalParameters other =
+            CopyExtension(nuisance_candidate.extension, nuisance.parameters, physics.parameters);
+        Result<inverse::ObjectiveEvaluation> a = context.objective->Evaluate(start, false);
+        Result<inverse::ObjectiveEvaluation> b = context.objective->Evaluate(other, false);
+        if (b.ok() && !b->diverged && (!a.ok() || a->diverged || b->cost < a->cost)) start = other;
+        std::vector<std::string> freed = nuisance_candidate.parameters;
+        for (const std::string& name : candidate.parameters) freed.push_back(name);
+        TestedCandidate tested;
+        tested.test.extension = candidate.extension;
+        tested.test.conditional = true;
+        tested.test.given = nuisance_candidate.extension;
+        tested.test.cost_before = nuisance.test.cost_after;
+        tested.test.heldout_before = nuisance.test.heldout_after;
+        tested.test.physics_cost = physics.test.cost_after;
+        tested.test.physics_heldout = physics.test.heldout_after;
+        tested.starts = nlohmann::json::array();
+        inverse::JobConfig used = config;
+        const Result<inverse::FitResult> fit =
+            refit(candidate, freed, {start}, &tested.starts, &used);
+        judge(candidate, fit, used, &tested);
+        if (tested.test.refit_error.empty()) {
+          tested.test.nuisance_lr = LikelihoodRatioStatistic(
+              tested.test.physics_cost, tested.test.cost_after, tested.test.n_eff);
+          tested.nuisance_values = ExtensionValues(
+              nuisance_candidate.extension, tested.parameters,
+              DefaultContactStiffness(tested.parameters, context.rest_bounds.sizes().maxCoeff()));
+        }
+        ApplyNuisanceCheck(rule, nuisance_candidate, &tested.test);
+        report.tested.push_back(std::move(tested));
+      }
     }
   }
 
@@ -386,15 +483,30 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
   std::vector<CandidateTest> tests;
   for (const TestedCandidate& t : report.tested) tests.push_back(t.test);
   report.decision = Decide(report.before.flagged, tests, &report.winner);
+  // Nuisances: accepted on their own, or part of the final model (physics found given them).
+  const TestedCandidate* winning = report.winner >= 0 ? &report.tested[report.winner] : nullptr;
   for (const TestedCandidate& t : report.tested) {
-    if (t.test.nuisance && t.test.accepted) {
-      report.nuisances.push_back(
-          {{"nuisance", ToString(t.test.extension)},
-           {"parameters", t.values},
-           {"uncertainty", t.uncertainty},
-           {"modelled", true},
-           {"explains_mismatch", report.winner >= 0 && &report.tested[report.winner] == &t}});
+    if (t.test.conditional || !t.test.nuisance) continue;
+    const bool in_final_model =
+        winning != nullptr && winning->test.conditional && winning->test.given == t.test.extension;
+    if (!t.test.accepted && !in_final_model) continue;
+    nlohmann::json entry = {
+        {"nuisance", ToString(t.test.extension)}, {"parameters", t.values},
+        {"uncertainty", t.uncertainty},           {"modelled", true},
+        {"accepted_alone", t.test.accepted},      {"explains_mismatch", winning == &t}};
+    // Physics found despite the nuisance: whether the nuisance is still needed given it (then it
+    // is part of the final model, with these values).
+    if (report.winner >= 0 && !report.tested[report.winner].test.nuisance) {
+      for (const TestedCandidate& c : report.tested) {
+        if (!c.test.conditional || c.test.given != t.test.extension ||
+            c.test.extension != report.tested[report.winner].test.extension)
+          continue;
+        entry["needed_given_physics"] = c.test.nuisance_needed;
+        if (&c == &report.tested[report.winner])
+          entry["parameters_in_final_model"] = c.nuisance_values;
+      }
     }
+    report.nuisances.push_back(entry);
   }
   if (report.winner >= 0) {
     TestedCandidate& w = report.tested[report.winner];
@@ -449,7 +561,10 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
     series.push_back(history("base fit", base_history));
     for (const TestedCandidate& t : report.tested) {
       if (!t.cost_history.empty())
-        series.push_back(history(std::string("+ ") + ToString(t.test.extension), t.cost_history));
+        series.push_back(history(
+            std::string("+ ") + ToString(t.test.extension) +
+                (t.test.conditional ? std::string(" + ") + ToString(t.test.given) : std::string()),
+            t.cost_history));
     }
     const std::string cost_png = (dir / "cost_per_iteration.png").string();
     SOFTID_RETURN_IF_ERROR(WriteCostHistoryPlot(cost_png, series));

@@ -52,7 +52,8 @@ struct DiagnoseOptions {
   Status Validate() const;
 };
 
-// One refitted candidate.
+// One refitted candidate: against the base, or (test.conditional) jointly with an accepted
+// nuisance against the nuisance's refit (decision.h, step 2).
 struct TestedCandidate {
   CandidateTest test;
   nlohmann::json values;  // ExtensionValues of the refit
@@ -66,6 +67,11 @@ struct TestedCandidate {
   Localization after;  // residuals of the refit, normalised by the base noise floor
   fem::PhysicalParameters parameters;
   std::vector<double> cost_history;  // initial cost, then after each iteration [m^2]
+  // Each start of the refit: {"start": values, "found": values, "cost"} (or "error"); a
+  // two-sided variable is refitted from both sides of its null, the lowest cost is kept.
+  nlohmann::json starts = nlohmann::json::array();
+  // A conditional test (test.conditional): the nuisance's values in the joint refit.
+  nlohmann::json nuisance_values;
 };
 
 struct DiagnosisReport {

@@ -58,6 +58,17 @@ nlohmann::json ToJson(const CandidateTest& t) {
           {"reason", t.Reason()}};
 }
 
+// The conditional part of a test given a nuisance (decision.h, step 2), null otherwise.
+nlohmann::json ConditionalJson(const CandidateTest& t) {
+  if (!t.conditional) return nullptr;
+  return {{"given", ToString(t.given)},
+          {"physics_cost", t.physics_cost},
+          {"physics_heldout", t.physics_heldout},
+          {"nuisance_lr", t.nuisance_lr},
+          {"nuisance_critical_value", t.nuisance_critical_value},
+          {"nuisance_needed", t.nuisance_needed}};
+}
+
 std::string Fixed(double v, int digits = 3) {
   std::ostringstream s;
   s.precision(digits);
@@ -88,6 +99,9 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
                                {"cost_after", w.test.cost_after},
                                {"heldout_before", w.test.heldout_before},
                                {"heldout_after", w.test.heldout_after},
+                               {"base_cost", r.base_cost},
+                               {"base_heldout", r.base_heldout},
+                               {"given", ConditionalJson(w.test)},
                                {"onset_frame", r.before.onset_frame},
                                {"phases", r.before.FlaggedPhaseNames()},
                                {"regions", r.before.FlaggedPatchLabels()},
@@ -140,6 +154,9 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
                                  {"heldout_before", t.test.heldout_before},
                                  {"heldout_after", t.test.heldout_after},
                                  {"refit_error", t.test.refit_error},
+                                 {"given", ConditionalJson(t.test)},
+                                 {"nuisance_parameters", t.nuisance_values},
+                                 {"starts", t.starts},
                                  {"fit", t.fit},
                                  {"test", ToJson(t.test)},
                                  {"residual_after", ToJson(t.after)}});
@@ -181,7 +198,9 @@ std::string ToText(const DiagnosisReport& r) {
   }
   for (size_t i = 0; i < r.tested.size(); ++i) {
     const TestedCandidate& t = r.tested[i];
-    out << "  refit " << ToString(t.test.extension) << ": " << t.values.dump();
+    out << "  refit " << ToString(t.test.extension)
+        << (t.test.conditional ? std::string(" given ") + ToString(t.test.given) : std::string())
+        << ": " << t.values.dump();
     if (!t.uncertainty.is_null()) out << " +- " << t.uncertainty.dump();
     if (t.profile.is_object() && t.profile.value("relative_uncertainty", -1.0) > 0.0)
       out << " (profile: +- " << Fixed(100.0 * t.profile["relative_uncertainty"].get<double>(), 2)
@@ -191,12 +210,22 @@ std::string ToText(const DiagnosisReport& r) {
         << Fixed(t.test.heldout_after) << " m^2, LR " << Fixed(t.test.lr) << " (critical "
         << Fixed(t.test.critical_value) << ")"
         << (t.test.accepted ? ": accepted" : ": rejected: " + t.test.Reason()) << "\n";
+    if (t.test.conditional) {
+      out << "    " << ToString(t.test.given) << " given " << ToString(t.test.extension) << ": "
+          << t.nuisance_values.dump() << ", cost " << Fixed(t.test.physics_cost) << " -> "
+          << Fixed(t.test.cost_after) << " m^2, held-out " << Fixed(t.test.physics_heldout)
+          << " -> " << Fixed(t.test.heldout_after) << " m^2, LR " << Fixed(t.test.nuisance_lr)
+          << " (critical " << Fixed(t.test.nuisance_critical_value)
+          << "): " << (t.test.nuisance_needed ? "still needed" : "adds nothing") << "\n";
+    }
   }
   if (r.winner >= 0 && !r.tested[r.winner].test.nuisance) {
     const TestedCandidate& w = r.tested[r.winner];
     out << "missing physics: " << ToString(w.test.extension) << " " << w.values.dump()
-        << "; held-out cost down "
-        << Fixed(100.0 * (1.0 - w.test.heldout_after / w.test.heldout_before)) << " %\n";
+        << (w.test.conditional ? std::string(" (given ") + ToString(w.test.given) + ")"
+                               : std::string())
+        << "; held-out cost down " << Fixed(100.0 * (1.0 - w.test.heldout_after / r.base_heldout))
+        << " % from the base\n";
   }
   for (const auto& n : r.nuisances) out << "nuisance: " << n.dump() << "\n";
   if (!r.plots.empty()) out << "plots: " << Join(r.plots) << "\n";

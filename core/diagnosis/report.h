@@ -6,14 +6,23 @@
 //                "unexplained",
 //    "findings": [{"physics": "friction", "parameters": {"friction_coefficient": 0.29},
 //                  "uncertainty": {"friction_coefficient": 0.01}, "cost_before": .., "cost_after":
-//                  .., "heldout_before": .., "heldout_after": .., "onset_frame": 4, "phases":
-//                  ["sliding"], "regions": ["patch 2 (-x bottom)"], "test": {..}}],
-//    "nuisances": [{"nuisance": "initial_spin", "parameters": {..}, ..}],
+//                  .., "heldout_before": .., "heldout_after": .., "base_cost": ..,
+//                  "base_heldout": .., "given": null | {"given": "initial_spin", "nuisance_lr",
+//                  "nuisance_critical_value", "nuisance_needed", "physics_cost",
+//                  "physics_heldout"}, "onset_frame": 4, "phases": ["sliding"], "regions":
+//                  ["patch 2 (-x bottom)"], "test": {..}}],
+//    (a finding "given" a nuisance was tested against the nuisance's refit: cost_before and
+//     heldout_before are that model's; decision.h step 2)
+//    "nuisances": [{"nuisance": "initial_spin", "parameters": {..}, "accepted_alone": ..,
+//                   "explains_mismatch": .., "needed_given_physics": .. (when physics was found
+//                   given it), "parameters_in_final_model": {..} (when the final model holds it),
+//                   ..}],
 //    "mismatch": {"flagged": .., "onset_frame": .., "worst_frame": .., "phases": [..],
 //                 "patches": [..], "frames": [{"frame", "time", "heldout", "phase", "before",
 //                 "after"}]},
 //    "noise_floor": {"sigma": .., "method": .., "frame0_misfit": .., "quantile_misfit": ..},
-//    "screening": [..], "candidates": [..],      // every screened / refitted candidate
+//    "screening": [..], "candidates": [..],      // every screened / refitted candidate (with
+//                                                // "given", "nuisance_parameters", "starts")
 //    "base_fit": {result.json}, "final_fit": {result.json}, "identifiability": {..} | null,
 //    "plots": [..], "seconds": ..}
 // Costs are in m^2 (mean Tukey loss over the frames' points), misfits normalised by the floor.

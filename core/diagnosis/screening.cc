@@ -6,6 +6,7 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <utility>
 
 #include "core/common/check.h"
 #include "core/common/json_fields.h"
@@ -28,6 +29,9 @@ struct Variant {
   double step = 0.0;       // delta
   double max_start = 0.0;  // |theta| bound of the refit start
   std::function<fem::PhysicalParameters(const fem::PhysicalParameters&, double)> make;
+  // The base variables' share of a ladder start at theta (identity when absent): what the
+  // extension changes that the base model already fitted, put back.
+  std::function<fem::PhysicalParameters(fem::PhysicalParameters, double)> rebalance;
   std::function<double(const fem::ParameterGradient&, const fem::PhysicalParameters&)> dtheta;
 };
 
@@ -107,6 +111,8 @@ Status ScreeningOptions::Validate() const {
     if (!(value > 0.0) || !std::isfinite(value))
       return json::Invalid(field, value, "must be positive");
   }
+  if (!(two_sided_start_factor > 1.0) || !std::isfinite(two_sided_start_factor))
+    return json::Invalid("screening.two_sided_start_factor", two_sided_start_factor, "must be > 1");
   return Status::Ok();
 }
 
@@ -224,6 +230,14 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
                  ? g.stiffness_field[0] * p.stiffness_field.regions[0].scale
                  : 0.0;
     };
+    // E is the upper half's modulus and the lower one's is r E: E / sqrt(r) keeps their geometric
+    // mean at the fitted E.
+    if (Contains(base.fitted, "youngs_modulus")) {
+      v.rebalance = [](fem::PhysicalParameters p, double t) {
+        p.youngs_modulus *= std::exp(-0.5 * t);
+        return p;
+      };
+    }
     variants.push_back(v);
   }
   {
@@ -351,7 +365,8 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
         curvature > 0.0 ? 0.5 * s.gradient * s.gradient / curvature : std::abs(s.gradient * theta);
     // Refit start: the best of the joint step (base variables re-adjusted), the extension alone,
     // and half the joint step.
-    std::vector<fem::PhysicalParameters> tries;
+    // Each try with its theta (the side of the null it lies on).
+    std::vector<std::pair<double, fem::PhysicalParameters>> tries;
     Eigen::VectorXd dx = nb > 0 ? Eigen::VectorXd(-absorb * theta) : Eigen::VectorXd();
     for (int i = 0; i < nb; ++i) dx[i] = std::clamp(dx[i], -1.0, 1.0);
     auto with_base = [&](double t, double fraction) {
@@ -359,21 +374,32 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
       for (int i = 0; i < nb; ++i) x[i] += fraction * dx[i];
       return v.make(space.ToParameters(x.data(), p0), t);
     };
-    tries.push_back(with_base(theta, 1.0));
-    tries.push_back(with_base(theta, 0.0));
-    tries.push_back(with_base(0.5 * theta, 0.5));
+    tries.emplace_back(theta, with_base(theta, 1.0));
+    tries.emplace_back(theta, with_base(theta, 0.0));
+    tries.emplace_back(0.5 * theta, with_base(0.5 * theta, 0.5));
+    auto ladder_start = [&](double t) {
+      fem::PhysicalParameters p = with_base(t, 0.0);
+      return v.rebalance ? v.rebalance(p, t) : p;
+    };
     // And a ladder of the extension alone over its start range: the cost is far from quadratic
     // for large effects (stick-slip, a spinning cube that looks the same every quarter turn), and
     // a start in the wrong basin stalls the refit.
     const double downhill = v.boundary ? 1.0 : (s.gradient > 0.0 ? -1.0 : 1.0);
     constexpr double kLadder[] = {1.0 / 16, 1.0 / 8, 3.0 / 16, 1.0 / 4, 3.0 / 8, 1.0 / 2, 3.0 / 4};
-    for (double f : kLadder) tries.push_back(with_base(downhill * f * v.max_start, 0.0));
+    for (double f : kLadder) {
+      const double t = downhill * f * v.max_start;
+      tries.emplace_back(t, ladder_start(t));
+    }
     // A two-sided variable is laddered uphill of the score too: the score is the slope at the
     // null, and a large effect's minimum can lie the other way (seen with a 2x stiffness contrast
     // between the halves of a bouncing bar: the slope at ratio 1 pointed to ratios below 1, the
     // minimum is at 2). The cost decides between the two sides, not the slope.
-    if (!v.boundary)
-      for (double f : kLadder) tries.push_back(with_base(-downhill * f * v.max_start, 0.0));
+    if (!v.boundary) {
+      for (double f : kLadder) {
+        const double t = -downhill * f * v.max_start;
+        tries.emplace_back(t, ladder_start(t));
+      }
+    }
     // A spin also along each principal axis of the body, both ways. The score is the linear
     // response at rest; a spin of a few rad/s turns the body by tens of degrees, and a symmetric
     // body looks alike after a quarter turn, so the score's direction mixes in other axes and
@@ -389,19 +415,51 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
           for (double f : kLadder) {
             fem::PhysicalParameters p = with_base(0.0, 0.0);
             p.initial_angular_velocity = f * v.max_start * turn;
-            tries.push_back(p);
+            tries.emplace_back(f * v.max_start, p);
           }
         }
       }
     }
     s.start_cost = std::numeric_limits<double>::infinity();
-    for (const fem::PhysicalParameters& p : tries) {
+    std::vector<double> try_costs(tries.size(), std::numeric_limits<double>::infinity());
+    double start_theta = 0.0;
+    for (size_t i = 0; i < tries.size(); ++i) {
+      const fem::PhysicalParameters& p = tries[i].second;
       if (!p.Validate().ok()) continue;
       Result<inverse::ObjectiveEvaluation> e = objective.Evaluate(p, false);
       if (!e.ok() || e->diverged) continue;
+      try_costs[i] = e->cost;
       if (e->cost < s.start_cost) {
         s.start_cost = e->cost;
         s.start = p;
+        start_theta = tries[i].first;
+      }
+    }
+    // Two-sided variables: the best start on each side, far enough from the null; the side
+    // with the lower forward cost first.
+    s.refit_starts = {s.start};
+    s.refit_thetas = {start_theta};
+    if (!v.boundary) {
+      const double min_theta = std::log(options.two_sided_start_factor);
+      std::array<int, 2> best_of_side = {-1, -1};
+      for (size_t i = 0; i < tries.size(); ++i) {
+        if (!std::isfinite(try_costs[i]) || std::abs(tries[i].first) < min_theta) continue;
+        int& best = best_of_side[tries[i].first > 0.0 ? 0 : 1];
+        if (best < 0 || try_costs[i] < try_costs[best]) best = static_cast<int>(i);
+      }
+      if (best_of_side[0] >= 0 && best_of_side[1] >= 0 &&
+          try_costs[best_of_side[1]] < try_costs[best_of_side[0]])
+        std::swap(best_of_side[0], best_of_side[1]);
+      s.refit_starts.clear();
+      s.refit_thetas.clear();
+      for (int i : best_of_side) {
+        if (i < 0) continue;
+        s.refit_starts.push_back(tries[i].second);
+        s.refit_thetas.push_back(tries[i].first);
+      }
+      if (s.refit_starts.empty()) {
+        s.refit_starts = {s.start};
+        s.refit_thetas = {start_theta};
       }
     }
     if (!std::isfinite(s.start_cost)) {

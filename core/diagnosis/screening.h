@@ -16,17 +16,21 @@
 // alone at theta*, and a ladder of the extension alone over its start range (1/16 ... 3/4 of it):
 // large effects are far from quadratic (stick-slip; a cube spinning looks alike every quarter
 // turn). Two-sided variables (stiffness ratio, contact stiffness) are laddered on both sides of the
-// null: a large effect's minimum can lie against the slope at the null. The spin is laddered also
-// both ways along the body's principal axes (PrincipalAxes): the score's direction is the linear
-// response of the first frames, mixes in other axes and can even have the wrong sign. A boundary
-// parameter whose score says "the cost rises as it leaves 0" is dropped: the one-sided test has
-// nothing to offer.
-// Signature: the share of the base fit's excess misfit (above the noise floor) in the phases where
-// the extension acts (candidate_library.h). score = predicted LR x ((1 - w) + w x share).
+// null: a large effect's minimum can lie against the slope at the null; the best start of each side
+// at least a factor 2 from the null is kept (the refit runs from both). The stiffness ladder keeps
+// the geometric mean of the halves' moduli at the base fit's E when E is fitted: the base fit found
+// the body's average stiffness, and a start that also changed it would rate the contrast by a wrong
+// mean. The spin is laddered also both ways along the body's principal axes (PrincipalAxes): the
+// score's direction is the linear response of the first frames, mixes in other axes and can even
+// have the wrong sign. A boundary parameter whose score says "the cost rises as it leaves 0" is
+// dropped: the one-sided test has nothing to offer. Signature: the share of the base fit's excess
+// misfit (above the noise floor) in the phases where the extension acts (candidate_library.h).
+// score = predicted LR x ((1 - w) + w x share).
 #pragma once
 
 #include <Eigen/Core>
 #include <array>
+#include <limits>
 #include <vector>
 
 #include "core/common/status.h"
@@ -55,6 +59,10 @@ struct ScreeningOptions {
   double max_log_ratio_start = 2.3;  // ratio 10
   double max_log_contact_start = 3.0;
   double max_spin_start = 10.0;  // [rad/s]
+  // Refit starts of two-sided variables lie at least this factor from the null (ratio or
+  // stiffness x or / it) [-], > 1. 2: past the plausibility gate's "uniform" band [0.8, 1.25]
+  // with room, and still inside the basin of a contrast of 1.5 or of 5.
+  double two_sided_start_factor = 2.0;
   // Weight w of the signature share in the score [-], in [0, 1].
   double signature_weight = 0.75;
   Status Validate() const;
@@ -72,6 +80,14 @@ struct ScreenedCandidate {
   Eigen::Vector3d direction = Eigen::Vector3d::Zero();  // spin axis (initial_spin)
   double start_cost = 0.0;                              // forward cost at the refit start [m^2]
   fem::PhysicalParameters start;  // the refit start (base variables moved too)
+  // The refit's starts: {start}, or for a two-sided variable (stiffness ratio, contact
+  // stiffness) the best start on each side of the null at least two_sided_start_factor from it
+  // (the refit runs from both, the lower fitted cost wins). Next to the null both sides look
+  // alike at the base parameters (the base fit absorbed what a small change does), and from there
+  // the optimiser slides into the nearer side's local minimum: a 4x stiffness contrast refitted
+  // from ratios 0.75 and 1.15 ended at 0.79 both times.
+  std::vector<fem::PhysicalParameters> refit_starts;
+  std::vector<double> refit_thetas;  // theta of each
   double predicted_lr = 0.0;
   double signature_share = 0.0;  // [0, 1]
   double score = 0.0;

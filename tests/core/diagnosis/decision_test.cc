@@ -2,6 +2,8 @@
 
 #include <gtest/gtest.h>
 
+#include "core/diagnosis/likelihood_ratio.h"
+
 namespace softid::diagnosis {
 namespace {
 
@@ -83,6 +85,138 @@ TEST(DecisionRule, Decide) {
   EXPECT_EQ(winner, 1);
   friction.accepted = false;
   EXPECT_EQ(Decide(true, {friction}, &winner), "unexplained");
+}
+
+// The situation of a 2x stiffness contrast whose release also fits a small spin: both improve the
+// fit against the base and pass every gate there; the spin's LR is the larger one (its residuals
+// are less correlated, so its n_eff is larger), which is no evidence between two models that are
+// not nested.
+struct SpinAndStiffness {
+  CandidateTest spin = Passing(Extension::kInitialSpin);
+  CandidateTest stiffness = Passing(Extension::kHeterogeneousStiffness);
+  SpinAndStiffness() {
+    spin.cost_after = 1.80e-6;
+    spin.heldout_after = 1.77e-6;
+    spin.lr = 3000.0;
+    stiffness.cost_after = 1.57e-6;
+    stiffness.heldout_after = 1.61e-6;
+    stiffness.lr = 2000.0;
+    ApplyDecisionRule(DecisionOptions(), GetCandidate(Extension::kInitialSpin), &spin);
+    ApplyDecisionRule(DecisionOptions(), GetCandidate(Extension::kHeterogeneousStiffness),
+                      &stiffness);
+  }
+  // The joint refit (base + spin + stiffness) tested against the spin model (the null) and
+  // checked against the stiffness model; n_eff as the refits have it.
+  CandidateTest Joint(double cost, double heldout, double n_eff = 4000.0) const {
+    CandidateTest t = Passing(Extension::kHeterogeneousStiffness);
+    t.conditional = true;
+    t.given = Extension::kInitialSpin;
+    t.cost_before = spin.cost_after;
+    t.heldout_before = spin.heldout_after;
+    t.cost_after = cost;
+    t.heldout_after = heldout;
+    t.n_eff = n_eff;
+    t.lr = LikelihoodRatioStatistic(t.cost_before, t.cost_after, n_eff);
+    t.physics_cost = stiffness.cost_after;
+    t.physics_heldout = stiffness.heldout_after;
+    t.nuisance_lr = LikelihoodRatioStatistic(t.physics_cost, t.cost_after, n_eff);
+    ApplyDecisionRule(DecisionOptions(), GetCandidate(Extension::kHeterogeneousStiffness), &t);
+    ApplyNuisanceCheck(DecisionOptions(), GetCandidate(Extension::kInitialSpin), &t);
+    return t;
+  }
+};
+
+// The nuisance's own test: both its LR against the physics model and the held-out gate must pass
+// for it to be needed once the physics is in; its critical value is chi2_3 at 1 %.
+TEST(DecisionRule, NuisanceCheckNeedsLikelihoodAndHeldOut) {
+  const SpinAndStiffness s;
+  const CandidateTest needed = s.Joint(1.30e-6, 1.40e-6);
+  EXPECT_NEAR(needed.nuisance_critical_value, 11.345, 1e-3);
+  EXPECT_TRUE(needed.nuisance_needed) << needed.nuisance_lr;
+  // Fits the fitted frames better, the held-out frames hardly: not needed.
+  EXPECT_FALSE(s.Joint(1.30e-6, 1.59e-6).nuisance_needed);
+  // Held-out better but the fitted cost barely moves (LR = 4000 log(1.57 / 1.566) ~ 10 < 11.3).
+  EXPECT_FALSE(s.Joint(1.566e-6, 1.40e-6).nuisance_needed);
+}
+
+// Without a joint fit the larger LR against the base decides: the spin, "none" (the behaviour
+// that missed the 2x contrast). With the joint fit the stiffness is tested given the spin.
+TEST(DecisionRule, PhysicsIsTestedGivenTheNuisance) {
+  const SpinAndStiffness s;
+  int winner = -1;
+  EXPECT_EQ(Decide(true, {s.spin, s.stiffness}, &winner), "none");
+  EXPECT_EQ(winner, 0);
+
+  // Given the spin the stiffness passes every gate, and the spin is still needed given the
+  // stiffness: the physics is found in the joint model.
+  const CandidateTest both = s.Joint(1.30e-6, 1.40e-6);
+  ASSERT_TRUE(both.accepted) << both.Reason();
+  ASSERT_TRUE(both.nuisance_needed);
+  EXPECT_EQ(Decide(true, {s.spin, s.stiffness, both}, &winner), "heterogeneous_stiffness");
+  EXPECT_EQ(winner, 2);
+  // Accepted given the spin while the spin does not pass its held-out gate given the stiffness:
+  // still the joint model (the spin's parameters are nuisance parameters, fitted when they lower
+  // the cost significantly; leaving them out would bias the stiffness ratio).
+  const CandidateTest joint = s.Joint(1.50e-6, 1.58e-6);
+  ASSERT_TRUE(joint.accepted) << joint.Reason();
+  ASSERT_FALSE(joint.nuisance_needed);
+  EXPECT_EQ(Decide(true, {s.spin, s.stiffness, joint}, &winner), "heterogeneous_stiffness");
+  EXPECT_EQ(winner, 2);
+
+  // Given the spin the stiffness lowers the cost significantly but the held-out frames by only
+  // 1.61 / 1.77 - 1 = 9 % (< 10 %: the spin model is already close to the noise floor), while the
+  // spin adds nothing to the stiffness model: the spin only imitated the physics, which stands
+  // on its own refit.
+  const CandidateTest imitated = s.Joint(1.565e-6, 1.61e-6);
+  ASSERT_FALSE(imitated.accepted);
+  ASSERT_TRUE(imitated.lr_passed);
+  ASSERT_FALSE(imitated.nuisance_needed);
+  EXPECT_EQ(Decide(true, {s.spin, s.stiffness, imitated}, &winner), "heterogeneous_stiffness");
+  EXPECT_EQ(winner, 1);
+}
+
+// The nuisance explains the mismatch: the physics adds nothing significant given it (LR below the
+// critical value), or it fails given the nuisance while the nuisance is still needed given it.
+// Either way the decision is "none" with the nuisance, never the physics.
+TEST(DecisionRule, NuisanceThatExplainsEverythingIsNeverPhysics) {
+  const SpinAndStiffness s;
+  int winner = -1;
+  CandidateTest nothing = s.Joint(1.7995e-6, 1.77e-6);  // LR = 4000 log(1.8 / 1.7995) ~ 1
+  ASSERT_FALSE(nothing.lr_passed);
+  EXPECT_EQ(Decide(true, {s.spin, s.stiffness, nothing}, &winner), "none");
+  EXPECT_EQ(winner, 0);
+
+  CandidateTest still_flagged = s.Joint(1.30e-6, 1.40e-6);
+  still_flagged.still_flagged = {"rebound"};
+  ApplyDecisionRule(DecisionOptions(), GetCandidate(Extension::kHeterogeneousStiffness),
+                    &still_flagged);
+  ASSERT_TRUE(still_flagged.nuisance_needed);
+  EXPECT_EQ(Decide(true, {s.spin, s.stiffness, still_flagged}, &winner), "none");
+  EXPECT_EQ(winner, 0);
+
+  // A physics candidate that was not accepted on its own and fails given the nuisance.
+  CandidateTest weak_alone = s.stiffness;
+  weak_alone.still_flagged = {"impact"};
+  ApplyDecisionRule(DecisionOptions(), GetCandidate(Extension::kHeterogeneousStiffness),
+                    &weak_alone);
+  EXPECT_EQ(Decide(true, {s.spin, weak_alone, nothing}, &winner), "none");
+}
+
+// Neither model explains everything alone (each leaves the other's signature), the joint model
+// does: the physics is found given the nuisance.
+TEST(DecisionRule, JointModelExplainsWhatNeitherDoesAlone) {
+  SpinAndStiffness s;
+  s.spin.still_flagged = {"flight"};
+  s.stiffness.still_flagged = {"rebound"};
+  for (CandidateTest* t : {&s.spin, &s.stiffness}) {
+    ApplyDecisionRule(DecisionOptions(), GetCandidate(t->extension), t);
+    ASSERT_FALSE(t->accepted);
+  }
+  int winner = -1;
+  EXPECT_EQ(Decide(true, {s.spin, s.stiffness}, &winner), "unexplained");
+  const CandidateTest both = s.Joint(1.30e-6, 1.40e-6);
+  EXPECT_EQ(Decide(true, {s.spin, s.stiffness, both}, &winner), "heterogeneous_stiffness");
+  EXPECT_EQ(winner, 2);
 }
 
 TEST(DecisionOptions, ValidateNamesTheField) {
