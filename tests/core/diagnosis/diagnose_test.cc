@@ -98,6 +98,43 @@ TEST(Diagnose, ControlWithoutEffectGivesNone) {
   EXPECT_TRUE(ToJson(*report)["findings"].empty());
 }
 
+// Synthesises the light-throw cube `scene` into `dir` (finer grid and more substeps than the
+// fit, realistic depth noise) and reads it back.
+Result<capture::Capture> SynthesizeLightThrow(const scenes::ConcealedScene& scene, double duration,
+                                              int width, int height,
+                                              const std::filesystem::path& dir) {
+  scenes::SynthesisOptions synth;
+  synth.run.simulation.cells_along_longest_side = 10;
+  synth.run.substeps_per_frame = 2;
+  synth.run.duration = duration;
+  synth.cameras = scene.cameras;
+  synth.cameras.width = width;
+  synth.cameras.height = height;
+  synth.noise = capture::StructuredLightNoise(/*seed=*/3);
+  synth.depth_scale = capture::kStructuredLightDepthScale;
+  SOFTID_RETURN_IF_ERROR(scenes::Synthesize(scene.scene, synth, dir).status());
+  return capture::ReadCapture(dir);
+}
+
+// The base job of the light-throw tests: the release velocity fitted, the material known.
+inverse::JobConfig LightThrowConfig(const scenes::ConcealedScene& scene) {
+  inverse::JobConfig config;
+  config.fit = {"initial_velocity"};
+  inverse::InitialValue v;
+  v.value = nlohmann::json::array({1.8, 0.0, 2.6});
+  config.initial["initial_velocity"] = v;
+  config.fixed = {{"youngs_modulus", 3e4},
+                  {"stiffness_damping", 0.01},
+                  {"poisson_ratio", 0.3},
+                  {"ground", fem::ToJson(*scene.scene.parameters.ground)}};
+  config.cells = 8;
+  config.substeps = 1;
+  config.starts = 1;
+  config.threads = 1;
+  config.max_iterations = 20;
+  return config;
+}
+
 // A light cube thrown with a spin of 4 rad/s (a nuisance of the release): the screening starts
 // the spin's refit in the right basin (along the cube's axis, not along the score's mixed
 // direction), the refit recovers the spin, and the capture is never labelled as physics. (On this
@@ -110,32 +147,9 @@ TEST(Diagnose, InitialSpinIsFittedNeverPhysics) {
   Result<scenes::ConcealedScene> scene =
       scenes::MakeDiagnosisScene("light-throw", scenes::ConcealedEffect::kInitialSpin, 4.0);
   ASSERT_TRUE(scene.ok());
-  scenes::SynthesisOptions synth;
-  synth.run.simulation.cells_along_longest_side = 10;
-  synth.run.substeps_per_frame = 2;
-  synth.run.duration = 0.4;
-  synth.cameras = scene->cameras;
-  synth.cameras.width = 80;
-  synth.cameras.height = 60;
-  synth.noise = capture::StructuredLightNoise(/*seed=*/3);
-  synth.depth_scale = capture::kStructuredLightDepthScale;
-  ASSERT_TRUE(scenes::Synthesize(scene->scene, synth, dir).ok());
-  Result<capture::Capture> capture = capture::ReadCapture(dir);
-  ASSERT_TRUE(capture.ok());
-  inverse::JobConfig config;
-  config.fit = {"initial_velocity"};
-  inverse::InitialValue v;
-  v.value = nlohmann::json::array({1.8, 0.0, 2.6});
-  config.initial["initial_velocity"] = v;
-  config.fixed = {{"youngs_modulus", 3e4},
-                  {"stiffness_damping", 0.01},
-                  {"poisson_ratio", 0.3},
-                  {"ground", fem::ToJson(*scene->scene.parameters.ground)}};
-  config.cells = 8;
-  config.substeps = 1;
-  config.starts = 1;
-  config.threads = 1;
-  config.max_iterations = 20;
+  Result<capture::Capture> capture = SynthesizeLightThrow(*scene, 0.4, 80, 60, dir);
+  ASSERT_TRUE(capture.ok()) << capture.status().ToString();
+  const inverse::JobConfig config = LightThrowConfig(*scene);
   Result<DiagnosisReport> report = Diagnose(*capture, config, SmallOptions());
   std::error_code ignored;
   std::filesystem::remove_all(dir, ignored);
@@ -169,32 +183,9 @@ TEST(Diagnose, PhysicsIsFoundGivenANuisance) {
       scenes::MakeDiagnosisScene("light-throw", scenes::ConcealedEffect::kAirDrag, 0.6);
   ASSERT_TRUE(scene.ok());
   scene->scene.parameters.initial_angular_velocity = Eigen::Vector3d(0.0, 4.0, 0.0);
-  scenes::SynthesisOptions synth;
-  synth.run.simulation.cells_along_longest_side = 10;
-  synth.run.substeps_per_frame = 2;
-  synth.run.duration = 0.6;
-  synth.cameras = scene->cameras;
-  synth.cameras.width = 64;
-  synth.cameras.height = 48;
-  synth.noise = capture::StructuredLightNoise(/*seed=*/3);
-  synth.depth_scale = capture::kStructuredLightDepthScale;
-  ASSERT_TRUE(scenes::Synthesize(scene->scene, synth, dir).ok());
-  Result<capture::Capture> capture = capture::ReadCapture(dir);
-  ASSERT_TRUE(capture.ok());
-  inverse::JobConfig config;
-  config.fit = {"initial_velocity"};
-  inverse::InitialValue v;
-  v.value = nlohmann::json::array({1.8, 0.0, 2.6});
-  config.initial["initial_velocity"] = v;
-  config.fixed = {{"youngs_modulus", 3e4},
-                  {"stiffness_damping", 0.01},
-                  {"poisson_ratio", 0.3},
-                  {"ground", fem::ToJson(*scene->scene.parameters.ground)}};
-  config.cells = 8;
-  config.substeps = 1;
-  config.starts = 1;
-  config.threads = 1;
-  config.max_iterations = 20;
+  Result<capture::Capture> capture = SynthesizeLightThrow(*scene, 0.6, 64, 48, dir);
+  ASSERT_TRUE(capture.ok()) << capture.status().ToString();
+  const inverse::JobConfig config = LightThrowConfig(*scene);
   DiagnoseOptions options = SmallOptions();
   options.decision.max_refits = 2;
   Result<DiagnosisReport> report = Diagnose(*capture, config, options);
