@@ -11,8 +11,10 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <mutex>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -42,6 +44,9 @@ struct ProveFlags {
   int max_iterations = 30;
   int max_refits = 2;
   bool keep = false;
+  // Reuse the outcome of every case already finished in --out with the same settings (a long
+  // benchmark run can stop and go on later).
+  bool resume = false;
   // Run only the cases whose name contains one of these (e.g. "-2-" for the 2x stiffness case);
   // empty = all.
   std::vector<std::string> only;
@@ -64,6 +69,56 @@ struct Outcome {
   double seconds = 0.0;
   std::string nuisances;
 };
+
+// The settings a finished case's outcome depends on (besides the code): a resumed run reuses an
+// outcome only when they match.
+nlohmann::json OutcomeSettings(const ProveFlags& flags) {
+  return {{"fit_cells", flags.fit_cells},
+          {"generator_cells", flags.generator_cells},
+          {"max_iterations", flags.max_iterations},
+          {"max_refits", flags.max_refits}};
+}
+
+constexpr const char* kOutcomeFormat = "softid-prove-outcome/1";
+
+nlohmann::json OutcomeJson(const Outcome& o, const ProveFlags& flags) {
+  return {{"format", kOutcomeFormat},
+          {"case", o.c.name},
+          {"settings", OutcomeSettings(flags)},
+          {"decision", o.decision},
+          {"error", o.error},
+          {"recovered",
+           std::isnan(o.recovered) ? nlohmann::json(nullptr) : nlohmann::json(o.recovered)},
+          {"heldout_before", o.heldout_before},
+          {"heldout_after", o.heldout_after},
+          {"seconds", o.seconds},
+          {"nuisances", o.nuisances}};
+}
+
+// The outcome a previous run left in the case's folder, if it is for this case and these
+// settings and did not end in an error.
+std::optional<Outcome> FinishedOutcome(const Case& c, const ProveFlags& flags,
+                                       const std::filesystem::path& file) {
+  if (!std::filesystem::exists(file)) return std::nullopt;
+  try {
+    const nlohmann::json j = nlohmann::json::parse(std::ifstream(file));
+    if (j.value("format", "") != kOutcomeFormat || j.value("case", "") != c.name ||
+        j.at("settings") != OutcomeSettings(flags) || !j.value("error", "").empty())
+      return std::nullopt;
+    Outcome o;
+    o.c = c;
+    o.decision = j.at("decision").get<std::string>();
+    o.recovered = j.at("recovered").is_null() ? std::nan("") : j.at("recovered").get<double>();
+    o.heldout_before = j.at("heldout_before").get<double>();
+    o.heldout_after = j.at("heldout_after").get<double>();
+    o.seconds = j.at("seconds").get<double>();
+    o.nuisances = j.at("nuisances").get<std::string>();
+    return o;
+  } catch (const std::exception& e) {
+    spdlog::warn("{}: unreadable ({}); the case runs again", file.string(), e.what());
+    return std::nullopt;
+  }
+}
 
 // What the experimenter fits in each scene (the base model): what the motion shows, nothing of
 // the concealed effect. Starts are off the truth.
@@ -146,6 +201,13 @@ std::vector<Case> MakeCases(const ProveFlags& flags) {
 }
 
 Outcome RunCase(const Case& c, const ProveFlags& flags) {
+  const std::filesystem::path dir = std::filesystem::path(flags.out) / c.name;
+  if (flags.resume) {
+    if (std::optional<Outcome> done = FinishedOutcome(c, flags, dir / "outcome.json")) {
+      spdlog::info("[{}] finished earlier: decision {} (resumed)", c.name, done->decision);
+      return *done;
+    }
+  }
   Outcome o;
   o.c = c;
   const auto begin = std::chrono::steady_clock::now();
@@ -158,7 +220,6 @@ Outcome RunCase(const Case& c, const ProveFlags& flags) {
     o.error = scene.status().message();
     return o;
   }
-  const std::filesystem::path dir = std::filesystem::path(flags.out) / c.name;
   std::filesystem::remove_all(dir);
   scenes::SynthesisOptions synth;
   synth.run.simulation.cells_along_longest_side = flags.generator_cells;
@@ -207,6 +268,8 @@ Outcome RunCase(const Case& c, const ProveFlags& flags) {
       if (entry.is_directory() && entry.path().filename().string().rfind("cam", 0) == 0)
         std::filesystem::remove_all(entry.path());
   }
+  // Written last: its presence means the case finished (what --resume looks for).
+  (void)WriteJsonFile(dir / "outcome.json", OutcomeJson(o, flags));
   return o;
 }
 
@@ -351,6 +414,9 @@ Command RegisterProveDiagnosis(CLI::App* app) {
                   "run only the cases whose name contains one of these (comma-separated)")
       ->delimiter(',');
   app->add_flag("--keep", flags->keep, "keep the depth images of every case");
+  app->add_flag("--resume", flags->resume,
+                "reuse the outcome of every case already finished in --out with the same "
+                "settings (run again: cases that ended in an error or never finished)");
   return [flags] { return RunProve(*flags); };
 }
 
