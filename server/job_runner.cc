@@ -184,6 +184,12 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
       if (p.num_starts > 1) {
         event.message = "start " + std::to_string(p.start + 1) + "/" + std::to_string(p.num_starts);
       }
+      if (p.num_stages > 1) {
+        // The cost of a continuation stage is over a prefix of the frames.
+        event.message += (event.message.empty() ? "" : ", ") + std::string("frames 0-") +
+                         std::to_string(p.horizon_frame) + " (stage " +
+                         std::to_string(p.stage + 1) + "/" + std::to_string(p.num_stages) + ")";
+      }
       if (Result<int64_t> seq = context.jobs->AppendProgress(job.id, event); !seq.ok()) {
         log->warn("job {}: progress of iteration {} not recorded: {}", job.id, p.iteration,
                   seq.status().message());

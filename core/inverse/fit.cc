@@ -11,6 +11,7 @@
 
 #include "core/capture/capture.h"
 #include "core/common/json_fields.h"
+#include "core/inverse/horizon_continuation.h"
 #include "core/inverse/objective_settings.h"
 #include "core/inverse/parameter_space.h"
 #include "core/inverse/trajectory_objective.h"
@@ -107,7 +108,8 @@ class ProgressBoard {
   }
 
   void Report(int start, int iteration, double cost, double gradient_norm,
-              const fem::PhysicalParameters& parameters) {
+              const fem::PhysicalParameters& parameters, int stage, int num_stages,
+              int horizon_frame) {
     std::lock_guard lock(mutex_);
     ++iterations_done_;
     const double elapsed = SecondsSince(begin_);
@@ -120,6 +122,9 @@ class ProgressBoard {
     progress.cost = cost;
     progress.gradient_norm = gradient_norm;
     progress.parameters = parameters;
+    progress.stage = stage;
+    progress.num_stages = num_stages;
+    progress.horizon_frame = horizon_frame;
     progress.elapsed_seconds = elapsed;
     // Pessimistic: every running start uses all its iterations, pending ones too.
     const double per_iteration = elapsed / std::max(1, iterations_done_) * threads_;
@@ -139,11 +144,19 @@ class ProgressBoard {
   int iterations_done_ = 0;
 };
 
+// Where a start's iterations are: its stage of the continuation over the horizon.
+struct StageInfo {
+  int stage = 0, num_stages = 1;
+  int last_frame = 0;           // last capture frame fitted in the stage
+  int iterations_before = 0;    // completed in earlier stages
+  bool records_history = true;  // the last stage (every frame) fills cost_history
+};
+
 class IterationReporter : public ceres::IterationCallback {
  public:
   IterationReporter(int start, const double* x, const ParameterSpace* space,
                     const fem::PhysicalParameters* base, double scale, ProgressBoard* board,
-                    const std::atomic<bool>* cancel, StartResult* stats)
+                    const std::atomic<bool>* cancel, StageInfo stage, StartResult* stats)
       : start_(start),
         x_(x),
         space_(space),
@@ -151,13 +164,18 @@ class IterationReporter : public ceres::IterationCallback {
         scale_(scale),
         board_(board),
         cancel_(cancel),
+        stage_(stage),
         stats_(stats) {}
 
   ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
     const double cost = summary.cost * scale_;
-    stats_->cost_history.push_back(cost);
-    board_->Report(start_, summary.iteration, cost, summary.gradient_max_norm,
-                   space_->ToParameters(x_, *base_));
+    // Iteration 0 is the stage's starting point: reported once, for the first stage.
+    if (summary.iteration > 0 || stage_.stage == 0) {
+      if (stage_.records_history && summary.iteration > 0) stats_->cost_history.push_back(cost);
+      board_->Report(start_, stage_.iterations_before + summary.iteration, cost,
+                     summary.gradient_max_norm, space_->ToParameters(x_, *base_), stage_.stage,
+                     stage_.num_stages, stage_.last_frame);
+    }
     if (cancel_ != nullptr && cancel_->load()) return ceres::SOLVER_ABORT;
     return ceres::SOLVER_CONTINUE;
   }
@@ -170,6 +188,7 @@ class IterationReporter : public ceres::IterationCallback {
   double scale_;
   ProgressBoard* board_;
   const std::atomic<bool>* cancel_;
+  StageInfo stage_;
   StartResult* stats_;
 };
 
@@ -215,6 +234,11 @@ fem::PhysicalParameters CentralStart(const JobConfig& config, const fem::Physica
   return p;
 }
 
+// Continuation over the horizon: intermediate stages only need to reach the basin of the next
+// one, so they stop at a looser tolerance and share at most half of the iteration budget.
+constexpr double kStageFunctionTolerance = 1e-4;
+constexpr double kStageBudgetFraction = 0.5;
+
 void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjective& objective,
               const ParameterSpace& space, const fem::PhysicalParameters& base,
               const JobConfig& config, const FitOptions& options, ProgressBoard& board,
@@ -227,25 +251,59 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
   const double scale = phi_max * phi_max;
   std::vector<double> x = space.ToVariables(start);
   result->initial = space.ToParameters(x.data(), base);
+  const std::vector<ObservedFrame>& frames = objective.frames();
+  const int all_frames = static_cast<int>(frames.size());
 
-  auto* function = new CeresObjective(&objective, &space, &base, &config, scale, result);
-  ceres::GradientProblem problem(function);  // takes ownership
-  IterationReporter reporter(index, x.data(), &space, &base, scale, &board, options.cancel, result);
-  ceres::GradientProblemSolver::Options solver;
-  solver.line_search_direction_type = ceres::LBFGS;
-  solver.line_search_type = ceres::WOLFE;
-  solver.max_num_iterations = config.max_iterations;
-  solver.function_tolerance = config.function_tolerance;
-  solver.gradient_tolerance = config.gradient_tolerance;
-  solver.parameter_tolerance = config.parameter_tolerance;
-  solver.logging_type = ceres::SILENT;
-  solver.update_state_every_iteration = true;
-  solver.callbacks.push_back(&reporter);
+  // The stages, from the frame costs at the start (a start that cannot be simulated gets one
+  // stage, whose solver reports the failure).
+  std::vector<int> stages = {all_frames};
+  std::optional<double> full_initial_cost;
+  if (config.continuation) {
+    objective.SetActiveFrames(all_frames);
+    Result<ObjectiveEvaluation> at_start = objective.Evaluate(result->initial, false);
+    if (at_start.ok() && !at_start->diverged) {
+      full_initial_cost = at_start->cost;
+      // Frames matching to 1 % of the truncation distance are matching, however noise-free.
+      stages = HorizonStages(frames, at_start->frame_costs, 1e-4 * scale);
+    }
+  }
+
   ceres::GradientProblemSolver::Summary summary;
-  ceres::Solve(solver, problem, x.data(), &summary);
+  int used_iterations = 0;
+  const int stage_budget = static_cast<int>(kStageBudgetFraction * config.max_iterations);
+  for (size_t stage = 0; stage < stages.size(); ++stage) {
+    const bool last = stage + 1 == stages.size();
+    if (!last && used_iterations >= stage_budget) continue;
+    objective.SetActiveFrames(stages[stage]);
+    auto* function = new CeresObjective(&objective, &space, &base, &config, scale, result);
+    ceres::GradientProblem problem(function);  // takes ownership
+    StageInfo info{static_cast<int>(stage), static_cast<int>(stages.size()),
+                   frames[stages[stage] - 1].frame, used_iterations, last};
+    IterationReporter reporter(index, x.data(), &space, &base, scale, &board, options.cancel, info,
+                               result);
+    ceres::GradientProblemSolver::Options solver;
+    solver.line_search_direction_type = ceres::LBFGS;
+    solver.line_search_type = ceres::WOLFE;
+    solver.max_num_iterations = last ? std::max(1, config.max_iterations - used_iterations)
+                                     : stage_budget - used_iterations;
+    solver.function_tolerance = last ? config.function_tolerance
+                                     : std::max(config.function_tolerance, kStageFunctionTolerance);
+    solver.gradient_tolerance = config.gradient_tolerance;
+    solver.parameter_tolerance = config.parameter_tolerance;
+    solver.logging_type = ceres::SILENT;
+    solver.update_state_every_iteration = true;
+    solver.callbacks.push_back(&reporter);
+    ceres::Solve(solver, problem, x.data(), &summary);
+    const int iterations = std::max(0, static_cast<int>(summary.iterations.size()) - 1);
+    used_iterations += iterations;
+    result->stages.push_back({info.last_frame, iterations, summary.initial_cost * scale,
+                              summary.final_cost * scale, summary.message});
+    if (options.cancel != nullptr && options.cancel->load()) break;
+  }
+  objective.SetActiveFrames(all_frames);
 
   result->final = space.ToParameters(x.data(), base);
-  result->iterations = std::max(0, static_cast<int>(summary.iterations.size()) - 1);
+  result->iterations = used_iterations;
   result->converged = summary.termination_type == ceres::CONVERGENCE;
   result->termination = summary.message;
   result->failed = summary.iterations.empty() || !std::isfinite(summary.initial_cost) ||
@@ -261,13 +319,12 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
         "): the fitted frames show nothing these parameters move; if the object touches a floor, "
         "give ground_plane in \"fixed\" or fit it";
   }
-  result->initial_cost = summary.initial_cost * scale;
+  result->initial_cost = full_initial_cost.value_or(summary.initial_cost * scale);
+  if (stages.size() == 1) result->initial_cost = summary.initial_cost * scale;
   result->final_cost = summary.final_cost * scale;
-  if (result->cost_history.size() > 1)
-    result->cost_history.erase(result->cost_history.begin());  // iteration 0 = initial cost
   // Held-out frames: the costs they did not help to fit.
-  const bool any_heldout = std::any_of(objective.frames().begin(), objective.frames().end(),
-                                       [](const ObservedFrame& f) { return f.heldout; });
+  const bool any_heldout =
+      std::any_of(frames.begin(), frames.end(), [](const ObservedFrame& f) { return f.heldout; });
   if (any_heldout && !result->failed) {
     Result<ObjectiveEvaluation> before = objective.Evaluate(result->initial, false);
     Result<ObjectiveEvaluation> after = objective.Evaluate(result->final, false);
@@ -424,6 +481,16 @@ nlohmann::json ToJson(const FitResult& result) {
     }
     return out;
   };
+  auto stages_json = [](const StartResult& start) {
+    nlohmann::json out = nlohmann::json::array();
+    for (const HorizonStageResult& stage : start.stages) {
+      out.push_back({{"last_frame", stage.last_frame},
+                     {"iterations", stage.iterations},
+                     {"cost", CostJson(stage.initial_cost, stage.final_cost)},
+                     {"termination", stage.termination}});
+    }
+    return out;
+  };
   auto start_json = [&](const StartResult& start) {
     nlohmann::json cost = CostJson(start.initial_cost, start.final_cost);
     cost["heldout_initial"] = start.initial_heldout_cost;
@@ -437,7 +504,8 @@ nlohmann::json ToJson(const FitResult& result) {
                           {"termination", start.termination},
                           {"evaluations", start.evaluations},
                           {"failed_evaluations", start.failed_evaluations},
-                          {"seconds", start.seconds}};
+                          {"seconds", start.seconds},
+                          {"stages", stages_json(start)}};
   };
   const StartResult& best = result.Best();
   nlohmann::json out;

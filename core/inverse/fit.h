@@ -8,7 +8,8 @@
 //    "parameters": {"youngs_modulus": {"value": 2.1e4, "unit": "Pa", "initial": 1e4}, ...},
 //    "cost": {"initial": .., "final": .., "heldout_initial": .., "heldout_final": ..},
 //    "iterations": .., "converged": .., "termination": "..",
-//    "starts": [{"index": 0, "parameters": {..}, "cost": {..}, "iterations": .., ...}, ...],
+//    "starts": [{"index": 0, "parameters": {..}, "cost": {..}, "iterations": .., ...,
+//                "stages": [{"last_frame": 14, "iterations": 5, "cost": {..}, ..}, ..]}, ...],
 //    "cost_history": [..],           // best start: cost after each iteration
 //    "fixed": {..},                  // every parameter the fit did not change, public JSON
 //    "time_step": {"substeps": 4, "selection": {..}},  // selection: when chosen ("auto")
@@ -44,12 +45,25 @@ struct FitProgress {
   fem::PhysicalParameters parameters;  // current values
   double elapsed_seconds = 0.0;        // since the fit began
   double remaining_seconds = 0.0;      // estimate for the whole fit
+  // Continuation over the horizon (JobConfig::continuation): the stage running (0-based) and the
+  // last capture frame it fits; `cost` is over the stage's frames. One stage without it.
+  int stage = 0;
+  int num_stages = 1;
+  int horizon_frame = 0;
 };
 
 struct FitOptions {
   std::function<void(const FitProgress&)> on_progress;  // optional
   // Checked every iteration; a set flag stops every start (the result then says "cancelled").
   const std::atomic<bool>* cancel = nullptr;
+};
+
+// One stage of a start's continuation over the horizon.
+struct HorizonStageResult {
+  int last_frame = 0;  // last capture frame fitted in the stage
+  int iterations = 0;
+  double initial_cost = 0.0, final_cost = 0.0;  // over the stage's fitted frames [m^2]
+  std::string termination;                      // Ceres' message
 };
 
 struct StartResult {
@@ -61,7 +75,8 @@ struct StartResult {
   bool converged = false;
   std::string termination;  // Ceres' message, or why the start failed
   bool failed = false;      // the start could not be evaluated at all (e.g. diverged at the start)
-  std::vector<double> cost_history;  // after each iteration [m^2]
+  std::vector<double> cost_history;  // after each iteration of the last stage (every frame) [m^2]
+  std::vector<HorizonStageResult> stages;  // the last one fits every frame
   int evaluations = 0, failed_evaluations = 0;
   double seconds = 0.0, forward_seconds = 0.0, backward_seconds = 0.0;
   long long steps = 0;  // simulation steps run, over all evaluations

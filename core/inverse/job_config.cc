@@ -38,6 +38,7 @@ constexpr auto kJobConfigKeys = std::to_array<std::string_view>({
     "parameter_tolerance",
     "gradient",
     "finite_difference_step",
+    "continuation",
     "cost",
     "diagnose",
 });
@@ -477,6 +478,12 @@ Result<JobConfig> JobConfigFromJson(const Json& j) {
   if (j.contains("cost")) {
     SOFTID_ASSIGN_OR_RETURN(config.cost, ParseCost(j["cost"]));
   }
+  if (j.contains("continuation")) {
+    if (!j["continuation"].is_boolean()) {
+      return json::Invalid("continuation", j["continuation"], "must be true or false");
+    }
+    config.continuation = j["continuation"].get<bool>();
+  }
   if (j.contains("diagnose")) {
     if (!j["diagnose"].is_boolean()) {
       return json::Invalid("diagnose", j["diagnose"], "must be true or false");
@@ -547,6 +554,7 @@ Json ToJson(const JobConfig& config) {
       {"parameter_tolerance", config.parameter_tolerance},
       {"gradient", ToString(config.gradient)},
       {"finite_difference_step", config.finite_difference_step},
+      {"continuation", config.continuation},
       {"cost",
        {{"band_cells", config.cost.band_cells},
         {"truncation_cells", config.cost.truncation_cells},

@@ -1,6 +1,7 @@
 #include "core/inverse/trajectory_objective.h"
 
 #include <chrono>
+#include <span>
 
 #include "core/common/check.h"
 
@@ -24,14 +25,22 @@ TrajectoryObjective::TrajectoryObjective(const geometry::TriangleMesh& rest_mesh
   SOFTID_THROW_UNLESS(fps > 0.0, "fps must be positive");
   SOFTID_THROW_UNLESS(substeps >= 1, "substeps must be at least 1");
   SOFTID_THROW_UNLESS(frames_ != nullptr && !frames_->empty(), "no observed frames");
+  active_frames_ = static_cast<int>(frames_->size());
   options.time_step = 1.0 / (fps * substeps);
   simulator_ =
       std::make_unique<fem::Simulator>(rest_mesh, initial_parameters, options, fixed_region);
   // The rest surface the simulator renders (and cameras see) is what the cost's rest SDF values
   // are fitted to.
-  cost_ = std::make_unique<cost::SparseSurfaceCost>(
-      simulator_->hex_mesh(), simulator_->signed_distance(), simulator_->rest_surface(),
-      cost_options);
+  cost_ = std::make_unique<cost::SparseSurfaceCost>(simulator_->hex_mesh(),
+                                                    simulator_->signed_distance(),
+                                                    simulator_->rest_surface(), cost_options);
+}
+
+void TrajectoryObjective::SetActiveFrames(int count) {
+  SOFTID_THROW_UNLESS(count >= 1 && count <= static_cast<int>(frames_->size()),
+                      "active frame count " + std::to_string(count) + " outside [1, " +
+                          std::to_string(frames_->size()) + "]");
+  active_frames_ = count;
 }
 
 Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalParameters& parameters,
@@ -44,7 +53,7 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
   } catch (const std::invalid_argument& error) {
     return Status::InvalidArgument(error.what());
   }
-  const std::vector<ObservedFrame>& frames = *frames_;
+  const std::span<const ObservedFrame> frames(frames_->data(), active_frames_);
   const int last_step = frames.back().frame * substeps_;
   states_.resize(last_step + 1);
   states_[0] = sim.state();
@@ -104,8 +113,8 @@ Result<std::vector<std::vector<cost::PointMatch>>> TrajectoryObjective::MatchPoi
     const fem::PhysicalParameters& parameters) {
   SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation, Evaluate(parameters, false));
   if (evaluation.diverged) return Status::FailedPrecondition("the simulation diverged");
-  std::vector<std::vector<cost::PointMatch>> matches(frames_->size());
-  for (size_t k = 0; k < frames_->size(); ++k) {
+  std::vector<std::vector<cost::PointMatch>> matches(active_frames_);
+  for (int k = 0; k < active_frames_; ++k) {
     const ObservedFrame& frame = (*frames_)[k];
     cost_->Evaluate(states_[frame.frame * substeps_].u, frame.points, nullptr, &matches[k]);
   }

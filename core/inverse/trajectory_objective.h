@@ -6,7 +6,8 @@
 //
 // C_k is the per-frame SSC cost (mean truncated squared distance of the frame's points); frame k
 // is compared with the state after k * substeps steps. Held-out frames are evaluated (for
-// validation) but do not enter the cost or the gradient.
+// validation) but do not enter the cost or the gradient. Only the active frames (a prefix, by
+// default all) are simulated and compared.
 //
 // Memory: the states (u, v, a) of every step, nothing else; matrices are re-assembled backwards.
 // Thread-compatibility: one instance per thread (it owns a Simulator and a cost).
@@ -32,7 +33,7 @@ struct ObjectiveEvaluation {
   bool diverged = false;            // the forward run failed: no cost, the parameters are unusable
   double cost = 0.0;                // mean over fitted frames [m^2]
   double heldout_cost = 0.0;        // mean over held-out frames [m^2] (0 without any)
-  std::vector<double> frame_costs;  // per observed frame (fitted and held out) [m^2]
+  std::vector<double> frame_costs;  // per active observed frame (fitted and held out) [m^2]
   fem::ParameterGradient gradient;  // d cost / d parameters (when requested)
   int steps = 0;
   double forward_seconds = 0.0, backward_seconds = 0.0;
@@ -60,6 +61,12 @@ class TrajectoryObjective {
   Result<std::vector<std::vector<cost::PointMatch>>> MatchPoints(
       const fem::PhysicalParameters& parameters);
 
+  // Horizon: only the first `count` observed frames are simulated and compared (fitted and held
+  // out alike); the default is every frame. The optimiser's continuation over the horizon
+  // (fit.cc) fits a prefix first. @pre 1 <= count <= frames().size(), with a fitted frame.
+  void SetActiveFrames(int count);
+  int active_frames() const { return active_frames_; }
+
   fem::Simulator& simulator() { return *simulator_; }
   const std::vector<ObservedFrame>& frames() const { return *frames_; }
   int substeps() const { return substeps_; }
@@ -70,6 +77,7 @@ class TrajectoryObjective {
   std::unique_ptr<cost::SparseSurfaceCost> cost_;
   std::shared_ptr<const std::vector<ObservedFrame>> frames_;
   int substeps_ = 1;
+  int active_frames_ = 0;
   std::vector<fem::SimulationState> states_;  // per step, reused across evaluations
   Eigen::VectorXd frame_gradient_;
 };

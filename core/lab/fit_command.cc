@@ -37,9 +37,14 @@ int RunFit(const FitFlags& flags) {
 
   inverse::FitOptions options;
   options.on_progress = [&](const inverse::FitProgress& p) {
-    spdlog::info("start {}/{} it {:>3}/{} cost {:.4e} |g| {:.2e} {} | {:.0f} s, ~{:.0f} s left",
-                 p.start + 1, p.num_starts, p.iteration, p.max_iterations, p.cost, p.gradient_norm,
-                 FormatParameters(p.parameters, config.fit), p.elapsed_seconds,
+    // Continuation over the horizon: the cost is over the frames up to the stage's last one.
+    const std::string stage =
+        p.num_stages > 1
+            ? fmt::format(" [frames 0-{}, stage {}/{}]", p.horizon_frame, p.stage + 1, p.num_stages)
+            : "";
+    spdlog::info("start {}/{} it {:>3}/{} cost {:.4e}{} |g| {:.2e} {} | {:.0f} s, ~{:.0f} s left",
+                 p.start + 1, p.num_starts, p.iteration, p.max_iterations, p.cost, stage,
+                 p.gradient_norm, FormatParameters(p.parameters, config.fit), p.elapsed_seconds,
                  p.remaining_seconds);
   };
   Result<inverse::FitResult> result = inverse::Fit(inputs.capture, config, options);

@@ -80,6 +80,7 @@ json FullConfig() {
     "parameter_tolerance": 1e-6,
     "gradient": "finite_difference",
     "finite_difference_step": 1e-3,
+    "continuation": false,
     "cost": {"band_cells": 4, "truncation_cells": 1.5, "rest_sdf": "sampled"},
     "diagnose": true
   })");
@@ -132,6 +133,7 @@ TEST(JobConfig, DefaultsFromEmptyObject) {
   EXPECT_EQ(config->parameter_tolerance, 1e-8);
   EXPECT_EQ(config->gradient, GradientMethod::kAdjoint);
   EXPECT_EQ(config->finite_difference_step, 1e-4);
+  EXPECT_TRUE(config->continuation);
   EXPECT_EQ(config->cost.band_cells, 3);
   EXPECT_EQ(config->cost.truncation_cells, 2.0);
   EXPECT_EQ(config->cost.rest_sdf, cost::RestSdf::kSurfaceFitted);
@@ -175,6 +177,7 @@ TEST(JobConfig, FullConfigRoundTrips) {
   EXPECT_EQ(config->parameter_tolerance, 1e-6);
   EXPECT_EQ(config->gradient, GradientMethod::kFiniteDifference);
   EXPECT_EQ(config->finite_difference_step, 1e-3);
+  EXPECT_FALSE(config->continuation);
   EXPECT_EQ(config->cost, (CostSettings{4, 1.5, cost::RestSdf::kSampled}));
   EXPECT_TRUE(config->diagnose);
   EXPECT_TRUE(config->Validate().ok()) << config->Validate().ToString();
@@ -371,6 +374,8 @@ TEST(JobConfigRejects, NumericalSettings) {
                 "must be \"surface_fitted\", \"exact\" or \"sampled\"");
   ExpectInvalid(json::parse(R"({"diagnose": "yes"})"),
                 "diagnose = \"yes\": ", "must be true or false");
+  ExpectInvalid(json::parse(R"({"continuation": 1})"),
+                "continuation = 1: ", "must be true or false");
 }
 
 TEST(JobConfigRejects, Frames) {
