@@ -14,8 +14,8 @@ struct PointForce {
   Eigen::Matrix3d stiffness = Eigen::Matrix3d::Zero();  // -df/dx [N/m]
   Eigen::Matrix3d damping = Eigen::Matrix3d::Zero();    // -df/dv [N s/m]
   // The rest of -df/dx, which can be indefinite: the position dependence of the normal damping
-  // (its coefficient follows the penalty's slope). Newton leaves it out of its tangent, the exact
-  // step Jacobian (adjoint) includes it.
+  // (its coefficient follows the penalty's slope). Kept apart so callers see which part of the
+  // tangent is not positive semi-definite; Newton and the adjoint both use the sum.
   Eigen::Matrix3d stiffness_indefinite = Eigen::Matrix3d::Zero();  // [N/m]
 };
 

@@ -38,6 +38,9 @@ Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
 constexpr int kMaxAssemblyThreads = 4;
 constexpr int kMinElementsPerAssemblyThread = 256;
 
+// Least share of an element's mass a corner gets, as a fraction of the uniform share V_e / 8.
+constexpr double kMinNodeMassShare = 0.25;
+
 }  // namespace
 
 Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalParameters& parameters,
@@ -132,8 +135,20 @@ void Simulator::ApplyParameters() {
   const double mu = parameters.LameMu();
   for (int e = 0; e < mesh_.NumElements(); ++e) {
     const auto& w = mesh_.element_weights[e];
+    // Lumped mass: each corner gets the material of its own octant (the row sum of the consistent
+    // mass matrix under the same octant quadrature as the stiffness). A uniform V_e / 8 share
+    // would put the material of a cut cell on its empty corners as well, moving mass outwards:
+    // torus-drop fitted at 16 cells on a 28-cell capture then gives E 7.9 % high (octant
+    // lumping on an octant capture: 0.9 %). A floor of a quarter of the uniform share keeps
+    // nodes touching only slivers from being nearly massless; the element's mass is unchanged.
+    std::array<double, 8> share;
+    double total = 0.0;
+    for (int c = 0; c < 8; ++c) {
+      share[c] = std::max(w.octant_volume[c], kMinNodeMassShare * w.volume / 8.0);
+      total += share[c];
+    }
     for (int c = 0; c < 8; ++c)
-      mass_[mesh_.element_nodes[e][c]] += parameters.density * w.volume / 8.0;
+      mass_[mesh_.element_nodes[e][c]] += parameters.density * w.volume * share[c] / total;
     const double scale = parameters.stiffness_field.Scale(mesh_.ElementCentre(e));
     // Ghost stiffness (as in CutFEM): nearly empty octants keep a small floor of stiffness, so
     // nodes that only touch slivers of material are not free to be pushed around by contact.
@@ -301,7 +316,11 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
       }
       if (f.force.isZero(0.0) && f.stiffness.isZero(0.0) && f.damping.isZero(0.0)) continue;
       Eigen::Matrix3d jacobian = f.stiffness + dv_du * f.damping;
-      if (!exact_tangent_only_if_definite_) jacobian += f.stiffness_indefinite;
+      // The exact tangent, also where the contact damper's position dependence is indefinite
+      // (separating contact): leaving that out made Newton converge only linearly (x0.63 per
+      // iteration) when light corner nodes rebound. GMRES does not need definiteness, and the
+      // preconditioner factors the symmetric part with a shift fallback.
+      jacobian += f.stiffness_indefinite;
       const int e = force_embedding_.element[p];
       const auto& w = force_embedding_.weights[p];
       const auto& nodes = mesh_.element_nodes[e];
