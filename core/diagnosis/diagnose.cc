@@ -63,6 +63,11 @@ inverse::JobConfig RefitConfig(const inverse::JobConfig& base,
     out.initial[name] = value;
   }
   out.starts = 1;
+  // A refit is local: it starts at the base optimum, inside the basin the base fit found over
+  // every frame. Refitting a prefix first would let the frames before the extension shows (a
+  // block's landing before it slides) pull the shared parameters away (ramp friction 0.3 came
+  // back as 0.19).
+  out.continuation = false;
   return out;
 }
 

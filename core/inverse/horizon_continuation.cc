@@ -33,11 +33,12 @@ std::vector<int> HorizonStages(const std::vector<ObservedFrame>& frames,
   if (departure < 0) return {all};
 
   std::vector<int> stages;
-  double count = departure + 1 + options.frames_after_departure;  // fitted frames in the stage
-  while (count <= options.final_fraction * m) {
-    const int c = static_cast<int>(std::lround(count));
-    stages.push_back(fitted[c - 1] + 1);  // the prefix up to the c-th fitted frame
-    count *= options.growth;
+  double after = 1 + options.frames_after_departure;  // fitted frames from the departure on
+  while (departure + after <= options.final_fraction * m) {
+    const int c = departure + static_cast<int>(std::lround(after));
+    if (stages.empty() || fitted[c - 1] + 1 > stages.back())
+      stages.push_back(fitted[c - 1] + 1);  // the prefix up to the c-th fitted frame
+    after *= options.growth;
   }
   stages.push_back(all);
   return stages;

@@ -61,17 +61,17 @@ TEST(Fit, RecoversYoungsModulusFromRandomStarts) {
   EXPECT_TRUE(json["fixed"].contains("ground"));
 }
 
-// A torus bouncing for a second: over every frame the cost of E has local minima where a later
-// rebound comes back in phase (here near 4x the truth); over the first impact it has not. The
-// continuation over the horizon fits the impact first and reaches the truth from there.
-TEST(Fit, ContinuationOverTheHorizonLeavesTheLocalMinimumOfALaterRebound) {
-  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 1.0);
+// A torus dropped onto the floor, seen through the impact and the rebound: over every frame the
+// cost of E has a local minimum near 2.4x the truth (the rebound's timing comes back in phase);
+// over the frames up to shortly after the impact it has not. The continuation over the horizon
+// fits those first and reaches the truth from 1.7x.
+TEST(Fit, ContinuationOverTheHorizonLeavesTheLocalMinimumOfTheRebound) {
+  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.35);
   ASSERT_TRUE(small.ok) << small.error;
   const double truth = small.truth.youngs_modulus;
   JobConfig config = YoungsModulusConfig(small.truth);
-  config.initial["youngs_modulus"] = InitialValue{.value = 4.0 * truth};
+  config.initial["youngs_modulus"] = InitialValue{.value = 1.7 * truth};
   config.starts = 1;
-  config.max_iterations = 30;
 
   config.continuation = false;
   Result<FitResult> whole = Fit(small.capture, config);
@@ -84,12 +84,12 @@ TEST(Fit, ContinuationOverTheHorizonLeavesTheLocalMinimumOfALaterRebound) {
   Result<FitResult> staged = Fit(small.capture, config);
   ASSERT_TRUE(staged.ok()) << staged.status().ToString();
   const StartResult& start = staged->Best();
-  EXPECT_NEAR(start.final.youngs_modulus, truth, 0.05 * truth);
-  EXPECT_LT(start.final_cost, 0.2 * whole->Best().final_cost);
+  EXPECT_NEAR(start.final.youngs_modulus, truth, 0.02 * truth);
+  EXPECT_LT(start.final_cost, 0.5 * whole->Best().final_cost);
   // Stages end at increasing frames, the first soon after the impact (~0.17 s = frame 10), the
   // last at the capture's last frame; the result's iterations are their sum.
   ASSERT_GE(start.stages.size(), 2u);
-  EXPECT_LT(start.stages.front().last_frame, 20);
+  EXPECT_LT(start.stages.front().last_frame, 16);
   EXPECT_EQ(start.stages.back().last_frame, small.frames->back().frame);
   int iterations = 0;
   for (size_t i = 0; i < start.stages.size(); ++i) {

@@ -23,9 +23,9 @@ std::vector<double> DropCosts(int count, int departure) {
 TEST(HorizonStages, StartShortlyAfterTheDepartureAndDoubleUpToEveryFrame) {
   const std::vector<ObservedFrame> frames = Frames(61);
   const std::vector<int> stages = HorizonStages(frames, DropCosts(61, 12), 0.0);
-  // 12 matching frames + the departing one + 2 after it = 15, then 30; 60 > 0.75 * 61 is
-  // replaced by every frame.
-  EXPECT_EQ(stages, (std::vector<int>{15, 30, 61}));
+  // 12 matching frames, then the departing one and 2 after it: 15; 12 + 6 = 18, 12 + 12 = 24,
+  // 12 + 24 = 36; 12 + 48 = 60 > 0.8 * 61 is replaced by every frame.
+  EXPECT_EQ(stages, (std::vector<int>{15, 18, 24, 36, 61}));
 }
 
 TEST(HorizonStages, OneStageWhenNothingDepartsOrTheDepartureIsLate) {
@@ -36,7 +36,11 @@ TEST(HorizonStages, OneStageWhenNothingDepartsOrTheDepartureIsLate) {
   tiny[20] = 1e-12;
   EXPECT_EQ(HorizonStages(frames, tiny, 1e-10), std::vector<int>{40});
   // The first stage would already hold most frames.
-  EXPECT_EQ(HorizonStages(frames, DropCosts(40, 35), 0.0), std::vector<int>{40});
+  EXPECT_EQ(HorizonStages(frames, DropCosts(40, 33), 0.0), std::vector<int>{40});
+  // Twice the floor is not a departure yet.
+  std::vector<double> close = DropCosts(40, 10);
+  for (int k = 10; k < 40; ++k) close[k] = 1.9e-6;
+  EXPECT_EQ(HorizonStages(frames, close, 0.0), std::vector<int>{40});
 }
 
 TEST(HorizonStages, CountsFittedFramesAndKeepsHeldOutOnesInsideThePrefix) {
@@ -45,9 +49,10 @@ TEST(HorizonStages, CountsFittedFramesAndKeepsHeldOutOnesInsideThePrefix) {
   std::vector<double> costs = DropCosts(40, 8);
   costs[3] = 1.0;  // a held-out frame never departs nor sets the floor
   const std::vector<int> stages = HorizonStages(frames, costs, 0.0);
-  // Fitted frames: 0 1 2 4 5 6 8 9 10 12 ...; frame 8 (fitted #7) departs; 7 + 2 = 9 fitted
-  // frames end at frame 10 (prefix 11), 18 at frame 22 (prefix 23); 36 > 0.75 * 30 fitted.
-  EXPECT_EQ(stages, (std::vector<int>{11, 23, 40}));
+  // Fitted frames: 0 1 2 4 5 6 8 9 10 12 13 14 16 17 18 20 ...; frame 8 (fitted #7) departs;
+  // 6 + 3 = 9 fitted frames end at frame 10 (prefix 11), 6 + 6 = 12 at frame 14 (prefix 15),
+  // 6 + 12 = 18 at frame 22 (prefix 23); 6 + 24 = 30 > 0.8 * 30 fitted frames.
+  EXPECT_EQ(stages, (std::vector<int>{11, 15, 23, 40}));
 }
 
 TEST(HorizonStages, RejectsMismatchedCostsAndAllHeldOut) {
