@@ -9,6 +9,10 @@
 //      d. the fitted value is physically plausible (candidate_library.h);
 //      e. the motion determines the found value: moving it by +-25 % (the other parameters at
 //         the refit) is rejected by the same likelihood-ratio test (its profile).
+//      C0 is the lowest cost of the null model found: once a-d pass, the null is also refitted
+//      from the candidate's refit with the extension at its null, and a-d are applied again when
+//      that is lower (an extension that only led the optimiser out of a poor base optimum is
+//      then rejected).
 //   2. A physics candidate and a nuisance (initial spin) are not nested: their likelihood ratios
 //      against the base answer different questions, and a small nuisance can soak up part of a
 //      physical signal. When a nuisance N and a physics candidate P both improve the fit (LRs

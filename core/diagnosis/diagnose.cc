@@ -356,6 +356,40 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
       tested->values = ExtensionValues(candidate.extension, tested->parameters, k0);
       tested->uncertainty = nullptr;
       ApplyDecisionRule(rule, candidate, &tested->test);
+      // 1a'. The null's cost is the lowest the null model reaches, also from the refit's values
+      // with the extension back at its null: a base fit that stopped in a local minimum (control
+      // s119: beta 0.0066 instead of 0.0025) let any extension "improve" it by escaping there.
+      if (tested->test.accepted) {
+        std::vector<std::string> null_freed;
+        for (const std::string& name : fit_config.fit) {
+          const bool extension_parameter =
+              std::find(candidate.parameters.begin(), candidate.parameters.end(), name) !=
+              candidate.parameters.end();
+          if (!extension_parameter && !config.IsFitted(name)) null_freed.push_back(name);
+        }
+        const fem::PhysicalParameters null_start =
+            CopyExtension(candidate.extension, p0, tested->parameters);
+        stage(std::string("null model refitted from the ") + ToString(candidate.extension) +
+              " refit");
+        Result<inverse::FitResult> null_fit =
+            inverse::Fit(capture, RefitConfig(config, null_freed, null_start), options.fit);
+        Result<ModelResiduals> rn = Status::Internal("not evaluated");
+        if (null_fit.ok()) rn = ResidualsAt(context, null_fit->Best().final);
+        if (rn.ok()) {
+          const bool lower = rn->cost < tested->test.cost_before;
+          tested->null_refit = {
+              {"cost", rn->cost}, {"heldout", rn->heldout}, {"replaced_null", lower}};
+          if (lower) {
+            tested->test.cost_before = rn->cost;
+            tested->test.heldout_before = rn->heldout;
+            tested->test.lr = LikelihoodRatioStatistic(rn->cost, r1->cost, ess.n_eff);
+            ApplyDecisionRule(rule, candidate, &tested->test);
+          }
+        } else {
+          tested->null_refit = {
+              {"error", !null_fit.ok() ? null_fit.status().message() : rn.status().message()}};
+        }
+      }
       // 1e. Does the motion determine the found value? Its profile at +-25 %.
       if (tested->test.accepted) {
         const Profile profile =

@@ -72,6 +72,10 @@ struct TestedCandidate {
   nlohmann::json starts = nlohmann::json::array();
   // A conditional test (test.conditional): the nuisance's values in the joint refit.
   nlohmann::json nuisance_values;
+  // When the refit passed gates a-d: the null model refitted from the refit's values with the
+  // extension at its null, {"cost", "heldout", "replaced_null"} (or {"error"}); a lower cost
+  // replaces the null's (cost_before, heldout_before, LR) and the gates are applied again.
+  nlohmann::json null_refit;
 };
 
 struct DiagnosisReport {

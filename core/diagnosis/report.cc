@@ -154,6 +154,7 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
                                  {"heldout_before", t.test.heldout_before},
                                  {"heldout_after", t.test.heldout_after},
                                  {"refit_error", t.test.refit_error},
+                                 {"null_refit", t.null_refit},
                                  {"given", ConditionalJson(t.test)},
                                  {"nuisance_parameters", t.nuisance_values},
                                  {"starts", t.starts},

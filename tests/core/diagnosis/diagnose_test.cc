@@ -7,6 +7,7 @@
 #include <filesystem>
 
 #include "core/diagnosis/report.h"
+#include "core/inverse/fit.h"
 #include "core/scenes/diagnosis_scenes.h"
 #include "core/scenes/synthesize.h"
 
@@ -96,6 +97,37 @@ TEST(Diagnose, ControlWithoutEffectGivesNone) {
   ASSERT_TRUE(report.ok()) << report.status().ToString();
   EXPECT_EQ(report->decision, "none") << ToText(*report);
   EXPECT_TRUE(ToJson(*report)["findings"].empty());
+}
+
+// The same control diagnosed from a base fit stopped far from its optimum (one iteration from
+// E at 1/4 of the truth): every extension refit lowers the cost, because with the base
+// parameters free it also finishes the base fit. The null refitted from such a refit's values
+// (extension at its null) is as good, so no physics is reported.
+TEST(Diagnose, AnExtensionThatOnlyFinishesAPoorBaseFitIsNotPhysics) {
+  RampCapture ramp(0.0);
+  inverse::JobConfig config = ramp.BaseConfig();
+  config.heldout_every = 4;  // the given base fit must hold out what the diagnosis holds out
+  inverse::JobConfig poor = config;
+  poor.initial["youngs_modulus"].value = 0.03 * ramp.truth.youngs_modulus;
+  poor.max_iterations = 1;
+  poor.continuation = false;
+  Result<inverse::FitResult> base = inverse::Fit(ramp.capture, poor);
+  ASSERT_TRUE(base.ok()) << base.status().ToString();
+  Result<DiagnosisReport> report = Diagnose(ramp.capture, config, SmallOptions(), &*base);
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  EXPECT_TRUE(report->before.flagged) << "the premise: the poor base fit misfits";
+  EXPECT_TRUE(report->decision == "none" || report->decision == "unexplained") << ToText(*report);
+  // The premise of the check: an extension passed gates a-d against the poor base, and the null
+  // refitted from its values replaced the poor base's cost.
+  bool replaced = false;
+  for (const TestedCandidate& t : report->tested) {
+    if (t.null_refit.is_object() && t.null_refit.value("replaced_null", false)) {
+      replaced = true;
+      EXPECT_LT(t.test.cost_before, report->base_cost);
+      EXPECT_FALSE(t.test.accepted);
+    }
+  }
+  EXPECT_TRUE(replaced) << ToText(*report);
 }
 
 // Synthesises the light-throw cube `scene` into `dir` (finer grid and more substeps than the
