@@ -40,6 +40,7 @@ struct ProveFlags {
   bool quick = false;
   int jobs = 1;
   int fit_cells = 10;
+  int fit_substeps = 2;  // steps per frame of the fit (the generator takes 4)
   int generator_cells = 15;
   int max_iterations = 30;
   int max_refits = 2;
@@ -74,6 +75,7 @@ struct Outcome {
 // outcome only when they match.
 nlohmann::json OutcomeSettings(const ProveFlags& flags) {
   return {{"fit_cells", flags.fit_cells},
+          {"fit_substeps", flags.fit_substeps},
           {"generator_cells", flags.generator_cells},
           {"max_iterations", flags.max_iterations},
           {"max_refits", flags.max_refits}};
@@ -141,7 +143,7 @@ inverse::JobConfig BaseConfig(const std::string& scene, const ProveFlags& flags)
     config.fixed = {{"poisson_ratio", 0.3}};
   }
   config.cells = flags.fit_cells;
-  config.substeps = 2;
+  config.substeps = flags.fit_substeps;
   config.heldout_every = 4;
   config.starts = 1;
   config.threads = 1;
@@ -404,6 +406,9 @@ Command RegisterProveDiagnosis(CLI::App* app) {
       ->check(CLI::PositiveNumber);
   app->add_option("--fit-cells", flags->fit_cells, "fit grid: cells along the longest side")
       ->capture_default_str();
+  app->add_option("--fit-substeps", flags->fit_substeps, "fit: time steps per frame")
+      ->capture_default_str()
+      ->check(CLI::PositiveNumber);
   app->add_option("--generator-cells", flags->generator_cells,
                   "generator grid (finer than the fit)")
       ->capture_default_str();
