@@ -3,6 +3,7 @@
 #include <dlfcn.h>
 
 #include <Eigen/CholmodSupport>
+#include <Eigen/SparseLU>
 #include <algorithm>
 #include <cmath>
 #include <mutex>
@@ -238,6 +239,36 @@ void LinearSolver::Precondition(const Eigen::VectorXd& b, const Eigen::Matrix3d&
   x->resize(b.size());
   preconditioner_rotation_ = rotation * reference_rotation_.transpose();
   ApplyPreconditioner(b, x);
+}
+
+LinearSolver::Summary LinearSolver::SolveDirect(const Matrix& a, const Eigen::VectorXd& b,
+                                                const Options& options, Eigen::VectorXd* x,
+                                                Operator op) {
+  Summary summary;
+  const double b_norm = b.norm();
+  if (b_norm == 0.0) {
+    x->setZero();
+    summary.relative_residual = 0.0;
+    summary.converged = true;
+    return summary;
+  }
+  Eigen::SparseLU<Matrix, Eigen::COLAMDOrdering<int>> lu;
+  if (op == Operator::kTransposed) {
+    const Matrix transposed = a.transpose();
+    lu.compute(transposed);
+  } else {
+    lu.compute(a);
+  }
+  if (lu.info() != Eigen::Success) return summary;
+  *x = lu.solve(b);
+  if (lu.info() != Eigen::Success || !x->allFinite()) return summary;
+  summary.iterations = 1;
+  const Eigen::VectorXd residual = op == Operator::kTransposed
+                                       ? Eigen::VectorXd(b - a.transpose() * *x)
+                                       : Eigen::VectorXd(b - a * *x);
+  summary.relative_residual = residual.norm() / b_norm;
+  summary.converged = summary.relative_residual <= options.relative_tolerance;
+  return summary;
 }
 
 LinearSolver::Summary LinearSolver::Solve(const Matrix& a, const Eigen::VectorXd& b,

@@ -59,6 +59,14 @@ class LinearSolver {
   Summary Solve(const Matrix& a, const Eigen::VectorXd& b, const Eigen::Matrix3d& rotation,
                 const Options& options, Eigen::VectorXd* x, Operator op = Operator::kMatrix);
 
+  // Solves op(a) x = b by sparse LU (Eigen's SparseLU, COLAMD ordering), without the factor: the
+  // fallback for the rare system GMRES stagnates on, e.g. the exact (indefinite, non-symmetric)
+  // tangent of a block sticking under strong friction. Slow (a fresh LU each call) but exact; the
+  // summary reports the true relative residual, and converged is false when the LU is singular or
+  // misses `options.relative_tolerance`.
+  static Summary SolveDirect(const Matrix& a, const Eigen::VectorXd& b, const Options& options,
+                             Eigen::VectorXd* x, Operator op = Operator::kMatrix);
+
  private:
   void ApplyPreconditioner(const Eigen::Ref<const Eigen::VectorXd>& r, Eigen::VectorXd* z);
 

@@ -18,8 +18,20 @@ double ContactNormalForce(const ContactLaw& law, double area, const Eigen::Vecto
   return law.stiffness * area * Softplus(s) / a;
 }
 
+Eigen::Vector3d FrictionForce(const ContactLaw& law, const Eigen::Vector3d& v,
+                              double lagged_normal_force) {
+  if (!(law.friction_coefficient > 0.0 && lagged_normal_force > 0.0))
+    return Eigen::Vector3d::Zero();
+  const Eigen::Vector3d& n = law.plane.normal;
+  const Eigen::Vector3d vt = v - n.dot(v) * n;
+  const double eps = law.friction_velocity_scale;
+  const double speed = std::sqrt(vt.squaredNorm() + eps * eps);
+  return (-law.friction_coefficient * lagged_normal_force / speed) * vt;
+}
+
 PointForce GroundContactForce(const ContactLaw& law, double area, const Eigen::Vector3d& x,
-                              const Eigen::Vector3d& v, double lagged_normal_force) {
+                              const Eigen::Vector3d& v, double lagged_normal_force,
+                              const Eigen::Vector3d* friction_iterate) {
   PointForce out;
   const double a = 1.0 / law.smoothing;
   const double d = law.plane.SignedDistance(x);
@@ -49,7 +61,12 @@ PointForce GroundContactForce(const ContactLaw& law, double area, const Eigen::V
     const double speed = std::sqrt(vt.squaredNorm() + eps * eps);
     const double c = law.friction_coefficient * lagged_normal_force / speed;
     out.force -= c * vt;
-    out.damping += c * (tangential - vt * vt.transpose() / (speed * speed));
+    if (friction_iterate != nullptr) {
+      const Eigen::Vector3d lambda = tangential * *friction_iterate;
+      out.damping += c * tangential + lambda * vt.transpose() / (speed * speed);
+    } else {
+      out.damping += c * (tangential - vt * vt.transpose() / (speed * speed));
+    }
   }
   return out;
 }

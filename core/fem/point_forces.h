@@ -36,8 +36,22 @@ double ContactNormalForce(const ContactLaw& law, double area, const Eigen::Vecto
 // friction uses the normal force of the previous time step (`lagged_normal_force`), so within a
 // step it depends on v alone and its Jacobian is symmetric; coupling it to this step's f_n makes
 // Newton stall at impacts, where f_n jumps.
+//
+// `friction_iterate`, when given, is Newton's current estimate lambda of the friction force (a
+// primal-dual Newton, as Chan, Golub & Mulet's for total variation): the damping then holds
+// (1/s)(mu f_n T + lambda v_t^T / s) with s = sqrt(|v_t|^2 + eps^2), the linearisation of
+// lambda s + mu f_n v_t = 0, instead of the exact -df/dv, which it equals when lambda is the
+// friction force. The exact tangent sees almost no resistance along a fast slip, so a step that
+// brings a sliding point to rest overshoots into reversed slip and Newton cycles between the two
+// sides; with lambda lagging the reversal, the tangent resists it. The force is always the exact
+// one.
 PointForce GroundContactForce(const ContactLaw& law, double area, const Eigen::Vector3d& x,
-                              const Eigen::Vector3d& v, double lagged_normal_force);
+                              const Eigen::Vector3d& v, double lagged_normal_force,
+                              const Eigen::Vector3d* friction_iterate = nullptr);
+
+// The friction force -mu f_n_lagged v_t / sqrt(|v_t|^2 + eps^2) alone [N].
+Eigen::Vector3d FrictionForce(const ContactLaw& law, const Eigen::Vector3d& v,
+                              double lagged_normal_force);
 
 // Drag on a point of area A: f = -(A / 4) (c1 + c2 |v|) v (projected area ~ surface / 4).
 PointForce AirDragForce(double drag_linear, double drag_quadratic, double area,

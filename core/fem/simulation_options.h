@@ -41,7 +41,7 @@ struct SimulationOptions {
   // Inexact Newton (forcing term): each solve only needs to shrink the residual by this factor for
   // Newton to converge to its own tolerance; tighter solves cost iterations and buy nothing
   // (torus-drop at 3k cells: 1e-6 -> 1e-3 is 1.5x faster, same state to 6 digits).
-  double linear_tolerance = 1e-3;  // relative residual [-], > 0
+  double linear_tolerance = 1e-3;   // relative residual [-], > 0
   int max_linear_iterations = 500;  // [-], >= 1
   // Relative residual of the adjoint's transposed solves [-], > 0. Unlike the forward solves, an
   // inexact adjoint solve is an error in the gradient itself; 1e-6 keeps it far below what a
@@ -53,6 +53,10 @@ struct SimulationOptions {
   double contact_smoothing = 0.0;
   // Regularised Coulomb friction: slip speeds well below this behave as stick [m/s], > 0.
   double friction_velocity_scale = 1e-3;
+  // Newton's friction tangent follows a friction force estimate (primal-dual, see
+  // GroundContactForce) instead of the exact one; false: exact tangent and a global step limit on
+  // slip reversal, which stalls on blocks that stick under strong friction.
+  bool primal_dual_friction = true;
   // The surface (contact, drag, rendering) is subdivided until its edges are at most this fraction
   // of h, so coarse input meshes still deform smoothly with the grid.
   double surface_edge_fraction = 0.5;  // [-], > 0

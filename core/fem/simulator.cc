@@ -305,7 +305,8 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
       PointForce f;
       if (parameters_.ground) {
         f = GroundContactForce(contact_, surface_areas_[p], xp, vp,
-                               dynamic ? lagged_normal_force_[p] : 0.0);
+                               dynamic ? lagged_normal_force_[p] : 0.0,
+                               use_friction_iterate_ ? &friction_iterate_[p] : nullptr);
       }
       if (dynamic && (parameters_.drag_linear > 0.0 || parameters_.drag_quadratic > 0.0)) {
         const PointForce drag = AirDragForce(parameters_.drag_linear, parameters_.drag_quadratic,
@@ -467,6 +468,21 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
   // initial guess, so the estimate is not wasted. In free flight this saves a full Newton
   // iteration per step.
   const double tolerance = options_.newton_tolerance * h;
+  // The friction force estimate starts from the law at v_n: a sticking point keeps its force.
+  const bool friction_active = dynamic && parameters_.ground &&
+                               parameters_.friction_coefficient > 0.0 && has_surface_forces_;
+  struct IterateGuard {
+    bool* flag;
+    ~IterateGuard() { *flag = false; }
+  } guard{&use_friction_iterate_};
+  use_friction_iterate_ = friction_active && options_.primal_dual_friction;
+  if (use_friction_iterate_) {
+    friction_iterate_.resize(force_embedding_.NumPoints());
+    for (int p = 0; p < force_embedding_.NumPoints(); ++p) {
+      friction_iterate_[p] = FrictionForce(
+          contact_, force_embedding_.Interpolate(mesh_, state_.v, p), lagged_normal_force_[p]);
+    }
+  }
   Eigen::Matrix3d body_rotation = Assemble(mode, u_next_, v_next_, a_next_);
   double residual_norm = residual_.norm();
   update_.setZero();
@@ -505,11 +521,13 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
       return summary;
     }
     const bool small = full_step <= tolerance;
-    const double step = small ? 1.0
-                              : std::min(ContactStepLimit(u_next_, update_),
-                                         dynamic ? FrictionStepLimit(v_next_, update_) : 1.0);
+    const double friction_limit =
+        dynamic && !use_friction_iterate_ ? FrictionStepLimit(v_next_, update_) : 1.0;
+    const double step = small ? 1.0 : std::min(ContactStepLimit(u_next_, update_), friction_limit);
+    if (use_friction_iterate_) v_before_ = v_next_;
     u_next_ += step * update_;
     if (dynamic) NewmarkKinematics(u_next_, &v_next_, &a_next_);
+    if (use_friction_iterate_) AdvanceFrictionIterate(v_before_, v_next_);
     summary.newton_iterations = it + 1;
     summary.max_update = step * full_step;
     // A converged update needs no new assembly: the state is final.
@@ -557,6 +575,32 @@ void Simulator::EvaluateStepResidual(const Eigen::VectorXd& u_next, Eigen::Vecto
   exact_tangent_only_if_definite_ = true;
   if (residual) *residual = residual_;
   if (jacobian) *jacobian = assembler_.matrix();
+}
+
+void Simulator::AdvanceFrictionIterate(const Eigen::VectorXd& v, const Eigen::VectorXd& v_new) {
+  // lambda' = lambda + dlambda with lambda s + mu f_n v_t = 0 linearised at (v, lambda):
+  // dlambda = -(rho + (mu f_n T + lambda v_t^T / s) dv) / s, rho = lambda s + mu f_n v_t; then
+  // projected onto the tangent plane and into the cone |lambda| <= mu f_n.
+  const Eigen::Vector3d& n = contact_.plane.normal;
+  const double eps = contact_.friction_velocity_scale;
+  for (int p = 0; p < force_embedding_.NumPoints(); ++p) {
+    const double limit = parameters_.friction_coefficient * lagged_normal_force_[p];
+    if (!(limit > 0.0)) {
+      friction_iterate_[p].setZero();
+      continue;
+    }
+    Eigen::Vector3d vt = force_embedding_.Interpolate(mesh_, v, p);
+    vt -= n.dot(vt) * n;
+    Eigen::Vector3d dvt = force_embedding_.Interpolate(mesh_, v_new, p) - vt;
+    dvt -= n.dot(dvt) * n;
+    const double s = std::sqrt(vt.squaredNorm() + eps * eps);
+    Eigen::Vector3d lambda = friction_iterate_[p] - n.dot(friction_iterate_[p]) * n;
+    lambda = -(limit / s) * (vt + dvt) - lambda * (vt.dot(dvt) / (s * s));
+    lambda -= n.dot(lambda) * n;
+    const double norm = lambda.norm();
+    if (norm > limit) lambda *= limit / norm;
+    friction_iterate_[p] = lambda;
+  }
 }
 
 void Simulator::UpdateLaggedNormalForces() {

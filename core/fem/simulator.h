@@ -191,6 +191,14 @@ class Simulator {
   // function of u_n, so it is recomputed, not part of the state.
   std::vector<double> lagged_normal_force_;
   void UpdateLaggedNormalForces();
+  // Newton's friction force estimate per surface point (see GroundContactForce), used for the
+  // forward tangent only: set from v_n at the start of a step, advanced by the linearised
+  // friction law after each update and kept within the friction cone. Not part of the state: the
+  // converged step does not depend on it.
+  std::vector<Eigen::Vector3d> friction_iterate_;
+  bool use_friction_iterate_ = false;
+  Eigen::VectorXd v_before_;  // work storage of the Newton update
+  void AdvanceFrictionIterate(const Eigen::VectorXd& v, const Eigen::VectorXd& dv);
   std::vector<Matrix24d, Eigen::aligned_allocator<Matrix24d>> element_stiffness_;
   std::vector<Eigen::Matrix3d> element_rotation_;
   // Parallel element loop of Assemble: the elements are cut into one contiguous range (a slab of

@@ -209,6 +209,10 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
         lambda.setZero();
         solve = solver_.Solve(jacobian, rhs, rotation, linear, &lambda, kTransposed);
       }
+      // GMRES can stagnate on the exact tangent (indefinite and non-symmetric where strong
+      // friction sticks); a direct LU solves it.
+      if (!solve.converged)
+        solve = LinearSolver::SolveDirect(jacobian, rhs, linear, &lambda, kTransposed);
       if (!solve.converged) {
         return Status::Internal("adjoint solve at t = " + std::to_string(next.time) +
                                 " s did not converge (relative residual " +

@@ -64,6 +64,7 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
       out.steps = step;
       return out;
     }
+    if (!summary.converged) ++out.unconverged_steps;
     states_[step] = sim.state();
   }
   out.steps = last_step;

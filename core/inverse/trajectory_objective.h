@@ -36,6 +36,9 @@ struct ObjectiveEvaluation {
   std::vector<double> frame_costs;  // per active observed frame (fitted and held out) [m^2]
   fem::ParameterGradient gradient;  // d cost / d parameters (when requested)
   int steps = 0;
+  // Steps whose Newton iteration stopped at max_newton_iterations short of its tolerance: the
+  // state then depends on the iteration path, so the cost is not smooth in the parameters there.
+  int unconverged_steps = 0;
   double forward_seconds = 0.0, backward_seconds = 0.0;
 };
 

@@ -1,0 +1,79 @@
+// LinearSolver: GMRES with the Cholesky preconditioner, and the direct LU fallback for systems
+// the preconditioned GMRES cannot finish (indefinite, non-symmetric).
+#include "core/fem/linear_solver.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+#include <vector>
+
+namespace softid::fem {
+namespace {
+
+// A 1-D Laplacian-like SPD matrix (3 DOFs per node) plus a skew part and a negative shift, so
+// that the result is non-symmetric and indefinite.
+LinearSolver::Matrix MakeMatrix(int nodes, double skew, double shift) {
+  const int n = 3 * nodes;
+  std::vector<Eigen::Triplet<double>> entries;
+  for (int i = 0; i < n; ++i) {
+    entries.emplace_back(i, i, 2.0 - shift);
+    if (i + 3 < n) {
+      entries.emplace_back(i, i + 3, -1.0 + skew);
+      entries.emplace_back(i + 3, i, -1.0 - skew);
+    }
+  }
+  LinearSolver::Matrix a(n, n);
+  a.setFromTriplets(entries.begin(), entries.end());
+  return a;
+}
+
+Eigen::VectorXd RandomVector(int n) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> uniform(-1.0, 1.0);
+  Eigen::VectorXd b(n);
+  for (int i = 0; i < n; ++i) b[i] = uniform(rng);
+  return b;
+}
+
+TEST(LinearSolver, GmresSolvesAPreconditionedSystem) {
+  const LinearSolver::Matrix a = MakeMatrix(200, 0.05, 0.0);
+  const Eigen::VectorXd b = RandomVector(a.rows());
+  LinearSolver solver;
+  ASSERT_TRUE(solver.Factorize(a, Eigen::Matrix3d::Identity()).ok());
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(a.rows());
+  LinearSolver::Options options;
+  options.relative_tolerance = 1e-10;
+  const LinearSolver::Summary summary =
+      solver.Solve(a, b, Eigen::Matrix3d::Identity(), options, &x);
+  EXPECT_TRUE(summary.converged);
+  EXPECT_LT((a * x - b).norm(), 1e-9 * b.norm());
+}
+
+TEST(LinearSolver, DirectSolveHandlesAnIndefiniteNonSymmetricTransposedSystem) {
+  // Shifted by more than the smallest eigenvalue of the Laplacian: indefinite.
+  const LinearSolver::Matrix a = MakeMatrix(200, 0.05, 0.5);
+  const Eigen::VectorXd b = RandomVector(a.rows());
+  LinearSolver::Options options;
+  options.relative_tolerance = 1e-10;
+  for (auto op : {LinearSolver::Operator::kMatrix, LinearSolver::Operator::kTransposed}) {
+    Eigen::VectorXd x;
+    const LinearSolver::Summary summary = LinearSolver::SolveDirect(a, b, options, &x, op);
+    ASSERT_TRUE(summary.converged) << summary.relative_residual;
+    const Eigen::VectorXd ax = op == LinearSolver::Operator::kTransposed
+                                   ? Eigen::VectorXd(a.transpose() * x)
+                                   : Eigen::VectorXd(a * x);
+    EXPECT_LT((ax - b).norm(), 1e-9 * b.norm());
+    EXPECT_NEAR(summary.relative_residual, (ax - b).norm() / b.norm(), 1e-12);
+  }
+}
+
+TEST(LinearSolver, DirectSolveReportsASingularSystem) {
+  LinearSolver::Matrix a(6, 6);  // all zero
+  a.makeCompressed();
+  const Eigen::VectorXd b = Eigen::VectorXd::Ones(6);
+  Eigen::VectorXd x;
+  EXPECT_FALSE(LinearSolver::SolveDirect(a, b, LinearSolver::Options(), &x).converged);
+}
+
+}  // namespace
+}  // namespace softid::fem
