@@ -288,13 +288,21 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
     // fitted cost wins. *tried lists each start's extension values and fitted cost.
     auto refit = [&](const Candidate& candidate, const std::vector<std::string>& freed,
                      const std::vector<fem::PhysicalParameters>& starts, nlohmann::json* tried,
-                     inverse::JobConfig* used) -> Result<inverse::FitResult> {
+                     inverse::JobConfig* used,
+                     const std::vector<fem::PhysicalParameters>& fallbacks = {})
+        -> Result<inverse::FitResult> {
       Result<inverse::FitResult> best = Status::Internal("no refit start");
       const double k0 = DefaultContactStiffness(p0, context.rest_bounds.sizes().maxCoeff());
-      for (const fem::PhysicalParameters& start : starts) {
+      std::vector<fem::PhysicalParameters> all = starts;
+      all.insert(all.end(), fallbacks.begin(), fallbacks.end());
+      for (size_t i = 0; i < all.size(); ++i) {
+        // Fallback starts only while no start has succeeded.
+        if (i >= starts.size() && best.ok()) break;
+        const fem::PhysicalParameters& start = all[i];
         const inverse::JobConfig c = RefitConfig(config, freed, start);
         Result<inverse::FitResult> fit = inverse::Fit(capture, c, options.fit);
         nlohmann::json entry = {{"start", ExtensionValues(candidate.extension, start, k0)}};
+        if (i >= starts.size()) entry["fallback"] = true;
         if (fit.ok()) {
           entry["cost"] = fit->Best().final_cost;
           entry["found"] = ExtensionValues(candidate.extension, fit->Best().final, k0);
@@ -444,10 +452,13 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
       // A two-sided variable is refitted from its best start on each side of the null.
       std::vector<fem::PhysicalParameters> starts = s.refit_starts;
       if (starts.empty()) starts = {s.start};
-      for (fem::PhysicalParameters& start : starts) {
-        if (s.extension == Extension::kContact && !(start.contact_stiffness > 0.0)) {
-          start.contact_stiffness =
-              DefaultContactStiffness(p0, context.rest_bounds.sizes().maxCoeff());
+      std::vector<fem::PhysicalParameters> fallbacks = s.fallback_starts;
+      for (auto* list : {&starts, &fallbacks}) {
+        for (fem::PhysicalParameters& start : *list) {
+          if (s.extension == Extension::kContact && !(start.contact_stiffness > 0.0)) {
+            start.contact_stiffness =
+                DefaultContactStiffness(p0, context.rest_bounds.sizes().maxCoeff());
+          }
         }
       }
       TestedCandidate tested;
@@ -457,7 +468,7 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
       tested.starts = nlohmann::json::array();
       inverse::JobConfig used = config;
       const Result<inverse::FitResult> fit =
-          refit(candidate, candidate.parameters, starts, &tested.starts, &used);
+          refit(candidate, candidate.parameters, starts, &tested.starts, &used, fallbacks);
       judge(candidate, fit, used, &tested);
       report.tested.push_back(std::move(tested));
     }

@@ -462,6 +462,24 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
         s.refit_thetas = {start_theta};
       }
     }
+    {
+      // Fallbacks: the other finite tries on the same side as the first refit start (the
+      // screening found the effect that way), in order of cost.
+      std::vector<size_t> order;
+      const double side = s.refit_thetas.empty() ? start_theta : s.refit_thetas.front();
+      for (size_t i = 0; i < tries.size(); ++i) {
+        if (!std::isfinite(try_costs[i]) || tries[i].first * side <= 0.0) continue;
+        if (std::abs(tries[i].first - side) < 1e-12) continue;
+        order.push_back(i);
+      }
+      std::sort(order.begin(), order.end(),
+                [&](size_t a, size_t b) { return try_costs[a] < try_costs[b]; });
+      for (size_t i : order) {
+        if (static_cast<int>(s.fallback_starts.size()) >= ScreenedCandidate::kMaxFallbackStarts)
+          break;
+        s.fallback_starts.push_back(tries[i].second);
+      }
+    }
     if (!std::isfinite(s.start_cost)) {
       s.applicable = false;
       s.note = "the simulation diverges at every refit start";

@@ -88,6 +88,11 @@ struct ScreenedCandidate {
   // from ratios 0.75 and 1.15 ended at 0.79 both times.
   std::vector<fem::PhysicalParameters> refit_starts;
   std::vector<double> refit_thetas;  // theta of each
+  // Further screened points on the start's side of the null, lowest forward cost first (at most
+  // kMaxFallbackStarts): the refit runs from them only when every refit start fails (a forward
+  // pass can succeed where the adjoint or a first Newton step cannot).
+  std::vector<fem::PhysicalParameters> fallback_starts;
+  static constexpr int kMaxFallbackStarts = 2;
   double predicted_lr = 0.0;
   double signature_share = 0.0;  // [0, 1]
   double score = 0.0;

@@ -82,6 +82,15 @@ TEST(Diagnose, FindsConcealedFrictionOnARamp) {
   const TestedCandidate& w = report->tested[report->winner];
   EXPECT_NEAR(w.values["friction_coefficient"].get<double>(), 0.3, 0.1);
   EXPECT_LT(w.test.heldout_after, 0.7 * w.test.heldout_before);
+  // Screening keeps further friction starts, in case the refit cannot start from its first.
+  for (const ScreenedCandidate& s : report->screening) {
+    if (s.extension != Extension::kFriction) continue;
+    EXPECT_FALSE(s.fallback_starts.empty());
+    for (const fem::PhysicalParameters& f : s.fallback_starts) {
+      EXPECT_GT(f.friction_coefficient, 0.0);
+      EXPECT_NE(f.friction_coefficient, s.start.friction_coefficient);
+    }
+  }
   const nlohmann::json json = ToJson(*report);
   EXPECT_EQ(json["decision"], "friction");
   ASSERT_EQ(json["findings"].size(), 1u);
