@@ -40,7 +40,7 @@ struct ProveFlags {
   bool quick = false;
   int jobs = 1;
   int fit_cells = 10;
-  int fit_substeps = 2;  // steps per frame of the fit (the generator takes 4)
+  int fit_substeps = 2;  // steps per frame of the fit (the generator takes twice as many)
   int generator_cells = 15;
   int max_iterations = 30;
   int max_refits = 2;
@@ -77,6 +77,7 @@ nlohmann::json OutcomeSettings(const ProveFlags& flags) {
   return {{"fit_cells", flags.fit_cells},
           {"fit_substeps", flags.fit_substeps},
           {"generator_cells", flags.generator_cells},
+          {"generator_substeps", 2 * flags.fit_substeps},
           {"max_iterations", flags.max_iterations},
           {"max_refits", flags.max_refits}};
 }
@@ -225,7 +226,8 @@ Outcome RunCase(const Case& c, const ProveFlags& flags) {
   std::filesystem::remove_all(dir);
   scenes::SynthesisOptions synth;
   synth.run.simulation.cells_along_longest_side = flags.generator_cells;
-  synth.run.substeps_per_frame = 4;  // half the fit's time step
+  // Half the fit's time step, as the fit must not share the generator's discretisation.
+  synth.run.substeps_per_frame = 2 * flags.fit_substeps;
   synth.cameras = scene->cameras;
   synth.noise = capture::StructuredLightNoise(static_cast<uint64_t>(c.seed));
   synth.depth_scale = capture::kStructuredLightDepthScale;
