@@ -32,6 +32,9 @@ struct Variant {
   // The base variables' share of a ladder start at theta (identity when absent): what the
   // extension changes that the base model already fitted, put back.
   std::function<fem::PhysicalParameters(fem::PhysicalParameters, double)> rebalance;
+  // Further ways to put the base share back, laddered over the larger starts too (see below).
+  std::vector<std::function<fem::PhysicalParameters(fem::PhysicalParameters, double)>>
+      alternative_rebalances;
   std::function<double(const fem::ParameterGradient&, const fem::PhysicalParameters&)> dtheta;
 };
 
@@ -237,6 +240,15 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
         p.youngs_modulus *= std::exp(-0.5 * t);
         return p;
       };
+      // A uniform fit of a two-stiffness body can also settle near one half's modulus (the
+      // half that dominates the motion): the 4x halves' uniform fit found E = 7.0 kPa for
+      // halves of 6 and 1.5 kPa, where no geometric-mean split comes near the truth. So the
+      // ladder also keeps the fitted E on either half.
+      v.alternative_rebalances = {[](fem::PhysicalParameters p, double) { return p; },
+                                  [](fem::PhysicalParameters p, double t) {
+                                    p.youngs_modulus *= std::exp(-t);
+                                    return p;
+                                  }};
     }
     variants.push_back(v);
   }
@@ -398,6 +410,14 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
       for (double f : kLadder) {
         const double t = -downhill * f * v.max_start;
         tries.emplace_back(t, ladder_start(t));
+      }
+    }
+    for (const auto& rebalance : v.alternative_rebalances) {
+      for (double f : {1.0 / 4, 3.0 / 8, 1.0 / 2, 3.0 / 4}) {
+        for (double side : {1.0, -1.0}) {
+          const double t = side * f * v.max_start;
+          tries.emplace_back(t, rebalance(with_base(t, 0.0), t));
+        }
       }
     }
     // A spin also along each principal axis of the body, both ways. The score is the linear
