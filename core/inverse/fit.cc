@@ -77,6 +77,7 @@ class CeresObjective : public ceres::FirstOrderFunction {
     stats_->forward_seconds += evaluation->forward_seconds;
     stats_->backward_seconds += evaluation->backward_seconds;
     stats_->steps += evaluation->steps;
+    stats_->unconverged_steps += evaluation->unconverged_steps;
     if (with_gradient) {
       space_->ChainGradient(evaluation->gradient, x, gradient);
       for (int i = 0; i < NumParameters(); ++i) gradient[i] /= scale_;
@@ -504,6 +505,8 @@ nlohmann::json ToJson(const FitResult& result) {
                           {"termination", start.termination},
                           {"evaluations", start.evaluations},
                           {"failed_evaluations", start.failed_evaluations},
+                          {"simulation_steps", start.steps},
+                          {"unconverged_steps", start.unconverged_steps},
                           {"seconds", start.seconds},
                           {"stages", stages_json(start)}};
   };

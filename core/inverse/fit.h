@@ -80,6 +80,9 @@ struct StartResult {
   int evaluations = 0, failed_evaluations = 0;
   double seconds = 0.0, forward_seconds = 0.0, backward_seconds = 0.0;
   long long steps = 0;  // simulation steps run, over all evaluations
+  // Of those, steps whose Newton iteration stopped short of its tolerance: the cost is not smooth
+  // where this is large (the trajectory depends on the iteration path).
+  long long unconverged_steps = 0;
 };
 
 struct FitResult {

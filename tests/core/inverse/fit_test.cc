@@ -56,6 +56,9 @@ TEST(Fit, RecoversYoungsModulusFromRandomStarts) {
   EXPECT_TRUE(json["parameters"]["youngs_modulus"].contains("initial"));
   EXPECT_LT(json["cost"]["final"].get<double>(), json["cost"]["initial"].get<double>());
   EXPECT_EQ(json["starts"].size(), 2u);
+  // A torus bouncing on the floor: every time step meets the Newton tolerance.
+  EXPECT_GT(json["starts"][0]["simulation_steps"].get<long long>(), 0);
+  EXPECT_EQ(json["starts"][0]["unconverged_steps"].get<long long>(), 0);
   EXPECT_GT(json["timing"]["ms_per_forward_adjoint_step"].get<double>(), 0.0);
   EXPECT_FALSE(json["fixed"].contains("youngs_modulus"));
   EXPECT_TRUE(json["fixed"].contains("ground"));
