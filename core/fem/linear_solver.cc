@@ -241,17 +241,23 @@ void LinearSolver::Precondition(const Eigen::VectorXd& b, const Eigen::Matrix3d&
   ApplyPreconditioner(b, x);
 }
 
+namespace {
+// b = 0: x = 0 solves op(a) x = b exactly.
+LinearSolver::Summary SolvedByZero(Eigen::VectorXd* x) {
+  x->setZero();
+  LinearSolver::Summary summary;
+  summary.relative_residual = 0.0;
+  summary.converged = true;
+  return summary;
+}
+}  // namespace
+
 LinearSolver::Summary LinearSolver::SolveDirect(const Matrix& a, const Eigen::VectorXd& b,
                                                 const Options& options, Eigen::VectorXd* x,
                                                 Operator op) {
   Summary summary;
   const double b_norm = b.norm();
-  if (b_norm == 0.0) {
-    x->setZero();
-    summary.relative_residual = 0.0;
-    summary.converged = true;
-    return summary;
-  }
+  if (b_norm == 0.0) return SolvedByZero(x);
   Eigen::SparseLU<Matrix, Eigen::COLAMDOrdering<int>> lu;
   if (op == Operator::kTransposed) {
     const Matrix transposed = a.transpose();
@@ -292,12 +298,7 @@ LinearSolver::Summary LinearSolver::Solve(const Matrix& a, const Eigen::VectorXd
   preconditioner_rotation_ = rotation * reference_rotation_.transpose();
 
   const double b_norm = b.norm();
-  if (b_norm == 0.0) {
-    x->setZero();
-    summary.relative_residual = 0.0;
-    summary.converged = true;
-    return summary;
-  }
+  if (b_norm == 0.0) return SolvedByZero(x);
   // Work of this solve (see kFactorFlopWeight): per iteration a preconditioner application (two
   // triangular solves, 2 nnz(L) flops each, and two block rotations), a product with A, and the
   // Gram-Schmidt and update vector operations, which grow with the basis.

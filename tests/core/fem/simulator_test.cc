@@ -281,13 +281,19 @@ struct RampMotion {
   double max_speed = 0.0;     // along the slope, over the measurement window [m/s]
 };
 
-RampMotion SlideOnRamp(double theta, double mu) {
+// A stiff block on a ramp of angle theta (gravity tilted, ground z = 0).
+PhysicalParameters RampParameters(double theta, double mu) {
   PhysicalParameters p;
   p.youngs_modulus = 2e5;
   p.density = 500.0;
   p.friction_coefficient = mu;
   p.gravity = 9.81 * Eigen::Vector3d(std::sin(theta), 0.0, -std::cos(theta));
   p.ground = GroundPlane{Eigen::Vector3d::UnitZ(), 0.0};
+  return p;
+}
+
+RampMotion SlideOnRamp(double theta, double mu) {
+  const PhysicalParameters p = RampParameters(theta, mu);
   SimulationOptions options;
   options.cells_along_longest_side = 8;
   options.time_step = 1.0 / 240.0;
@@ -361,13 +367,7 @@ TEST(Simulator, BlockStoppedByStrongFrictionConvergesEveryStep) {
 // The Newton tangent changes the path, not the solution: where Newton converges with the exact
 // friction tangent, the primal-dual one reaches the same motion.
 TEST(Simulator, FrictionTangentDoesNotChangeTheSlide) {
-  const double theta = 30.0 * kPi / 180.0, mu = 0.3;
-  PhysicalParameters p;
-  p.youngs_modulus = 2e5;
-  p.density = 500.0;
-  p.friction_coefficient = mu;
-  p.gravity = 9.81 * Eigen::Vector3d(std::sin(theta), 0.0, -std::cos(theta));
-  p.ground = GroundPlane{Eigen::Vector3d::UnitZ(), 0.0};
+  const PhysicalParameters p = RampParameters(30.0 * kPi / 180.0, 0.3);
   geometry::TriangleMesh block = MakeBox(Eigen::Vector3d(0.1, 0.1, 0.05), 0.0125);
   for (auto& v : block.vertices) v.z() += 0.026;
   Eigen::Vector3d centre[2];
