@@ -96,6 +96,24 @@ fem::PhysicalParameters CopyExtension(Extension extension, const fem::PhysicalPa
   return to;
 }
 
+fem::PhysicalParameters NullModelStart(Extension extension, const fem::PhysicalParameters& null,
+                                       const fem::PhysicalParameters& refit,
+                                       const Eigen::AlignedBox3d& rest_bounds) {
+  fem::PhysicalParameters out = CopyExtension(extension, null, refit);
+  if (extension != Extension::kHeterogeneousStiffness || rest_bounds.isEmpty()) return out;
+  const double volume = rest_bounds.volume();
+  if (!(volume > 0.0)) return out;
+  if (refit.stiffness_field.kind != fem::StiffnessField::Kind::kRegions) return out;
+  double log_mean = 0.0;
+  for (const fem::StiffnessField::Region& region : refit.stiffness_field.regions) {
+    const Eigen::AlignedBox3d inside = region.box.intersection(rest_bounds);
+    if (inside.isEmpty() || !(region.scale > 0.0)) continue;
+    log_mean += inside.volume() / volume * std::log(region.scale);
+  }
+  out.youngs_modulus = refit.youngs_modulus * std::exp(log_mean);
+  return out;
+}
+
 namespace {
 
 double HalvesRatio(const fem::PhysicalParameters& p) {

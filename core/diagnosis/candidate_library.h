@@ -63,6 +63,14 @@ fem::StiffnessField HalvesField(const Eigen::AlignedBox3d& rest_bounds, int axis
 fem::PhysicalParameters CopyExtension(Extension extension, const fem::PhysicalParameters& from,
                                       fem::PhysicalParameters to);
 
+// The start of the null model refitted from an extension's refit: `refit` with the extension
+// back at its null (taken from `null`). A stiffness split keeps its stiffness: E becomes the
+// volume-weighted geometric mean E_upper r^f (f = the share of `rest_bounds` inside the scaled
+// region), since E_upper alone is the stiffness of one half only.
+fem::PhysicalParameters NullModelStart(Extension extension, const fem::PhysicalParameters& null,
+                                       const fem::PhysicalParameters& refit,
+                                       const Eigen::AlignedBox3d& rest_bounds);
+
 // Whether the fitted value of the extension is physically plausible; `why` says which bound.
 //   friction: mu in [0.01, 1.5]; air_drag: [0.01, 5] kg/m^3 (rho_air C_d / 2 of bluff bodies is
 //   ~0.6); heterogeneous_stiffness: ratio outside [0.8, 1.25] and inside [1/50, 50];

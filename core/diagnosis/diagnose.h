@@ -42,6 +42,10 @@ struct DiagnoseOptions {
   // Held-out frames when the job holds none out (every k-th frame) [-], >= 2: the decision rule
   // needs frames the fits did not see.
   int default_heldout_every = 4;
+  // Restarts from a better base fit [-], >= 0: when nothing explains the misfit, the base model
+  // refitted from the refits' values may land far lower (the first base fit stopped in a local
+  // minimum); the diagnosis then runs again from that base. 1: one restart at most.
+  int max_base_restarts = 1;
   // Run the identifiability analysis of the final model (2 adjoint runs per fitted variable).
   bool identifiability = true;
   // Folder for the PNG plots; empty = no plots.
@@ -94,7 +98,11 @@ struct DiagnosisReport {
   std::vector<TestedCandidate> tested;
   nlohmann::json nuisances = nlohmann::json::array();
   nlohmann::json base_fit, final_fit;  // result.json
-  nlohmann::json identifiability;      // of the final model, or null
+  // Earlier base fits left because a refit showed a lower null (DiagnoseOptions::
+  // max_base_restarts): {"reason", "via", "cost_before", "cost_after", "first_decision",
+  // "first_report" (the diagnosis.json of that base)}, oldest first.
+  nlohmann::json base_restarts = nlohmann::json::array();
+  nlohmann::json identifiability;  // of the final model, or null
   std::vector<std::string> plots;
   double seconds = 0.0;
 };

@@ -162,6 +162,7 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
                                  {"test", ToJson(t.test)},
                                  {"residual_after", ToJson(t.after)}});
   }
+  out["base_restarts"] = r.base_restarts;
   out["base_fit"] = r.base_fit;
   out["final_fit"] = r.final_fit;
   out["identifiability"] = r.identifiability;
@@ -229,6 +230,12 @@ std::string ToText(const DiagnosisReport& r) {
         << " % from the base\n";
   }
   for (const auto& n : r.nuisances) out << "nuisance: " << n.dump() << "\n";
+  for (const auto& b : r.base_restarts) {
+    out << "base fit restarted: cost " << b.value("cost_before", 0.0) << " -> "
+        << b.value("cost_after", 0.0) << " m^2 (null model refitted from the "
+        << b.value("via", std::string()) << " refit; first decision "
+        << b.value("first_decision", std::string()) << ")\n";
+  }
   if (!r.plots.empty()) out << "plots: " << Join(r.plots) << "\n";
   return out.str();
 }

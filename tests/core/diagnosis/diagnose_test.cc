@@ -109,9 +109,10 @@ TEST(Diagnose, ControlWithoutEffectGivesNone) {
 }
 
 // The same control diagnosed from a base fit stopped far from its optimum (one iteration from
-// E at 1/4 of the truth): every extension refit lowers the cost, because with the base
+// E at 3 % of the truth): every extension refit lowers the cost, because with the base
 // parameters free it also finishes the base fit. The null refitted from such a refit's values
-// (extension at its null) is as good, so no physics is reported.
+// (extension at its null) is as good, so no physics is reported; nothing explains the first
+// base's misfit, so the diagnosis restarts from that better base and finds nothing missing.
 TEST(Diagnose, AnExtensionThatOnlyFinishesAPoorBaseFitIsNotPhysics) {
   RampCapture ramp(0.0);
   inverse::JobConfig config = ramp.BaseConfig();
@@ -124,19 +125,26 @@ TEST(Diagnose, AnExtensionThatOnlyFinishesAPoorBaseFitIsNotPhysics) {
   ASSERT_TRUE(base.ok()) << base.status().ToString();
   Result<DiagnosisReport> report = Diagnose(ramp.capture, config, SmallOptions(), &*base);
   ASSERT_TRUE(report.ok()) << report.status().ToString();
-  EXPECT_TRUE(report->before.flagged) << "the premise: the poor base fit misfits";
-  EXPECT_TRUE(report->decision == "none" || report->decision == "unexplained") << ToText(*report);
-  // The premise of the check: an extension passed gates a-d against the poor base, and the null
-  // refitted from its values replaced the poor base's cost.
+  EXPECT_EQ(report->decision, "none") << ToText(*report);
+  ASSERT_EQ(report->base_restarts.size(), 1u) << ToText(*report);
+  const nlohmann::json& restart = report->base_restarts[0];
+  EXPECT_EQ(restart["first_decision"], "unexplained");
+  EXPECT_LT(restart["cost_after"].get<double>(), restart["cost_before"].get<double>());
+  EXPECT_LT(report->base_cost, restart["cost_before"].get<double>());
+  const nlohmann::json& first = restart["first_report"];
+  EXPECT_TRUE(first["mismatch"]["flagged"].get<bool>()) << "the premise: the poor base misfits";
+  // Gate 1a' in the first pass: an extension passed gates a-d against the poor base, and the
+  // null refitted from its values replaced the poor base's cost.
   bool replaced = false;
-  for (const TestedCandidate& t : report->tested) {
-    if (t.null_refit.is_object() && t.null_refit.value("replaced_null", false)) {
+  for (const nlohmann::json& c : first["candidates"]) {
+    if (c["null_refit"].is_object() && c["null_refit"].value("replaced_null", false)) {
       replaced = true;
-      EXPECT_LT(t.test.cost_before, report->base_cost);
-      EXPECT_FALSE(t.test.accepted);
+      EXPECT_LT(c["cost_before"].get<double>(), first["base"]["cost"].get<double>());
+      EXPECT_FALSE(c["test"]["accepted"].get<bool>());
     }
   }
-  EXPECT_TRUE(replaced) << ToText(*report);
+  EXPECT_TRUE(replaced) << first.dump();
+  EXPECT_EQ(ToJson(*report)["base_restarts"].size(), 1u);
 }
 
 // Synthesises the light-throw cube `scene` into `dir` (finer grid and more substeps than the
@@ -281,6 +289,13 @@ TEST(Diagnose, RejectsBadOptionsAndConfigs) {
                 .status()
                 .message()
                 .find("default_heldout_every = 1"),
+            std::string::npos);
+  options = DiagnoseOptions();
+  options.max_base_restarts = -1;
+  EXPECT_NE(Diagnose(empty, inverse::JobConfig(), options)
+                .status()
+                .message()
+                .find("max_base_restarts = -1"),
             std::string::npos);
 }
 

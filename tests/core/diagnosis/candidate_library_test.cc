@@ -1,0 +1,58 @@
+#include "core/diagnosis/candidate_library.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+namespace softid::diagnosis {
+namespace {
+
+fem::PhysicalParameters NullParameters() {
+  fem::PhysicalParameters p;
+  p.youngs_modulus = 3000.0;
+  return p;
+}
+
+// A split refit's E is one half's modulus: the null model restarts from the geometric mean over
+// the volume, not from that half.
+TEST(NullModelStart, StiffnessSplitStartsAtTheVolumeMean) {
+  const Eigen::AlignedBox3d body(Eigen::Vector3d(-0.1, -0.05, 0.0),
+                                 Eigen::Vector3d(0.1, 0.05, 0.1));
+  fem::PhysicalParameters refit = NullParameters();
+  refit.youngs_modulus = 8000.0;
+  refit.stiffness_field = HalvesField(body, /*axis=*/0, /*ratio=*/0.25);
+  const fem::PhysicalParameters start =
+      NullModelStart(Extension::kHeterogeneousStiffness, NullParameters(), refit, body);
+  EXPECT_EQ(start.stiffness_field.kind, fem::StiffnessField::Kind::kUniform);
+  EXPECT_NEAR(start.youngs_modulus, 8000.0 * std::sqrt(0.25), 1e-9);
+
+  // A region over a quarter of the body (split at x = -0.05): E r^(1/4).
+  refit.stiffness_field.regions[0].box.max().x() = -0.05;
+  EXPECT_NEAR(NullModelStart(Extension::kHeterogeneousStiffness, NullParameters(), refit, body)
+                  .youngs_modulus,
+              8000.0 * std::pow(0.25, 0.25), 1e-9);
+}
+
+// Every other extension goes back to its null and keeps the refit's base parameters.
+TEST(NullModelStart, OtherExtensionsKeepTheRefitsBaseParameters) {
+  const Eigen::AlignedBox3d body(Eigen::Vector3d::Zero(), Eigen::Vector3d::Constant(0.1));
+  fem::PhysicalParameters refit = NullParameters();
+  refit.youngs_modulus = 5000.0;
+  refit.stiffness_damping = 0.004;
+  refit.friction_coefficient = 0.4;
+  refit.contact_stiffness = 2e6;
+  refit.contact_damping = 1e-3;
+  const fem::PhysicalParameters friction =
+      NullModelStart(Extension::kFriction, NullParameters(), refit, body);
+  EXPECT_EQ(friction.friction_coefficient, 0.0);
+  EXPECT_EQ(friction.youngs_modulus, 5000.0);
+  EXPECT_EQ(friction.stiffness_damping, 0.004);
+  const fem::PhysicalParameters contact =
+      NullModelStart(Extension::kContact, NullParameters(), refit, body);
+  EXPECT_EQ(contact.contact_stiffness, NullParameters().contact_stiffness);
+  EXPECT_EQ(contact.contact_damping, NullParameters().contact_damping);
+  EXPECT_EQ(contact.youngs_modulus, 5000.0);
+}
+
+}  // namespace
+}  // namespace softid::diagnosis
