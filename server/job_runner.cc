@@ -190,6 +190,10 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
                          std::to_string(p.horizon_frame) + " (stage " +
                          std::to_string(p.stage + 1) + "/" + std::to_string(p.num_stages) + ")";
       }
+      if (p.unconverged_steps > 0) {
+        event.message += (event.message.empty() ? "" : ", ") + std::to_string(p.unconverged_steps) +
+                         " of " + std::to_string(p.simulation_steps) + " steps unconverged";
+      }
       if (Result<int64_t> seq = context.jobs->AppendProgress(job.id, event); !seq.ok()) {
         log->warn("job {}: progress of iteration {} not recorded: {}", job.id, p.iteration,
                   seq.status().message());

@@ -110,7 +110,7 @@ class ProgressBoard {
 
   void Report(int start, int iteration, double cost, double gradient_norm,
               const fem::PhysicalParameters& parameters, int stage, int num_stages,
-              int horizon_frame) {
+              int horizon_frame, long long simulation_steps, long long unconverged_steps) {
     std::lock_guard lock(mutex_);
     ++iterations_done_;
     const double elapsed = SecondsSince(begin_);
@@ -126,6 +126,8 @@ class ProgressBoard {
     progress.stage = stage;
     progress.num_stages = num_stages;
     progress.horizon_frame = horizon_frame;
+    progress.simulation_steps = simulation_steps;
+    progress.unconverged_steps = unconverged_steps;
     progress.elapsed_seconds = elapsed;
     // Pessimistic: every running start uses all its iterations, pending ones too.
     const double per_iteration = elapsed / std::max(1, iterations_done_) * threads_;
@@ -175,7 +177,8 @@ class IterationReporter : public ceres::IterationCallback {
       if (stage_.records_history && summary.iteration > 0) stats_->cost_history.push_back(cost);
       board_->Report(start_, stage_.iterations_before + summary.iteration, cost,
                      summary.gradient_max_norm, space_->ToParameters(x_, *base_), stage_.stage,
-                     stage_.num_stages, stage_.last_frame);
+                     stage_.num_stages, stage_.last_frame, stats_->steps,
+                     stats_->unconverged_steps);
     }
     if (cancel_ != nullptr && cancel_->load()) return ceres::SOLVER_ABORT;
     return ceres::SOLVER_CONTINUE;

@@ -50,6 +50,10 @@ struct FitProgress {
   int stage = 0;
   int num_stages = 1;
   int horizon_frame = 0;
+  // Time steps this start has simulated so far, and those whose Newton iteration hit its limit
+  // (a state that depends on the iteration path; should stay 0).
+  long long simulation_steps = 0;
+  long long unconverged_steps = 0;
 };
 
 struct FitOptions {

@@ -42,10 +42,15 @@ int RunFit(const FitFlags& flags) {
         p.num_stages > 1
             ? fmt::format(" [frames 0-{}, stage {}/{}]", p.horizon_frame, p.stage + 1, p.num_stages)
             : "";
-    spdlog::info("start {}/{} it {:>3}/{} cost {:.4e}{} |g| {:.2e} {} | {:.0f} s, ~{:.0f} s left",
+    // Newton misses make the cost depend on the iteration path: shown when there are any.
+    const std::string misses =
+        p.unconverged_steps > 0
+            ? fmt::format(" | {} of {} steps unconverged", p.unconverged_steps, p.simulation_steps)
+            : "";
+    spdlog::info("start {}/{} it {:>3}/{} cost {:.4e}{} |g| {:.2e} {} | {:.0f} s, ~{:.0f} s left{}",
                  p.start + 1, p.num_starts, p.iteration, p.max_iterations, p.cost, stage,
                  p.gradient_norm, FormatParameters(p.parameters, config.fit), p.elapsed_seconds,
-                 p.remaining_seconds);
+                 p.remaining_seconds, misses);
   };
   Result<inverse::FitResult> result = inverse::Fit(inputs.capture, config, options);
   if (!result.ok()) {

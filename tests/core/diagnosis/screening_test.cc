@@ -55,8 +55,8 @@ TEST(PrincipalAxes, TurnedSlabFollowsItsShape) {
 TEST(PrincipalAxes, CubeUsesTheWorldAxes) {
   const auto axes = PrincipalAxes(BoxMesh(Eigen::Vector3d(0.2, 0.2, 0.2),
                                           Eigen::Isometry3d(Eigen::Translation3d(-0.5, 0, 0.3))));
-  for (const Eigen::Vector3d& world :
-       {Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitY(), Eigen::Vector3d::UnitZ()}) {
+  for (int axis = 0; axis < 3; ++axis) {
+    const Eigen::Vector3d world = Eigen::Vector3d::Unit(axis);
     double best = 0.0;
     for (const Eigen::Vector3d& a : axes) best = std::max(best, Alignment(a, world));
     EXPECT_GT(best, 1.0 - 1e-9);

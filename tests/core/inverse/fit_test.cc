@@ -34,6 +34,10 @@ TEST(Fit, RecoversYoungsModulusFromRandomStarts) {
     ++progress_lines;
     EXPECT_GE(p.remaining_seconds, 0.0);
     EXPECT_EQ(p.max_iterations, 20);
+    // Every reported iteration has simulated the horizon at least once.
+    EXPECT_GT(p.simulation_steps, 0);
+    EXPECT_GE(p.unconverged_steps, 0);
+    EXPECT_LE(p.unconverged_steps, p.simulation_steps);
   };
   Result<FitResult> result = Fit(small.capture, config, options);
   ASSERT_TRUE(result.ok()) << result.status().ToString();
@@ -73,7 +77,7 @@ TEST(Fit, ContinuationOverTheHorizonLeavesTheLocalMinimumOfTheRebound) {
   ASSERT_TRUE(small.ok) << small.error;
   const double truth = small.truth.youngs_modulus;
   JobConfig config = YoungsModulusConfig(small.truth);
-  config.initial["youngs_modulus"] = InitialValue{.value = 1.7 * truth};
+  config.initial["youngs_modulus"] = InitialValue{.value = 1.7 * truth, .range = std::nullopt};
   config.starts = 1;
 
   config.continuation = false;
@@ -97,7 +101,9 @@ TEST(Fit, ContinuationOverTheHorizonLeavesTheLocalMinimumOfTheRebound) {
   int iterations = 0;
   for (size_t i = 0; i < start.stages.size(); ++i) {
     iterations += start.stages[i].iterations;
-    if (i > 0) EXPECT_GT(start.stages[i].last_frame, start.stages[i - 1].last_frame);
+    if (i > 0) {
+      EXPECT_GT(start.stages[i].last_frame, start.stages[i - 1].last_frame);
+    }
   }
   EXPECT_EQ(iterations, start.iterations);
   const nlohmann::json json = ToJson(*staged);
