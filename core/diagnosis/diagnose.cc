@@ -389,6 +389,7 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
             inverse::Fit(capture, RefitConfig(config, null_freed, null_start), options.fit);
         Result<ModelResiduals> rn = Status::Internal("not evaluated");
         if (null_fit.ok()) rn = ResidualsAt(context, null_fit->Best().final);
+        if (null_fit.ok() && null_freed.empty()) tested->null_fit = *null_fit;
         if (rn.ok()) {
           const bool lower = rn->cost < tested->test.cost_before;
           tested->null_refit = {
@@ -557,11 +558,16 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
           !(LikelihoodRatioStatistic(r0.cost, t.test.cost_after, ess0.n_eff) > critical))
         continue;
       if (options.fit.cancel != nullptr && options.fit.cancel->load()) break;
-      stage(std::string("base model refitted from the ") + ToString(t.test.extension) + " refit");
-      const fem::PhysicalParameters start =
-          NullModelStart(t.test.extension, p0, t.parameters, context.rest_bounds);
-      Result<inverse::FitResult> fit =
-          inverse::Fit(capture, RefitConfig(config, {}, start), options.fit);
+      // Gate 1a' may have fitted this very start already.
+      Result<inverse::FitResult> fit = Status::Internal("not fitted");
+      if (t.null_fit) {
+        fit = *t.null_fit;
+      } else {
+        stage(std::string("base model refitted from the ") + ToString(t.test.extension) + " refit");
+        const fem::PhysicalParameters start =
+            NullModelStart(t.test.extension, p0, t.parameters, context.rest_bounds);
+        fit = inverse::Fit(capture, RefitConfig(config, {}, start), options.fit);
+      }
       if (!fit.ok() || !(fit->Best().final_cost < better_cost)) continue;
       better_cost = fit->Best().final_cost;
       better = std::move(*fit);

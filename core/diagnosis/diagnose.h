@@ -16,6 +16,7 @@
 #include <filesystem>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -80,6 +81,9 @@ struct TestedCandidate {
   // extension at its null, {"cost", "heldout", "replaced_null"} (or {"error"}); a lower cost
   // replaces the null's (cost_before, heldout_before, LR) and the gates are applied again.
   nlohmann::json null_refit;
+  // That null refit itself, when it fitted the base model's parameters only (a base restart then
+  // reuses it instead of fitting the same start again).
+  std::optional<inverse::FitResult> null_fit;
 };
 
 struct DiagnosisReport {
