@@ -213,9 +213,10 @@ class Simulator {
   ContactLaw contact_;
   bool has_surface_forces_ = false;
 
-  // Newton drops an element's stress-stiffness term where it would make the element's block
-  // indefinite; EvaluateStepResidual turns this off to return the exact Jacobian.
-  bool exact_tangent_only_if_definite_ = true;
+  // Assemble Newton's tangent: without the geometric term in dynamic steps, and in static solves
+  // without an element's stress-stiffness term where it would make the element's block
+  // indefinite. EvaluateStepResidual and the adjoint turn this off for the exact Jacobian.
+  bool newton_tangent_ = true;
 
   ElementAssembler assembler_;
   LinearSolver solver_;

@@ -190,9 +190,9 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
   // The exact Jacobian at the end of the step.
   SetState(previous);
   UpdateLaggedNormalForces();
-  exact_tangent_only_if_definite_ = false;
+  newton_tangent_ = false;
   const Eigen::Matrix3d rotation = Assemble(Mode::kDynamic, next.u, next.v, next.a);
-  exact_tangent_only_if_definite_ = true;
+  newton_tangent_ = true;
 
   Eigen::VectorXd lambda = Eigen::VectorXd::Zero(3 * n);
   if (!rhs.isZero(0.0)) {
