@@ -10,6 +10,23 @@
 
 #include "core/common/check.h"
 
+// CHOLMOD's supernodal factorisation (Debian's SuiteSparse 5.12, built with OpenMP) opens an OpenMP
+// parallel region per supernode (clearing its map, zeroing its block) with a thread count fixed at
+// compile time, num_threads(CHOLMOD_OMP_NUM_THREADS = 4), which neither OMP_NUM_THREADS nor
+// omp_set_num_threads() overrides; only the OMP_THREAD_LIMIT environment variable does, and only
+// when set before the process starts. Thousands of 4-thread team starts per factorisation on 2
+// cores spend most of it waking and parking threads: 230 ms vs 88 ms for the torus-drop matrix at
+// 3100 cells, and 25 % of the whole simulation. This process-wide definition of libgomp's entry
+// point for `#pragma omp parallel` takes precedence over libgomp's (the executable's dynamic
+// symbol is bound first) and runs each region on the calling thread: a team of one, which is
+// what OpenMP promises when a region runs serialised (omp_get_num_threads() = 1, loops run every
+// iteration). Only CHOLMOD enters OpenMP in softid (our code is not built with -fopenmp); softid
+// parallelises across optimiser starts and jobs instead.
+extern "C" void GOMP_parallel(void (*function)(void*), void* data, unsigned /*num_threads*/,
+                              unsigned /*flags*/) {
+  function(data);
+}
+
 namespace softid::fem {
 
 namespace {
@@ -115,12 +132,13 @@ namespace {
 // Work model of the ski-rental rule (RefactorPays), in "memory-bound flops": the flops of sparse
 // products, triangular solves and vector updates, which all run at about the same rate (bounded by
 // memory traffic). A factorisation's flops run as dense BLAS-3 blocks, several times faster;
-// kFactorFlopWeight converts them. Measured once on the 2-core AMD EPYC dev host (OpenBLAS 0.3.21,
-// CHOLMOD 3.0.14, torus-drop at 3100 cells: 12.9k unknowns, nnz(A) 0.85e6, nnz(L) 3.5e6, 1.48e9
-// factorisation flops): factorisation 0.16 s (9.2 GFlop/s), one solve with L and L^T 5.5 ms
-// (4 nnz(L) flops: 2.5 GFlop/s), one product with A 0.86 ms (2 nnz(A) flops: 2.0 GFlop/s).
-// 2.5 / 9.2 = 0.28. The rule only needs the ratio to within a factor of ~1.5: a wrong weight
-// shifts the balance between refactorisations and extra iterations, never the result's accuracy.
+// kFactorFlopWeight converts them. Measured on the idle 2-core AMD EPYC dev host (OpenBLAS 0.3.21,
+// CHOLMOD 3.0.14 with its OpenMP regions serialised, torus-drop at 3100 cells: 12.9k unknowns,
+// nnz(A) 0.85e6, nnz(L) 3.5e6, 1.48e9 factorisation flops): Factorize 90-100 ms (~16 GFlop/s),
+// one preconditioner application 1.4 ms, one product with A 0.6 ms: a factorisation costs ~45
+// iterations, which the weight 0.28 reproduces (0.15 and 0.4 measured no better in bench). The
+// rule only needs the ratio to within a factor of ~1.5: a wrong weight shifts the balance between
+// refactorisations and extra iterations, never the result's accuracy.
 constexpr double kFactorFlopWeight = 0.28;
 // The solves run on the single-precision copy of L, measured 1.7x faster than CHOLMOD's double
 // solves on the same host and problem (4.3 vs 7.5 ms under the same load).

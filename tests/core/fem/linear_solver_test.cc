@@ -2,10 +2,16 @@
 // the preconditioned GMRES cannot finish (indefinite, non-symmetric).
 #include "core/fem/linear_solver.h"
 
+#include <dlfcn.h>
 #include <gtest/gtest.h>
 
+#include <fstream>
 #include <random>
+#include <string>
 #include <vector>
+
+// Defined in linear_solver.cc.
+extern "C" void GOMP_parallel(void (*)(void*), void*, unsigned, unsigned);
 
 namespace softid::fem {
 namespace {
@@ -47,6 +53,32 @@ TEST(LinearSolver, GmresSolvesAPreconditionedSystem) {
       solver.Solve(a, b, Eigen::Matrix3d::Identity(), options, &x);
   EXPECT_TRUE(summary.converged);
   EXPECT_LT((a * x - b).norm(), 1e-9 * b.norm());
+}
+
+int ThreadsOfThisProcess() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  while (std::getline(status, line)) {
+    if (line.rfind("Threads:", 0) == 0) return std::stoi(line.substr(8));
+  }
+  return -1;
+}
+
+TEST(LinearSolver, FactorisationRunsOnTheCallingThread) {
+  // CHOLMOD's OpenMP regions must run serialised (see GOMP_parallel in linear_solver.cc): the
+  // process-wide definition is the one the dynamic linker binds, and factorising a matrix large
+  // enough for CHOLMOD's parallel loops (> 128 unknowns) starts no thread.
+  EXPECT_EQ(dlsym(RTLD_DEFAULT, "GOMP_parallel"), reinterpret_cast<void*>(&GOMP_parallel));
+  const int before = ThreadsOfThisProcess();
+  ASSERT_GT(before, 0);
+  const LinearSolver::Matrix a = MakeMatrix(2000, 0.0, 0.0);
+  LinearSolver solver;
+  ASSERT_TRUE(solver.Factorize(a, Eigen::Matrix3d::Identity()).ok());
+  EXPECT_EQ(ThreadsOfThisProcess(), before);
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(a.rows());
+  const Eigen::VectorXd b = RandomVector(a.rows());
+  EXPECT_TRUE(
+      solver.Solve(a, b, Eigen::Matrix3d::Identity(), LinearSolver::Options(), &x).converged);
 }
 
 TEST(LinearSolver, DirectSolveHandlesAnIndefiniteNonSymmetricTransposedSystem) {
