@@ -12,6 +12,7 @@
 #include "core/capture/capture.h"
 #include "core/common/json_fields.h"
 #include "core/inverse/horizon_continuation.h"
+#include "core/inverse/least_squares_refinement.h"
 #include "core/inverse/objective_settings.h"
 #include "core/inverse/parameter_space.h"
 #include "core/inverse/trajectory_objective.h"
@@ -306,12 +307,57 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
   }
   objective.SetActiveFrames(all_frames);
 
-  result->final = space.ToParameters(x.data(), base);
   result->iterations = used_iterations;
   result->converged = summary.termination_type == ceres::CONVERGENCE;
   result->termination = summary.message;
   result->failed = summary.iterations.empty() || !std::isfinite(summary.initial_cost) ||
                    summary.termination_type == ceres::FAILURE;
+  const bool cancelled = options.cancel != nullptr && options.cancel->load();
+  if (config.refine_iterations > 0 && !result->failed && !cancelled) {
+    RefinementOptions refine;
+    refine.max_iterations = config.refine_iterations;
+    refine.function_tolerance = config.function_tolerance;
+    refine.gradient_tolerance = config.gradient_tolerance;
+    refine.parameter_tolerance = config.parameter_tolerance;
+    refine.cancel = options.cancel;
+    const int stage_count = static_cast<int>(stages.size());
+    refine.on_iteration = [&](int iteration, double cost, double gradient_norm) {
+      board.Report(index, used_iterations + iteration, cost, gradient_norm,
+                   space.ToParameters(x.data(), base), stage_count, stage_count + 1,
+                   frames.back().frame, result->steps, result->unconverged_steps);
+    };
+    const std::vector<double> before = x;
+    Result<RefinementSummary> refined =
+        RefineByLevenbergMarquardt({&objective}, space, base, scale, &x, refine);
+    RefinementResult record;
+    if (refined.ok()) {
+      record.iterations = refined->iterations;
+      record.initial_cost = refined->initial_cost;
+      record.final_cost = refined->final_cost;
+      record.converged = refined->converged;
+      record.termination = refined->termination;
+      record.evaluations = refined->evaluations;
+      record.failed_evaluations = refined->failed_evaluations;
+      result->evaluations += refined->evaluations;
+      result->failed_evaluations += refined->failed_evaluations;
+      result->steps += refined->steps;
+      result->unconverged_steps += refined->unconverged_steps;
+      result->forward_seconds += refined->forward_seconds;
+      // Ceres keeps the best point it accepted; a refinement that found nothing keeps L-BFGS's.
+      if (refined->final_cost <= summary.final_cost * scale) {
+        summary.final_cost = refined->final_cost / scale;
+        result->converged = refined->converged || result->converged;
+      } else {
+        x = before;
+      }
+    } else {
+      record.termination = refined.status().message();
+      x = before;
+    }
+    result->refinement = std::move(record);
+  }
+
+  result->final = space.ToParameters(x.data(), base);
   // Converged without a single step: the gradient vanished at the start, i.e. nothing in the
   // fitted frames responds to the fitted parameters there (typically the simulated object misses
   // the observations, e.g. falls through where the recording shows a floor). Not a result.
@@ -495,6 +541,17 @@ nlohmann::json ToJson(const FitResult& result) {
     }
     return out;
   };
+  auto refinement_json = [](const StartResult& start) -> nlohmann::json {
+    if (!start.refinement) return nullptr;
+    const RefinementResult& r = *start.refinement;
+    return {{"method", "levenberg_marquardt"},
+            {"iterations", r.iterations},
+            {"cost", CostJson(r.initial_cost, r.final_cost)},
+            {"converged", r.converged},
+            {"termination", r.termination},
+            {"evaluations", r.evaluations},
+            {"failed_evaluations", r.failed_evaluations}};
+  };
   auto start_json = [&](const StartResult& start) {
     nlohmann::json cost = CostJson(start.initial_cost, start.final_cost);
     cost["heldout_initial"] = start.initial_heldout_cost;
@@ -511,7 +568,8 @@ nlohmann::json ToJson(const FitResult& result) {
                           {"simulation_steps", start.steps},
                           {"unconverged_steps", start.unconverged_steps},
                           {"seconds", start.seconds},
-                          {"stages", stages_json(start)}};
+                          {"stages", stages_json(start)},
+                          {"refinement", refinement_json(start)}};
   };
   const StartResult& best = result.Best();
   nlohmann::json out;

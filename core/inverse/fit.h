@@ -9,7 +9,9 @@
 //    "cost": {"initial": .., "final": .., "heldout_initial": .., "heldout_final": ..},
 //    "iterations": .., "converged": .., "termination": "..",
 //    "starts": [{"index": 0, "parameters": {..}, "cost": {..}, "iterations": .., ...,
-//                "stages": [{"last_frame": 14, "iterations": 5, "cost": {..}, ..}, ..]}, ...],
+//                "stages": [{"last_frame": 14, "iterations": 5, "cost": {..}, ..}, ..],
+//                "refinement": null | {"method": "levenberg_marquardt", "iterations": ..,
+//                                      "cost": {..}, "converged": .., ..}}, ...],
 //    "cost_history": [..],           // best start: cost after each iteration
 //    "fixed": {..},                  // every parameter the fit did not change, public JSON
 //    "time_step": {"substeps": 4, "selection": {..}},  // selection: when chosen ("auto")
@@ -70,6 +72,15 @@ struct HorizonStageResult {
   std::string termination;                      // Ceres' message
 };
 
+// A start's Levenberg-Marquardt refinement (JobConfig::refine_iterations).
+struct RefinementResult {
+  int iterations = 0;
+  double initial_cost = 0.0, final_cost = 0.0;  // over every fitted frame [m^2]
+  bool converged = false;
+  std::string termination;                      // Ceres' message, or why it could not run
+  int evaluations = 0, failed_evaluations = 0;  // forward runs
+};
+
 struct StartResult {
   int index = 0;
   fem::PhysicalParameters initial, final;
@@ -80,7 +91,8 @@ struct StartResult {
   std::string termination;  // Ceres' message, or why the start failed
   bool failed = false;      // the start could not be evaluated at all (e.g. diverged at the start)
   std::vector<double> cost_history;  // after each iteration of the last stage (every frame) [m^2]
-  std::vector<HorizonStageResult> stages;  // the last one fits every frame
+  std::vector<HorizonStageResult> stages;      // the last one fits every frame
+  std::optional<RefinementResult> refinement;  // when JobConfig::refine_iterations > 0
   int evaluations = 0, failed_evaluations = 0;
   double seconds = 0.0, forward_seconds = 0.0, backward_seconds = 0.0;
   long long steps = 0;  // simulation steps run, over all evaluations

@@ -39,6 +39,7 @@ constexpr auto kJobConfigKeys = std::to_array<std::string_view>({
     "gradient",
     "finite_difference_step",
     "continuation",
+    "refine_iterations",
     "cost",
     "diagnose",
 });
@@ -472,6 +473,10 @@ Result<JobConfig> JobConfigFromJson(const Json& j) {
       SOFTID_ASSIGN_OR_RETURN(*target, ReadPositive(j[key], key));
     }
   }
+  if (j.contains("refine_iterations")) {
+    SOFTID_ASSIGN_OR_RETURN(config.refine_iterations,
+                            ReadIntAtLeast(j["refine_iterations"], "refine_iterations", 0));
+  }
   if (j.contains("gradient")) {
     SOFTID_ASSIGN_OR_RETURN(config.gradient, ParseGradient(j["gradient"]));
   }
@@ -555,6 +560,7 @@ Json ToJson(const JobConfig& config) {
       {"gradient", ToString(config.gradient)},
       {"finite_difference_step", config.finite_difference_step},
       {"continuation", config.continuation},
+      {"refine_iterations", config.refine_iterations},
       {"cost",
        {{"band_cells", config.cost.band_cells},
         {"truncation_cells", config.cost.truncation_cells},

@@ -24,6 +24,7 @@
 //     "gradient": "adjoint",     // or "finite_difference"
 //     "finite_difference_step": 1e-4,
 //     "continuation": true,      // fit a growing prefix of the frames first (fit.h)
+//     "refine_iterations": 0,    // Levenberg-Marquardt iterations after L-BFGS; 0 = none
 //     "cost": {"band_cells": 3, "truncation_cells": 2.0,
 //              "rest_sdf": "surface_fitted"},  // or "exact", "sampled"
 //     "diagnose": false
@@ -184,6 +185,12 @@ struct JobConfig {
   // 1.4x, 2.5x and 3.2x of the truth from starts in [0.1x, 10x]); the first impact alone
   // does not. false = every frame from the first iteration on.
   bool continuation = true;
+  // After its L-BFGS stages, each start is refined by at most this many Levenberg-Marquardt
+  // iterations on the least-squares form of the cost over every frame
+  // (least_squares_refinement.h), which follows the curved valleys of coupled parameters that
+  // L-BFGS creeps along. Each iteration costs 2 n + 1 forward runs for n optimiser variables.
+  // 0 = no refinement.
+  int refine_iterations = 0;  // [-], >= 0
 
   CostSettings cost;
   // Run the diagnosis of left-out physics after the fit and return its report with the result

@@ -1,6 +1,7 @@
 #include "core/inverse/trajectory_objective.h"
 
 #include <chrono>
+#include <cmath>
 #include <span>
 
 #include "core/common/check.h"
@@ -108,6 +109,36 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
   sim.BackpropagateInitialState(states_[0], adjoint, &out.gradient);
   out.backward_seconds = SecondsSince(backward_start);
   return out;
+}
+
+int TrajectoryObjective::NumResiduals() const {
+  int count = 0;
+  for (int k = 0; k < active_frames_; ++k) {
+    const ObservedFrame& frame = (*frames_)[k];
+    if (!frame.heldout) count += static_cast<int>(frame.points.size());
+  }
+  return count;
+}
+
+Result<ObjectiveEvaluation> TrajectoryObjective::EvaluateResiduals(
+    const fem::PhysicalParameters& parameters, Eigen::VectorXd* residuals) {
+  SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation, Evaluate(parameters, false));
+  if (evaluation.diverged) return evaluation;
+  int fitted = 0;
+  for (int k = 0; k < active_frames_; ++k) fitted += (*frames_)[k].heldout ? 0 : 1;
+  residuals->resize(NumResiduals());
+  int next = 0;
+  for (int k = 0; k < active_frames_; ++k) {
+    const ObservedFrame& frame = (*frames_)[k];
+    if (frame.heldout || frame.points.empty()) continue;
+    cost_->Evaluate(states_[frame.frame * substeps_].u, frame.points, nullptr, &matches_);
+    const double weight = 2.0 / (static_cast<double>(fitted) * frame.points.size());
+    for (const cost::PointMatch& match : matches_) {
+      const double magnitude = std::sqrt(weight * match.cost);
+      (*residuals)[next++] = match.matched && match.phi < 0.0 ? -magnitude : magnitude;
+    }
+  }
+  return evaluation;
 }
 
 Result<std::vector<std::vector<cost::PointMatch>>> TrajectoryObjective::MatchPoints(

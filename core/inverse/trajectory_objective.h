@@ -60,6 +60,17 @@ class TrajectoryObjective {
   Result<ObjectiveEvaluation> Evaluate(const fem::PhysicalParameters& parameters,
                                        bool with_gradient);
 
+  // The cost as a sum of squares, for Gauss-Newton methods: one residual per observed point of
+  // every fitted active frame k (N_k points, F fitted frames), in frame order,
+  //   r = sign(phi) sqrt(2 rho(phi) / (F N_k))   [m],   so that cost = 1/2 |r|^2.
+  // sign(phi) keeps r smooth through phi = 0 (rho ~ phi^2 / 2 there); a point matching nothing
+  // (constant rho) counts as outside. Forward only; `residuals` is resized to NumResiduals().
+  // The evaluation's cost and frame costs are filled as by Evaluate(parameters, false).
+  Result<ObjectiveEvaluation> EvaluateResiduals(const fem::PhysicalParameters& parameters,
+                                                Eigen::VectorXd* residuals);
+  // Number of residuals of EvaluateResiduals at the current active frames.
+  int NumResiduals() const;
+
   // Per observed frame, the point matches at the given parameters (diagnosis); runs forward only.
   Result<std::vector<std::vector<cost::PointMatch>>> MatchPoints(
       const fem::PhysicalParameters& parameters);
@@ -83,6 +94,7 @@ class TrajectoryObjective {
   int active_frames_ = 0;
   std::vector<fem::SimulationState> states_;  // per step, reused across evaluations
   Eigen::VectorXd frame_gradient_;
+  std::vector<cost::PointMatch> matches_;  // scratch of EvaluateResiduals
 };
 
 }  // namespace softid::inverse

@@ -77,6 +77,7 @@ Benchmark BallBounce() {
   b.starts = 10;
   b.quick_starts = 2;
   b.quick_duration = 0.8;
+  b.refine_iterations = 20;
   b.identifiability_focus = {"youngs_modulus", "stiffness_damping"};
   return b;
 }
@@ -89,7 +90,9 @@ Benchmark PillowRamp() {
       "pillow sliding down a frictionless ramp, one camera: Young's modulus, mass and stiffness "
       "damping (Rayleigh alpha, beta), gravity and the ground plane jointly; the capture gives the "
       "mass";
-  b.rows = {MakeRow("c1-100", "1 camera 100x100", 1, 100, std::nullopt, true)};
+  // 200x200: at 100x100 (~260 object pixels per frame) fits from the truth on two noise seeds put
+  // mass damping 14 % and 1.4 % off, so the smaller image cannot pin it to the 5 % asked.
+  b.rows = {MakeRow("c1-200", "1 camera 200x200", 1, 200, std::nullopt, true)};
   b.fit = {"youngs_modulus", "mass_damping", "stiffness_damping", "gravity", "ground_plane"};
   b.quantities = {
       {"youngs_modulus", "E", Metric::kRelative, 0.05, true},
@@ -102,6 +105,7 @@ Benchmark PillowRamp() {
   b.starts = 10;
   b.quick_starts = 2;
   b.quick_duration = 0.6;
+  b.refine_iterations = 20;
   b.identifiability_focus = {"youngs_modulus", "mass_damping", "stiffness_damping"};
   return b;
 }
@@ -235,7 +239,7 @@ nlohmann::json DrawStart(const Benchmark& benchmark, const fem::PhysicalParamete
 Result<inverse::JobConfig> MakeStartConfig(const Benchmark& benchmark, const Row& row,
                                            const fem::PhysicalParameters& truth,
                                            const nlohmann::json& initial, bool capture_has_mass,
-                                           int max_iterations) {
+                                           int max_iterations, int refine_iterations) {
   nlohmann::json fixed = fem::ToJson(truth);
   for (const std::string& name : benchmark.fit)
     fixed.erase(std::string(inverse::PhysicalParameterKey(name)));
@@ -249,6 +253,7 @@ Result<inverse::JobConfig> MakeStartConfig(const Benchmark& benchmark, const Row
       {"starts", 1},
       {"threads", 1},
       {"max_iterations", max_iterations},
+      {"refine_iterations", refine_iterations},
       {"gradient", inverse::ToString(row.gradient)},
   };
   return inverse::JobConfigFromJson(config);

@@ -82,13 +82,16 @@ struct Benchmark {
   std::vector<Row> rows;
   std::vector<std::string> fit;  // fitted parameter names
   std::vector<Quantity> quantities;
-  int starts = 20;        // random starts per row
-  int quick_starts = 3;   // with --quick
-  int cells = 16;         // grid of the generator and the fit
-  int substeps = 2;       // steps per frame, generator and fit
-  double duration = 0.0;  // [s]; 0 = the scene's own
+  int starts = 20;              // random starts per row
+  int quick_starts = 3;         // with --quick
+  int cells = 16;               // grid of the generator and the fit
+  int substeps = 2;             // steps per frame, generator and fit
+  double duration = 0.0;        // [s]; 0 = the scene's own
   double quick_duration = 0.0;  // [s] with --quick; 0 = as duration
   int max_iterations = 50;
+  // Levenberg-Marquardt iterations after L-BFGS per start (JobConfig::refine_iterations): the
+  // coupled multi-parameter fits need them to leave the valleys L-BFGS creeps along.
+  int refine_iterations = 0;
   capture::DepthNoiseOptions noise;
   double depth_scale = 1e-3;  // [m] per PNG unit
   // The capture leaves mass_kg out, so that density (the mass) can be fitted.
@@ -113,6 +116,6 @@ nlohmann::json DrawStart(const Benchmark& benchmark, const fem::PhysicalParamete
 Result<inverse::JobConfig> MakeStartConfig(const Benchmark& benchmark, const Row& row,
                                            const fem::PhysicalParameters& truth,
                                            const nlohmann::json& initial, bool capture_has_mass,
-                                           int max_iterations);
+                                           int max_iterations, int refine_iterations);
 
 }  // namespace softid::lab::reproduce

@@ -49,6 +49,7 @@ struct ReproduceFlags {
   int cells = 0;     // 0: the benchmark's
   int substeps = 0;  // 0: the benchmark's
   int max_iterations = 0;
+  int refine_iterations = -1;  // -1: the benchmark's
   std::uint64_t seed = 1;
 };
 
@@ -150,16 +151,16 @@ void Verdict(const Benchmark& b, const inverse::IdentifiabilityReport& report, R
     for (inverse::IdentifiabilityFlag f : v->flags)
       flags += (flags.empty() ? "" : ", ") + std::string(inverse::ToString(f));
     verdict[name] = {{"identifiable", v->identifiable()},
-                     {"relative_uncertainty", v->relative_uncertainty >= 0.0 &&
-                                                      std::isfinite(v->relative_uncertainty)
-                                                  ? nlohmann::json(v->relative_uncertainty)
-                                                  : nlohmann::json(nullptr)},
+                     {"relative_uncertainty",
+                      v->relative_uncertainty >= 0.0 && std::isfinite(v->relative_uncertainty)
+                          ? nlohmann::json(v->relative_uncertainty)
+                          : nlohmann::json(nullptr)},
                      {"flags", nlohmann::json::array()}};
     for (inverse::IdentifiabilityFlag f : v->flags) verdict[name]["flags"].push_back(ToString(f));
-    out->verdict_lines.push_back(fmt::format(
-        "{}: {} (formal 1-sigma {:.3g} %{}{})", name,
-        v->identifiable() ? "identifiable" : "NOT separately identifiable",
-        100.0 * v->relative_uncertainty, flags.empty() ? "" : "; ", flags));
+    out->verdict_lines.push_back(
+        fmt::format("{}: {} (formal 1-sigma {:.3g} %{}{})", name,
+                    v->identifiable() ? "identifiable" : "NOT separately identifiable",
+                    100.0 * v->relative_uncertainty, flags.empty() ? "" : "; ", flags));
   }
   // Pairwise correlations and valleys among the focus variables.
   for (size_t a = 0; a < b.identifiability_focus.size(); ++a) {
@@ -172,8 +173,8 @@ void Verdict(const Benchmark& b, const inverse::IdentifiabilityReport& report, R
       if (i < 0 || j < 0) continue;
       const double rho = report.correlation(i, j);
       out->verdict_lines.push_back(fmt::format("correlation({}, {}) = {:+.3f}",
-                                               report.variables[i].name,
-                                               report.variables[j].name, rho));
+                                               report.variables[i].name, report.variables[j].name,
+                                               rho));
       verdict["correlations"][report.variables[i].name + "," + report.variables[j].name] =
           std::isfinite(rho) ? nlohmann::json(rho) : nlohmann::json(nullptr);
     }
@@ -200,11 +201,12 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
   SOFTID_ASSIGN_OR_RETURN(scenes::Scene scene, scenes::MakeBuiltinScene(b.scene));
   if (duration > 0.0) scene.duration = duration;
   const fem::PhysicalParameters truth = scene.parameters;
-  SOFTID_ASSIGN_OR_RETURN(std::filesystem::path dir,
-                          EnsureCapture(b, row, duration, work, scene));
+  SOFTID_ASSIGN_OR_RETURN(std::filesystem::path dir, EnsureCapture(b, row, duration, work, scene));
   SOFTID_ASSIGN_OR_RETURN(capture::Capture capture,
                           capture::ReadCapture(dir, {.decode_frames = false}));
   const int max_iterations = flags.max_iterations > 0 ? flags.max_iterations : b.max_iterations;
+  const int refine_iterations =
+      flags.refine_iterations >= 0 ? flags.refine_iterations : b.refine_iterations;
 
   // The same starts for every row of a benchmark (one seed), so rows differ only in their data.
   std::mt19937_64 rng(flags.seed);
@@ -221,8 +223,9 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
   Status error;
   auto worker = [&]() {
     for (int s = next++; s < starts; s = next++) {
-      Result<inverse::JobConfig> config = reproduce::MakeStartConfig(
-          b, row, truth, initial[s], capture.mass_kg.has_value(), max_iterations);
+      Result<inverse::JobConfig> config =
+          reproduce::MakeStartConfig(b, row, truth, initial[s], capture.mass_kg.has_value(),
+                                     max_iterations, refine_iterations);
       if (!config.ok()) {
         std::lock_guard lock(mutex);
         error = config.status();
@@ -246,10 +249,10 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
       start.index = s;
       std::string errors;
       for (const Quantity& q : b.quantities) {
-        errors += fmt::format(" {} {:.3g}{}", q.label,
-                              reproduce::MetricDisplayScale(q.metric) *
-                                  reproduce::ScoreError(q, start.final, truth),
-                              reproduce::MetricUnit(q.metric));
+        errors += fmt::format(
+            " {} {:.3g}{}", q.label,
+            reproduce::MetricDisplayScale(q.metric) * reproduce::ScoreError(q, start.final, truth),
+            reproduce::MetricUnit(q.metric));
       }
       spdlog::info("{} {} start {}/{}: {}{}; cost {:.3e} m^2, {} iterations, {:.0f} s", b.name,
                    row.id, s + 1, starts, start.failed ? "FAILED " : "", errors, start.final_cost,
@@ -379,25 +382,23 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
 }
 
 void PrintRows(const Benchmark& b, const std::vector<RowSummary>& rows) {
-  std::printf("\n%-10s %-36s %-7s %-5s %-13s %-12s %-10s %-6s %-22s %s\n", "row", "setup",
-              "conv.", "", "quantity", "mean err", "target", "met", "paper (err, conv.)", "time");
+  std::printf("\n%-10s %-36s %-7s %-5s %-13s %-12s %-10s %-6s %-22s %s\n", "row", "setup", "conv.",
+              "", "quantity", "mean err", "target", "met", "paper (err, conv.)", "time");
   for (const RowSummary& r : rows) {
     for (size_t q = 0; q < r.quantities.size(); ++q) {
       const QuantitySummary& qs = r.quantities[q];
       const double scale = reproduce::MetricDisplayScale(qs.quantity->metric);
       const char* unit = reproduce::MetricUnit(qs.quantity->metric);
-      const std::string conv =
-          q == 0 ? fmt::format("{}/{}", r.converged, r.starts) : std::string();
+      const std::string conv = q == 0 ? fmt::format("{}/{}", r.converged, r.starts) : std::string();
       const std::string rate =
           q == 0 ? fmt::format("{:.0f}%", 100.0 * r.converged / std::max(1, r.starts))
                  : std::string();
       const std::string mean = std::isfinite(qs.mean_error)
                                    ? fmt::format("{:.3g} {}", scale * qs.mean_error, unit)
                                    : std::string("-");
-      const std::string target = qs.quantity->judged
-                                     ? fmt::format("<= {:.3g} {}", scale * qs.quantity->target,
-                                                   unit)
-                                     : std::string("(info)");
+      const std::string target =
+          qs.quantity->judged ? fmt::format("<= {:.3g} {}", scale * qs.quantity->target, unit)
+                              : std::string("(info)");
       const std::string met = qs.quantity->judged ? (qs.met ? "yes" : "NO") : "";
       const std::string paper = q == 0 && r.row->paper
                                     ? fmt::format("{:.1f} %, {:.0f} %", r.row->paper->error_percent,
@@ -405,15 +406,16 @@ void PrintRows(const Benchmark& b, const std::vector<RowSummary>& rows) {
                                     : std::string();
       const std::string time = q == 0 ? fmt::format("{:.0f} s", r.seconds) : std::string();
       std::printf("%-10s %-36s %-7s %-5s %-13s %-12s %-10s %-6s %-22s %s\n",
-                  q == 0 ? r.row->id.c_str() : "", q == 0 ? r.row->label.c_str() : "",
-                  conv.c_str(), rate.c_str(), qs.quantity->label.c_str(), mean.c_str(),
-                  target.c_str(), met.c_str(), paper.c_str(), time.c_str());
+                  q == 0 ? r.row->id.c_str() : "", q == 0 ? r.row->label.c_str() : "", conv.c_str(),
+                  rate.c_str(), qs.quantity->label.c_str(), mean.c_str(), target.c_str(),
+                  met.c_str(), paper.c_str(), time.c_str());
     }
     for (const std::string& line : r.verdict_lines) std::printf("%-10s   %s\n", "", line.c_str());
   }
-  std::printf("converged = every judged quantity within %.0f %% (relative), 5 deg, 10 mm; mean "
-              "errors over converged runs; %s\n",
-              100.0 * reproduce::ConvergenceLimit(Metric::kRelative), b.description.c_str());
+  std::printf(
+      "converged = every judged quantity within %.0f %% (relative), 5 deg, 10 mm; mean "
+      "errors over converged runs; %s\n",
+      100.0 * reproduce::ConvergenceLimit(Metric::kRelative), b.description.c_str());
 }
 
 int RunReproduce(const ReproduceFlags& flags) {
@@ -437,7 +439,8 @@ int RunReproduce(const ReproduceFlags& flags) {
     }
   } else {
     for (const std::string& id : flags.rows) {
-      auto it = std::find_if(b.rows.begin(), b.rows.end(), [&](const Row& r) { return r.id == id; });
+      auto it =
+          std::find_if(b.rows.begin(), b.rows.end(), [&](const Row& r) { return r.id == id; });
       if (it == b.rows.end()) {
         std::string known;
         for (const Row& r : b.rows) known += (known.empty() ? "" : ", ") + r.id;
@@ -456,10 +459,10 @@ int RunReproduce(const ReproduceFlags& flags) {
     spdlog::error("--out = {}: {}", out.string(), ec.message());
     return kExitFailure;
   }
-  spdlog::info("reproduce {}: {} row(s), {} start(s) each, {} thread(s), grid {} cells, {} "
-               "substeps{}",
-               b.name, rows.size(), starts, threads, b.cells, b.substeps,
-               flags.quick ? ", quick" : "");
+  spdlog::info(
+      "reproduce {}: {} row(s), {} start(s) each, {} thread(s), grid {} cells, {} "
+      "substeps{}",
+      b.name, rows.size(), starts, threads, b.cells, b.substeps, flags.quick ? ", quick" : "");
 
   std::vector<RowSummary> summaries;
   nlohmann::json summary_rows = nlohmann::json::array();
@@ -485,14 +488,10 @@ int RunReproduce(const ReproduceFlags& flags) {
   }
   std::printf("\n== reproduce %s: %s ==", b.name.c_str(), b.description.c_str());
   PrintRows(b, summaries);
-  const nlohmann::json summary = {{"format", "softid-reproduce/1"},
-                                  {"benchmark", b.name},
-                                  {"description", b.description},
-                                  {"quick", flags.quick},
-                                  {"starts", starts},
-                                  {"seed", flags.seed},
-                                  {"rows", summary_rows},
-                                  {"pass", pass}};
+  const nlohmann::json summary = {
+      {"format", "softid-reproduce/1"}, {"benchmark", b.name}, {"description", b.description},
+      {"quick", flags.quick},           {"starts", starts},    {"seed", flags.seed},
+      {"rows", summary_rows},           {"pass", pass}};
   const std::filesystem::path summary_file = out / fmt::format("{}-summary.json", b.name);
   if (Status written = WriteJsonFile(summary_file, summary); !written.ok()) {
     spdlog::error("{}", written.message());
@@ -517,12 +516,17 @@ Command RegisterReproduce(CLI::App* app) {
       ->capture_default_str();
   app->add_option("--out", flags->out, "folder for the result JSON of every row and the summary")
       ->capture_default_str();
-  app->add_option("--work", flags->work, "folder for the synthesised captures (default OUT/captures)");
+  app->add_option("--work", flags->work,
+                  "folder for the synthesised captures (default OUT/captures)");
   app->add_flag("--quick", flags->quick,
                 "reduced run: fewer starts, a shorter clip, only the main row");
   app->add_option("--cells", flags->cells, "grid cells along the longest side (default 16)");
   app->add_option("--substeps", flags->substeps, "steps per frame (default 2)");
   app->add_option("--max-iterations", flags->max_iterations, "optimiser iterations per start");
+  app->add_option("--refine-iterations", flags->refine_iterations,
+                  "Levenberg-Marquardt iterations per start after L-BFGS (default: the "
+                  "benchmark's, 20 for ball-bounce and pillow-ramp, 0 otherwise)")
+      ->check(CLI::NonNegativeNumber);
   app->add_option("--seed", flags->seed, "seed of the random starts")->capture_default_str();
   return [flags] { return RunReproduce(*flags); };
 }

@@ -77,23 +77,31 @@ Scene BarHanging() {
 
 // A soft pillow dropped onto a 20 degree ramp, where it lands and slides (frictionless by default;
 // friction is the physics the paper's model left out). The ramp n . x = 0 descends towards +x.
+// It is held nearly level (5 degrees nose down, the ramp's 20 less 25), so its uphill edge lands
+// first and it slaps down flat: bending and rocking that show the stiffness, and a slide whose
+// slowing shows the mass damping. A first design dropped it flat onto the ramp with beta 0.03 s,
+// which damps the thickness mode critically (zeta = beta omega / 2 ~ 1): E then only showed as a
+// ~1 mm static sag, which a fitted ground offset absorbs (noise-free fits from the truth went to
+// E -29 %, noisy ones to -50 %..-65 %), so nothing could recover it.
 Scene PillowRamp() {
   Scene s;
   s.name = "pillow-ramp";
   const double angle = 20.0 * kDegree;
+  const double tilt = -25.0 * kDegree;  // relative to the ramp, about the y axis
   const Eigen::Vector3d normal(std::sin(angle), 0.0, std::cos(angle));
   const Eigen::Vector3d downhill(std::cos(angle), 0.0, -std::sin(angle));
   s.mesh = geometry::MakeBox(Eigen::Vector3d(0.3, 0.2, 0.1), 0.025);
   Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
-  // Centre 4 cm above the ramp (half thickness 5 cm), uphill of the view centre.
-  pose.translate(-0.3 * downhill + 0.09 * normal);
-  pose.rotate(Eigen::AngleAxisd(angle, Eigen::Vector3d::UnitY()));
+  // Centre 14 cm above the ramp, uphill of the view centre; the lowest edge ~4 cm above it.
+  pose.translate(-0.3 * downhill + 0.14 * normal);
+  pose.rotate(Eigen::AngleAxisd(angle + tilt, Eigen::Vector3d::UnitY()));
   Transform(pose, &s.mesh);
   s.parameters.youngs_modulus = 3450.0;
   s.parameters.poisson_ratio = 0.3;
   s.parameters.density = 80.0;
   s.parameters.mass_damping = 0.2;
-  s.parameters.stiffness_damping = 0.03;
+  // Bending modes ring a few times (zeta ~ 0.2-0.3) before the pillow settles into the slide.
+  s.parameters.stiffness_damping = 0.01;
   s.parameters.ground = fem::GroundPlane{normal, 0.0};
   // Frictionless it slides ~0.8 m in this time (g sin 20 deg = 3.4 m/s^2).
   s.duration = 0.8;

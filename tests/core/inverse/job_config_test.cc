@@ -81,6 +81,7 @@ json FullConfig() {
     "gradient": "finite_difference",
     "finite_difference_step": 1e-3,
     "continuation": false,
+    "refine_iterations": 12,
     "cost": {"band_cells": 4, "truncation_cells": 1.5, "rest_sdf": "sampled"},
     "diagnose": true
   })");
@@ -134,6 +135,7 @@ TEST(JobConfig, DefaultsFromEmptyObject) {
   EXPECT_EQ(config->gradient, GradientMethod::kAdjoint);
   EXPECT_EQ(config->finite_difference_step, 1e-4);
   EXPECT_TRUE(config->continuation);
+  EXPECT_EQ(config->refine_iterations, 0);
   EXPECT_EQ(config->cost.band_cells, 3);
   EXPECT_EQ(config->cost.truncation_cells, 2.0);
   EXPECT_EQ(config->cost.rest_sdf, cost::RestSdf::kSurfaceFitted);
@@ -178,6 +180,7 @@ TEST(JobConfig, FullConfigRoundTrips) {
   EXPECT_EQ(config->gradient, GradientMethod::kFiniteDifference);
   EXPECT_EQ(config->finite_difference_step, 1e-3);
   EXPECT_FALSE(config->continuation);
+  EXPECT_EQ(config->refine_iterations, 12);
   EXPECT_EQ(config->cost, (CostSettings{4, 1.5, cost::RestSdf::kSampled}));
   EXPECT_TRUE(config->diagnose);
   EXPECT_TRUE(config->Validate().ok()) << config->Validate().ToString();
@@ -376,6 +379,10 @@ TEST(JobConfigRejects, NumericalSettings) {
                 "diagnose = \"yes\": ", "must be true or false");
   ExpectInvalid(json::parse(R"({"continuation": 1})"),
                 "continuation = 1: ", "must be true or false");
+  ExpectInvalid(json::parse(R"({"refine_iterations": -1})"),
+                "refine_iterations = -1: ", "must be an integer >= 0");
+  ExpectInvalid(json::parse(R"({"refine_iterations": 2.5})"),
+                "refine_iterations = 2.5: ", "must be an integer >= 0");
 }
 
 TEST(JobConfigRejects, Frames) {

@@ -94,6 +94,45 @@ TEST(TrajectoryObjective, TruthIsALocalMinimumAndDivergenceIsReported) {
   EXPECT_LT(at_truth, 0.3 * cost_at(0.1));
 }
 
+// The least-squares form carries exactly the cost: 1/2 |r|^2 = cost, one residual per point of
+// every fitted frame, held-out frames left out; a point's residual has the sign of its distance.
+TEST(TrajectoryObjective, ResidualsAreTheCostAsASumOfSquares) {
+  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.3);
+  ASSERT_TRUE(small.ok) << small.error;
+  std::vector<ObservedFrame> frames = *small.frames;
+  for (size_t k = 3; k < frames.size(); k += 4) frames[k].heldout = true;
+  auto shared = std::make_shared<const std::vector<ObservedFrame>>(frames);
+  fem::SimulationOptions options;
+  options.cells_along_longest_side = 8;
+  fem::PhysicalParameters p = small.truth;
+  p.youngs_modulus *= 1.6;  // residuals well above the discretisation floor
+  TrajectoryObjective objective(small.mesh, std::nullopt, p, options, {}, shared, small.capture.fps,
+                                2);
+  int fitted_points = 0;
+  for (const ObservedFrame& frame : frames) {
+    if (!frame.heldout) fitted_points += static_cast<int>(frame.points.size());
+  }
+  ASSERT_GT(fitted_points, 100);
+  EXPECT_EQ(objective.NumResiduals(), fitted_points);
+  Eigen::VectorXd residuals;
+  Result<ObjectiveEvaluation> evaluation = objective.EvaluateResiduals(p, &residuals);
+  ASSERT_TRUE(evaluation.ok()) << evaluation.status().ToString();
+  ASSERT_FALSE(evaluation->diverged);
+  ASSERT_EQ(residuals.size(), fitted_points);
+  Result<ObjectiveEvaluation> plain = objective.Evaluate(p, false);
+  ASSERT_TRUE(plain.ok());
+  EXPECT_EQ(evaluation->cost, plain->cost);
+  EXPECT_NEAR(0.5 * residuals.squaredNorm(), plain->cost, 1e-12 * plain->cost);
+  // Both signs occur (points inside and outside the simulated surface).
+  EXPECT_GT((residuals.array() > 0.0).count(), 0);
+  EXPECT_GT((residuals.array() < 0.0).count(), 0);
+  // A shorter horizon has fewer residuals.
+  objective.SetActiveFrames(4);
+  EXPECT_EQ(objective.NumResiduals(),
+            static_cast<int>(frames[0].points.size() + frames[1].points.size() +
+                             frames[2].points.size()));
+}
+
 // An optimiser's line search and finite differences need the same parameters to give the same
 // cost and gradient, bitwise, on the objective it keeps reusing.
 TEST(TrajectoryObjective, EvaluationIsBitwiseRepeatable) {
