@@ -99,7 +99,7 @@ class ProgressBoard {
  public:
   ProgressBoard(const FitOptions& options, const JobConfig& config, int num_starts, int threads)
       : options_(options),
-        max_iterations_(config.max_iterations),
+        max_iterations_(config.max_iterations + config.refine_iterations),
         num_starts_(num_starts),
         threads_(threads),
         begin_(Clock::now()) {}

@@ -40,10 +40,10 @@ namespace softid::inverse {
 struct FitProgress {
   int start = 0;  // index of the start reporting
   int num_starts = 1;
-  int iteration = 0;  // completed iterations of this start
-  int max_iterations = 0;
-  double cost = 0.0;                   // [m^2]
-  double gradient_norm = 0.0;          // max norm, optimiser variables
+  int iteration = 0;           // completed iterations of this start (L-BFGS, then refinement)
+  int max_iterations = 0;      // max_iterations + refine_iterations of the config
+  double cost = 0.0;           // [m^2]
+  double gradient_norm = 0.0;  // max norm, optimiser variables
   fem::PhysicalParameters parameters;  // current values
   double elapsed_seconds = 0.0;        // since the fit began
   double remaining_seconds = 0.0;      // estimate for the whole fit

@@ -110,6 +110,52 @@ TEST(Fit, ContinuationOverTheHorizonLeavesTheLocalMinimumOfTheRebound) {
   EXPECT_EQ(json["starts"][0]["stages"].size(), start.stages.size());
 }
 
+// refine_iterations: after an L-BFGS budget too small to converge, Levenberg-Marquardt finishes the
+// start; the result and the progress lines say so.
+TEST(Fit, RefinementFinishesWhatLbfgsLeftAndIsReported) {
+  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.35);
+  ASSERT_TRUE(small.ok) << small.error;
+  const double truth = small.truth.youngs_modulus;
+  JobConfig config = YoungsModulusConfig(small.truth);
+  config.initial["youngs_modulus"] = InitialValue{.value = 1.3 * truth, .range = std::nullopt};
+  config.starts = 1;
+  config.continuation = false;
+  config.max_iterations = 1;
+  config.refine_iterations = 10;
+  int last_reported = 0, max_reported = 0;
+  FitOptions options;
+  options.on_progress = [&](const FitProgress& p) {
+    last_reported = p.iteration;
+    max_reported = p.max_iterations;
+  };
+  Result<FitResult> result = Fit(small.capture, config, options);
+  ASSERT_TRUE(result.ok()) << result.status().ToString();
+  const StartResult& start = result->Best();
+  ASSERT_TRUE(start.refinement.has_value());
+  const RefinementResult& refinement = *start.refinement;
+  EXPECT_GE(refinement.iterations, 1);
+  EXPECT_LE(refinement.iterations, 10);
+  EXPECT_LT(refinement.final_cost, refinement.initial_cost);
+  EXPECT_EQ(start.final_cost, refinement.final_cost);
+  EXPECT_TRUE(start.converged) << refinement.termination;
+  EXPECT_NEAR(start.final.youngs_modulus, truth, 0.15 * truth);
+  EXPECT_EQ(max_reported, 11);
+  EXPECT_EQ(last_reported, start.iterations + refinement.iterations);
+  const nlohmann::json json = ToJson(*result);
+  const nlohmann::json& reported = json["starts"][0]["refinement"];
+  EXPECT_EQ(reported["method"], "levenberg_marquardt");
+  EXPECT_EQ(reported["iterations"].get<int>(), refinement.iterations);
+  EXPECT_EQ(json["cost"]["final"].get<double>(), refinement.final_cost);
+
+  // Without refinement the start says so with null.
+  config.refine_iterations = 0;
+  Result<FitResult> plain = Fit(small.capture, config);
+  ASSERT_TRUE(plain.ok()) << plain.status().ToString();
+  EXPECT_FALSE(plain->Best().refinement.has_value());
+  EXPECT_TRUE(ToJson(*plain)["starts"][0]["refinement"].is_null());
+  EXPECT_LT(start.final_cost, plain->Best().final_cost);
+}
+
 TEST(Fit, RejectsConfigsThatDoNotFitTheCapture) {
   testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.1);
   ASSERT_TRUE(small.ok) << small.error;
