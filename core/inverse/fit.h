@@ -1,6 +1,8 @@
 // Fitting physical parameters to a capture: several starts of Ceres' line-search minimiser
 // (L-BFGS, Wolfe line search) over the ParameterSpace variables, each minimising a
 // TrajectoryObjective, run in parallel; the best start is the result and every start is kept.
+// With JobConfig::refine_iterations > 0 each start then continues with Levenberg-Marquardt on the
+// cost's least-squares form (least_squares_refinement.h).
 //
 // The result's JSON (`ToJson(FitResult)`) is the public result.json schema, also returned by the
 // service:
