@@ -149,6 +149,11 @@ Result<RefinementSummary> RefineByLevenbergMarquardt(
     return Status::InvalidArgument(
         "RefineByLevenbergMarquardt: scale, jacobian_step and max_iterations must be positive");
   }
+  // Ceres aborts on a residual block without residuals: no observed point in the fitted frames.
+  if (objectives.front()->NumResiduals() == 0) {
+    return Status::InvalidArgument(
+        "RefineByLevenbergMarquardt: the fitted frames hold no observed point");
+  }
   RunStatistics statistics;
   ceres::Problem problem;  // owns the cost function
   problem.AddResidualBlock(

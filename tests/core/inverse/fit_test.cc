@@ -24,6 +24,15 @@ JobConfig YoungsModulusConfig(const fem::PhysicalParameters& truth) {
   return config;
 }
 
+// One start from `scale` x the true Young's modulus.
+JobConfig OneStartConfig(const fem::PhysicalParameters& truth, double scale) {
+  JobConfig config = YoungsModulusConfig(truth);
+  config.initial["youngs_modulus"] =
+      InitialValue{.value = scale * truth.youngs_modulus, .range = std::nullopt};
+  config.starts = 1;
+  return config;
+}
+
 TEST(Fit, RecoversYoungsModulusFromRandomStarts) {
   testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.35);
   ASSERT_TRUE(small.ok) << small.error;
@@ -76,9 +85,7 @@ TEST(Fit, ContinuationOverTheHorizonLeavesTheLocalMinimumOfTheRebound) {
   testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.35);
   ASSERT_TRUE(small.ok) << small.error;
   const double truth = small.truth.youngs_modulus;
-  JobConfig config = YoungsModulusConfig(small.truth);
-  config.initial["youngs_modulus"] = InitialValue{.value = 1.7 * truth, .range = std::nullopt};
-  config.starts = 1;
+  JobConfig config = OneStartConfig(small.truth, 1.7);
 
   config.continuation = false;
   Result<FitResult> whole = Fit(small.capture, config);
@@ -116,9 +123,7 @@ TEST(Fit, RefinementFinishesWhatLbfgsLeftAndIsReported) {
   testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.35);
   ASSERT_TRUE(small.ok) << small.error;
   const double truth = small.truth.youngs_modulus;
-  JobConfig config = YoungsModulusConfig(small.truth);
-  config.initial["youngs_modulus"] = InitialValue{.value = 1.3 * truth, .range = std::nullopt};
-  config.starts = 1;
+  JobConfig config = OneStartConfig(small.truth, 1.3);
   config.continuation = false;
   config.max_iterations = 1;
   config.refine_iterations = 10;
