@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "core/capture/capture.h"
+#include "core/common/check.h"
 #include "core/common/json_fields.h"
 #include "core/inverse/objective_settings.h"
 #include "core/inverse/observed_frames.h"
@@ -142,6 +143,83 @@ const VariableIdentifiability* IdentifiabilityReport::Find(const std::string& na
   return nullptr;
 }
 
+HessianCovariance CovarianceFromHessian(const Eigen::MatrixXd& h, double variance_scale) {
+  SOFTID_DEMAND(h.rows() == h.cols());
+  const int p = static_cast<int>(h.rows());
+  HessianCovariance out;
+  // Variables without upward curvature are left out of the scaled analysis.
+  for (int i = 0; i < p; ++i) {
+    if (h(i, i) > 0.0 && std::isfinite(h(i, i))) out.kept.push_back(i);
+  }
+  const int k = static_cast<int>(out.kept.size());
+  Eigen::VectorXd d_inv_sqrt(k);
+  Eigen::MatrixXd scaled(k, k);
+  for (int a = 0; a < k; ++a) d_inv_sqrt[a] = 1.0 / std::sqrt(h(out.kept[a], out.kept[a]));
+  for (int a = 0; a < k; ++a)
+    for (int b = 0; b < k; ++b)
+      scaled(a, b) = h(out.kept[a], out.kept[b]) * d_inv_sqrt[a] * d_inv_sqrt[b];
+  if (k > 0) {
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(scaled);
+    out.scaled_eigenvalues = eigen.eigenvalues();
+    out.scaled_eigenvectors = eigen.eigenvectors();
+  }
+  const Eigen::VectorXd& lambda = out.scaled_eigenvalues;
+  const Eigen::MatrixXd& vectors = out.scaled_eigenvectors;
+
+  // Cov over the kept variables = variance_scale D^-1/2 V Lambda^+ V^T D^-1/2 (pseudo-inverse:
+  // singular directions left out), and infinite variances for the variables that load on a
+  // singular direction. A direction the cost does not curve along (or, through finite-difference
+  // noise, curves slightly down along) leaves every variable in it undetermined; a variable that
+  // only grazes it (|loading| < kUnboundedLoading: moving along the valley by t moves it by under
+  // t / 10 in scaled units) keeps the uncertainty of the determined directions. Clamping the
+  // eigenvalue instead made every marginal variance infinite and every correlation +-1.
+  const double lambda_max = k > 0 ? std::max(lambda.maxCoeff(), 0.0) : 0.0;
+  const double lambda_floor = kSingularEigenvalue * std::max(lambda_max, 1.0);
+  out.singular.assign(k, false);
+  out.unbounded.assign(p, false);
+  Eigen::VectorXd inverse_lambda = Eigen::VectorXd::Zero(k);
+  std::vector<bool> unbounded_kept(k, false);
+  for (int e = 0; e < k; ++e) {
+    if (lambda[e] > lambda_floor) {
+      inverse_lambda[e] = 1.0 / lambda[e];
+      continue;
+    }
+    out.singular[e] = true;
+    for (int a = 0; a < k; ++a) {
+      if (std::abs(vectors(a, e)) >= kUnboundedLoading) unbounded_kept[a] = true;
+    }
+  }
+  const Eigen::MatrixXd scaled_covariance =
+      vectors * inverse_lambda.asDiagonal() * vectors.transpose();
+  out.covariance = Eigen::MatrixXd::Constant(p, p, kInfinity);
+  out.correlation = Eigen::MatrixXd::Constant(p, p, std::nan(""));
+  for (int i = 0; i < p; ++i) out.correlation(i, i) = 1.0;
+  // Between two unbounded variables the correlation is its limit as the singular eigenvalues go
+  // to zero (+-1 for a pair in one valley): from the eigenvalues clamped to the floor.
+  Eigen::VectorXd clamped_inverse_lambda(k);
+  for (int e = 0; e < k; ++e) clamped_inverse_lambda[e] = 1.0 / std::max(lambda[e], lambda_floor);
+  const Eigen::MatrixXd limit_covariance =
+      vectors * clamped_inverse_lambda.asDiagonal() * vectors.transpose();
+  for (int a = 0; a < k; ++a) out.unbounded[out.kept[a]] = unbounded_kept[a];
+  for (int a = 0; a < k; ++a) {
+    for (int b = 0; b < k; ++b) {
+      const int i = out.kept[a], j = out.kept[b];
+      if (!unbounded_kept[a] && !unbounded_kept[b]) {
+        out.covariance(i, j) =
+            variance_scale * scaled_covariance(a, b) * d_inv_sqrt[a] * d_inv_sqrt[b];
+        if (i != j) {
+          out.correlation(i, j) = scaled_covariance(a, b) /
+                                  std::sqrt(scaled_covariance(a, a) * scaled_covariance(b, b));
+        }
+      } else if (unbounded_kept[a] && unbounded_kept[b] && i != j) {
+        out.correlation(i, j) =
+            limit_covariance(a, b) / std::sqrt(limit_covariance(a, a) * limit_covariance(b, b));
+      }
+    }
+  }
+  return out;
+}
+
 Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& make_objective,
                                                      const ParameterSpace& space,
                                                      const fem::PhysicalParameters& parameters,
@@ -249,59 +327,28 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
   report.residual_sigma = std::sqrt(sigma2);
   const double variance_scale = sigma2 / std::max(n_eff, 1.0);  // Cov = variance_scale * H^-1
 
-  // Variables without upward curvature are left out of the scaled analysis.
-  std::vector<int> kept;
   report.variables.resize(p);
   for (int i = 0; i < p; ++i) {
     VariableIdentifiability& v = report.variables[i];
     v.name = space.variable_names()[i];
     v.parameter = ParameterOf(v.name);
     v.variable = x0[i];
-    if (h(i, i) > 0.0 && std::isfinite(h(i, i)))
-      kept.push_back(i);
-    else
-      v.flags.push_back(IdentifiabilityFlag::kNoSensitivity);
   }
+  const HessianCovariance laplace = CovarianceFromHessian(h, variance_scale);
+  const std::vector<int>& kept = laplace.kept;
   const int k = static_cast<int>(kept.size());
+  for (int i = 0; i < p; ++i) {
+    if (std::find(kept.begin(), kept.end(), i) == kept.end())
+      report.variables[i].flags.push_back(IdentifiabilityFlag::kNoSensitivity);
+  }
+  report.covariance = laplace.covariance;
+  report.correlation = laplace.correlation;
+  report.scaled_eigenvalues = laplace.scaled_eigenvalues;
+  report.scaled_eigenvectors = laplace.scaled_eigenvectors;
+  const Eigen::VectorXd& lambda = laplace.scaled_eigenvalues;
+  const Eigen::MatrixXd& vectors = laplace.scaled_eigenvectors;
   Eigen::VectorXd d_inv_sqrt(k);
-  Eigen::MatrixXd scaled(k, k);
   for (int a = 0; a < k; ++a) d_inv_sqrt[a] = 1.0 / std::sqrt(h(kept[a], kept[a]));
-  for (int a = 0; a < k; ++a)
-    for (int b = 0; b < k; ++b) scaled(a, b) = h(kept[a], kept[b]) * d_inv_sqrt[a] * d_inv_sqrt[b];
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(scaled);
-  const Eigen::VectorXd lambda = k > 0 ? eigen.eigenvalues() : Eigen::VectorXd();
-  const Eigen::MatrixXd vectors = k > 0 ? eigen.eigenvectors() : Eigen::MatrixXd();
-  report.scaled_eigenvalues = lambda;
-  report.scaled_eigenvectors = vectors;
-
-  // Cov over the kept variables = variance_scale D^-1/2 V Lambda^-1 V^T D^-1/2, with singular
-  // eigenvalues clamped for the correlations and marking infinite variances.
-  const double lambda_max = k > 0 ? std::max(lambda.maxCoeff(), 0.0) : 0.0;
-  const double lambda_floor = kSingularEigenvalue * std::max(lambda_max, 1.0);
-  std::vector<bool> singular(k, false);
-  Eigen::VectorXd inverse_lambda(k);
-  for (int e = 0; e < k; ++e) {
-    inverse_lambda[e] = 1.0 / std::max(lambda[e], lambda_floor);
-    if (lambda[e] <= lambda_floor) {
-      for (int a = 0; a < k; ++a) singular[a] = singular[a] || std::abs(vectors(a, e)) > 1e-6;
-    }
-  }
-  const Eigen::MatrixXd scaled_covariance =
-      vectors * inverse_lambda.asDiagonal() * vectors.transpose();
-  report.covariance = Eigen::MatrixXd::Constant(p, p, kInfinity);
-  report.correlation = Eigen::MatrixXd::Constant(p, p, std::nan(""));
-  for (int i = 0; i < p; ++i) report.correlation(i, i) = 1.0;
-  for (int a = 0; a < k; ++a) {
-    for (int b = 0; b < k; ++b) {
-      const int i = kept[a], j = kept[b];
-      report.correlation(i, j) =
-          scaled_covariance(a, b) / std::sqrt(scaled_covariance(a, a) * scaled_covariance(b, b));
-      if (!singular[a] && !singular[b]) {
-        report.covariance(i, j) =
-            variance_scale * scaled_covariance(a, b) * d_inv_sqrt[a] * d_inv_sqrt[b];
-      }
-    }
-  }
 
   // Per-variable uncertainties in physical units (d value / d x by central differences of the
   // transform: exact enough, and the same code for every parameterisation).
@@ -329,7 +376,8 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
   for (int a = 0; a < k; ++a) {
     for (int b = a + 1; b < k; ++b) {
       const int i = kept[a], j = kept[b];
-      if (std::abs(report.correlation(i, j)) <= options.max_correlation) continue;
+      // (NaN, for a variable without a finite uncertainty, is not a correlation.)
+      if (!(std::abs(report.correlation(i, j)) > options.max_correlation)) continue;
       report.correlated_pairs.emplace_back(report.variables[i].name, report.variables[j].name);
       for (int m : {i, j}) {
         auto& flags = report.variables[m].flags;
@@ -348,7 +396,10 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
     combination.direction.normalize();
     // Flags and loadings from the scaled eigenvector (scale-free); the direction is for people.
     for (int a = 0; a < k; ++a) {
-      if (std::abs(vectors(a, e)) < options.min_loading) continue;
+      const bool member = std::abs(vectors(a, e)) >= options.min_loading ||
+                          (laplace.singular[e] && laplace.unbounded[kept[a]] &&
+                           std::abs(vectors(a, e)) >= kUnboundedLoading);
+      if (!member) continue;
       VariableIdentifiability& v = report.variables[kept[a]];
       combination.loadings.emplace_back(v.name, vectors(a, e));
       if (std::find(v.flags.begin(), v.flags.end(), IdentifiabilityFlag::kDegenerateCombination) ==

@@ -29,7 +29,8 @@
 //                           (variables with a relative scale: positive quantities, vectors).
 //   kCorrelatedPair         |correlation| > max_correlation with another variable.
 //   kDegenerateCombination  it loads >= min_loading on an eigenvector of H~ with eigenvalue <
-//                           min_scaled_eigenvalue.
+//                           min_scaled_eigenvalue, or >= kUnboundedLoading on a singular one
+//                           (its uncertainty is then infinite).
 // A variable can be "identifiable" with a tiny formal uncertainty on noise-free synthetic data and
 // still sit in a valley with another: the flags are reported separately so callers can tell a
 // well-determined value from a well-determined combination.
@@ -97,7 +98,8 @@ struct VariableIdentifiability {
   double variable = 0.0;  // x* [-]
   double value = 0.0;     // physical value (ground tilt: the variable itself, radians)
   // Marginal standard uncertainty of the variable and of the physical value; +inf when the
-  // Hessian is singular along a direction the variable loads on.
+  // Hessian is singular along a direction the variable loads on by >= kUnboundedLoading (see
+  // CovarianceFromHessian).
   double variable_uncertainty = 0.0;
   double standard_uncertainty = 0.0;
   // standard_uncertainty / scale (positive quantities: their value; vector entries: the vector's
@@ -107,7 +109,8 @@ struct VariableIdentifiability {
   bool identifiable() const { return flags.empty(); }
 };
 
-// A direction in variable space along which the cost is flat for its scale (kDegenerateCombination).
+// A direction in variable space along which the cost is flat for its scale
+// (kDegenerateCombination).
 struct DegenerateCombination {
   double scaled_eigenvalue = 0.0;  // of H~ [-]
   // Unit eigenvector of H~ mapped back to the variables (v_i / sqrt(H_ii), renormalised): moving
@@ -116,6 +119,26 @@ struct DegenerateCombination {
   std::vector<std::pair<std::string, double>> loadings;  // variables with |loading| >= min_loading
   Eigen::VectorXd direction;                             // all variables
 };
+
+// Step 3 of the method on a given symmetric Hessian H [m^2] in the optimiser's variables, with
+// Cov = variance_scale * H^-1 (variance_scale = sigma^2 / N_eff): the eigen-decomposition of the
+// unit-diagonal H~ over the variables with H_ii > 0 ("kept"), and the covariance by the
+// pseudo-inverse of H~ (eigenvalues <= 1e-10 of the largest count as singular). A variable loading
+// >= kUnboundedLoading on a singular direction is unbounded: +inf variance, NaN correlation with
+// bounded variables, and with other unbounded ones the limit as the singular eigenvalues go to
+// zero (+-1 within one valley); the others keep finite values from the determined directions.
+// Variables not kept: +inf, NaN.
+inline constexpr double kUnboundedLoading = 0.1;
+struct HessianCovariance {
+  std::vector<int> kept;                // variables with H_ii > 0, ascending
+  Eigen::VectorXd scaled_eigenvalues;   // of H~ over the kept variables, ascending
+  Eigen::MatrixXd scaled_eigenvectors;  // columns, same order; rows follow `kept`
+  std::vector<bool> singular;           // per eigenvalue
+  std::vector<bool> unbounded;          // per variable (all p)
+  Eigen::MatrixXd covariance;           // p x p [-]
+  Eigen::MatrixXd correlation;          // p x p [-]
+};
+HessianCovariance CovarianceFromHessian(const Eigen::MatrixXd& h, double variance_scale);
 
 struct IdentifiabilityReport {
   std::vector<VariableIdentifiability> variables;
@@ -126,9 +149,9 @@ struct IdentifiabilityReport {
   Eigen::MatrixXd hessian;             // H [m^2], symmetrised
   double hessian_asymmetry = 0.0;      // |H - H^T| / |H| before symmetrising (FD noise) [-]
   bool hessian_positive_definite = false;
-  Eigen::MatrixXd covariance;          // Cov(x) [-]; +inf entries along singular directions
-  Eigen::MatrixXd correlation;         // [-]
-  Eigen::VectorXd scaled_eigenvalues;  // of H~, ascending [-]
+  Eigen::MatrixXd covariance;           // Cov(x) [-]; +inf rows and columns of unbounded variables
+  Eigen::MatrixXd correlation;          // [-]; NaN (JSON null) between unbounded and bounded
+  Eigen::VectorXd scaled_eigenvalues;   // of H~, ascending [-]
   Eigen::MatrixXd scaled_eigenvectors;  // columns, same order
   std::vector<std::pair<std::string, std::string>> correlated_pairs;
   std::vector<DegenerateCombination> degenerate_combinations;
@@ -153,8 +176,7 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
 
 // The same for a finished fit of `capture` under `config`, at its best start.
 Result<IdentifiabilityReport> AnalyzeIdentifiability(const capture::Capture& capture,
-                                                     const JobConfig& config,
-                                                     const FitResult& fit,
+                                                     const JobConfig& config, const FitResult& fit,
                                                      const IdentifiabilityOptions& options = {});
 
 // result.json's "identifiability" object:

@@ -172,9 +172,10 @@ void Verdict(const Benchmark& b, const inverse::IdentifiabilityReport& report, R
       }
       if (i < 0 || j < 0) continue;
       const double rho = report.correlation(i, j);
-      out->verdict_lines.push_back(fmt::format("correlation({}, {}) = {:+.3f}",
-                                               report.variables[i].name, report.variables[j].name,
-                                               rho));
+      out->verdict_lines.push_back(fmt::format(
+          "correlation({}, {}) = {}", report.variables[i].name, report.variables[j].name,
+          std::isfinite(rho) ? fmt::format("{:+.3f}", rho)
+                             : std::string("undefined (one of them is unbounded)")));
       verdict["correlations"][report.variables[i].name + "," + report.variables[j].name] =
           std::isfinite(rho) ? nlohmann::json(rho) : nlohmann::json(nullptr);
     }

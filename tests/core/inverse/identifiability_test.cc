@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <string>
 
@@ -69,6 +70,75 @@ TEST(IdentifiabilityOptions, ValidateNamesFieldAndValue) {
   options = IdentifiabilityOptions();
   options.min_residual_sigma = -1e-3;
   EXPECT_EQ(options.Validate().code(), StatusCode::kInvalidArgument);
+}
+
+// A determined Hessian: the covariance is variance_scale * H^-1, the correlations its normalised
+// entries.
+TEST(CovarianceFromHessian, InvertsADeterminedHessian) {
+  Eigen::Matrix2d h;
+  h << 4.0, 1.0, 1.0, 9.0;
+  const HessianCovariance c = CovarianceFromHessian(h, 2.0);
+  const Eigen::Matrix2d expected = 2.0 * h.inverse();
+  EXPECT_NEAR((c.covariance - expected).norm(), 0.0, 1e-12);
+  EXPECT_NEAR(c.correlation(0, 1), expected(0, 1) / std::sqrt(expected(0, 0) * expected(1, 1)),
+              1e-12);
+  EXPECT_EQ(c.kept.size(), 2u);
+  EXPECT_FALSE(c.unbounded[0] || c.unbounded[1]);
+}
+
+// Two variables a, b in a valley along which the cost curves slightly down (finite-difference
+// noise at a flat direction), and a third, E, that grazes it (loading 1e-3) but is determined on
+// its own: a and b are unbounded, E keeps the uncertainty its own curvature gives and a finite
+// correlation with them is not claimed. (Clamping the negative eigenvalue instead gave E an
+// infinite variance and every pair a correlation of +-1.)
+TEST(CovarianceFromHessian, ValleyLeavesBystandersDetermined) {
+  Eigen::Matrix3d v;
+  v.col(0) = Eigen::Vector3d(1e-3, 1.0, 1.0).normalized();     // the valley
+  v.col(1) = Eigen::Vector3d(1.0, -5e-4, -5e-4).normalized();  // E
+  v.col(2) = v.col(0).cross(v.col(1)).normalized();            // a - b
+  const Eigen::Vector3d lambda(-1e-7, 1.0, 2.0);
+  Eigen::Matrix3d h = v * lambda.asDiagonal() * v.transpose();
+  // Physical scales: E in log units curving 100x more than the valley variables.
+  const Eigen::Vector3d scale(10.0, 0.5, 2.0);
+  h = (scale.asDiagonal() * h * scale.asDiagonal()).eval();
+  const HessianCovariance c = CovarianceFromHessian(h, 1e-4);
+  ASSERT_EQ(c.kept.size(), 3u);
+  EXPECT_FALSE(c.unbounded[0]);
+  EXPECT_TRUE(c.unbounded[1]);
+  EXPECT_TRUE(c.unbounded[2]);
+  ASSERT_TRUE(std::isfinite(c.covariance(0, 0)));
+  // E alone: variance_scale / H_EE, to the grazing coupling.
+  EXPECT_NEAR(c.covariance(0, 0), 1e-4 / h(0, 0), 1e-3 * 1e-4 / h(0, 0));
+  EXPECT_TRUE(std::isinf(c.covariance(1, 1)));
+  EXPECT_TRUE(std::isinf(c.covariance(2, 2)));
+  EXPECT_TRUE(std::isnan(c.correlation(0, 1)));
+  EXPECT_NEAR(c.correlation(1, 2), 1.0, 1e-6);  // one valley: a and b move together
+  EXPECT_EQ(c.correlation(0, 0), 1.0);
+  EXPECT_EQ(std::count(c.singular.begin(), c.singular.end(), true), 1);
+  EXPECT_LT(c.scaled_eigenvalues[0], 0.0);
+}
+
+// A variable that loads materially on a flat direction (0.3) is unbounded too; one without
+// upward curvature is left out of the analysis altogether.
+TEST(CovarianceFromHessian, MaterialLoadingOrNoCurvatureIsUnbounded) {
+  Eigen::Matrix3d v;
+  v.col(0) = Eigen::Vector3d(0.3, 1.0, 0.0).normalized();
+  v.col(1) = Eigen::Vector3d(1.0, -0.3, 0.0).normalized();
+  v.col(2) = Eigen::Vector3d(0.0, 0.0, 1.0);
+  const Eigen::Matrix3d h = v * Eigen::Vector3d(0.0, 1.0, 1.0).asDiagonal() * v.transpose();
+  HessianCovariance c = CovarianceFromHessian(h, 1.0);
+  EXPECT_TRUE(c.unbounded[0]);
+  EXPECT_TRUE(c.unbounded[1]);
+  EXPECT_FALSE(c.unbounded[2]);
+  EXPECT_NEAR(c.covariance(2, 2), 1.0, 1e-12);
+
+  Eigen::Matrix3d flat = Eigen::Matrix3d::Identity();
+  flat(1, 1) = -0.5;
+  c = CovarianceFromHessian(flat, 1.0);
+  EXPECT_EQ(c.kept, (std::vector<int>{0, 2}));
+  EXPECT_TRUE(std::isinf(c.covariance(1, 1)));
+  EXPECT_NEAR(c.covariance(0, 0), 1.0, 1e-12);
+  EXPECT_NEAR(c.correlation(0, 2), 0.0, 1e-12);
 }
 
 // A torus in free fall (the first 0.1 s of torus-drop, before it lands) does not deform, so its
@@ -145,8 +215,11 @@ TEST(Identifiability, FreeFallCorrelatesGravityWithMassDamping) {
   EXPECT_NE(std::find(names.begin(), names.end(), "mass_damping"), names.end());
   // Sideways gravity is not part of the valley. (alpha = 0.1 1/s bends the path by only 0.2 mm
   // here, so its Hessian row is near the cost's cell-switching noise and may make H indefinite:
-  // no assertion on the exact set of pairs.)
-  EXPECT_LT(std::abs(report->correlation(0, alpha)), 0.95);
+  // no assertion on the exact set of pairs.) Whatever the valley's curvature, sideways gravity
+  // keeps a finite uncertainty: it does not load on the valley.
+  EXPECT_FALSE(std::abs(report->correlation(0, alpha)) > 0.95);
+  EXPECT_TRUE(std::isfinite(report->variables[0].standard_uncertainty));
+  EXPECT_TRUE(report->variables[0].identifiable());
 }
 
 // A fit without a usable start cannot be analysed.
@@ -156,8 +229,7 @@ TEST(Identifiability, RejectsFitWithoutBestStart) {
   JobConfig config;
   FitResult fit;
   fit.fitted = config.fit;
-  const Result<IdentifiabilityReport> report =
-      AnalyzeIdentifiability(capture.capture, config, fit);
+  const Result<IdentifiabilityReport> report = AnalyzeIdentifiability(capture.capture, config, fit);
   EXPECT_EQ(report.status().code(), StatusCode::kFailedPrecondition);
   IdentifiabilityOptions options;
   options.step = -1.0;
