@@ -176,10 +176,15 @@ bool LinearSolver::RefactorPays() const {
   return factor_ != nullptr && excess_work_ > factor_work_;
 }
 
-Status LinearSolver::Factorize(const Matrix& a, const Eigen::Matrix3d& rotation) {
+Status LinearSolver::Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
+                               Symmetry symmetry) {
   // The consistent tangent is not symmetric; its symmetric part is what a Cholesky factor can
   // approximate (the lower triangle alone can be far from positive definite).
-  const Matrix symmetric = 0.5 * (a + Matrix(a.transpose()));
+  SOFTID_ASSERT(symmetry == Symmetry::kGeneral ||
+                (a - Matrix(a.transpose())).norm() <= 1e-12 * a.norm());
+  Matrix symmetrised;
+  if (symmetry == Symmetry::kGeneral) symmetrised = 0.5 * (a + Matrix(a.transpose()));
+  const Matrix& symmetric = symmetry == Symmetry::kGeneral ? symmetrised : a;
   // The assembly pattern is fixed, so the fill-reducing ordering and symbolic analysis (METIS
   // dominates a factorisation at ~10^4 unknowns) are done once and reused: the numeric factor
   // goes into the spare, which becomes current only when it succeeds.

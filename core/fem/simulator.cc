@@ -2,7 +2,9 @@
 
 #include <Eigen/Cholesky>
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <map>
 #include <stdexcept>
 #include <system_error>
 #include <thread>
@@ -127,7 +129,9 @@ void Simulator::ApplyParameters() {
   const int n = mesh_.NumNodes();
   // Lumped mass and element stiffness (fixed for the whole run).
   mass_ = Eigen::VectorXd::Zero(n);
-  element_stiffness_.resize(mesh_.NumElements());
+  stiffness_matrices_.clear();
+  element_stiffness_index_.resize(mesh_.NumElements());
+  std::map<std::array<double, 9>, int> distinct;  // (weights, scale) -> matrix, exact match
   element_rotation_.assign(mesh_.NumElements(), Eigen::Matrix3d::Identity());
   element_stiffness_weights_.resize(mesh_.NumElements());
   element_scale_.resize(mesh_.NumElements());
@@ -155,7 +159,15 @@ void Simulator::ApplyParameters() {
     std::array<double, 8> stiffness_weights = w.octant_volume;
     const double floor = options_.ghost_stiffness_fraction * h * h * h / 8.0;
     for (double& weight : stiffness_weights) weight = std::max(weight, floor);
-    element_stiffness_[e] = ElementStiffness(stiffness_weights, h, scale * lambda, scale * mu);
+    std::array<double, 9> key;
+    std::copy(stiffness_weights.begin(), stiffness_weights.end(), key.begin());
+    key[8] = scale;
+    const auto [it, added] = distinct.emplace(key, static_cast<int>(stiffness_matrices_.size()));
+    if (added) {
+      stiffness_matrices_.push_back(
+          ElementStiffness(stiffness_weights, h, scale * lambda, scale * mu));
+    }
+    element_stiffness_index_[e] = it->second;
     element_stiffness_weights_[e] = stiffness_weights;
     element_scale_[e] = scale;
   }
@@ -184,7 +196,8 @@ void Simulator::ApplyParameters() {
   Assemble(Mode::kDynamic, zero, zero, zero);
   has_surface_forces_ = saved_forces;
   // The solver keeps its symbolic analysis: only the numbers change with the parameters.
-  ThrowIfError(solver_.Factorize(assembler_.matrix(), Eigen::Matrix3d::Identity()));
+  ThrowIfError(solver_.Factorize(assembler_.matrix(), Eigen::Matrix3d::Identity(),
+                                 LinearSolver::Symmetry::kSymmetric));
 }
 
 int Simulator::num_fixed_nodes() const {
@@ -368,7 +381,7 @@ void Simulator::AssembleElement(int e, const ElementTerms& terms, const Eigen::V
     if (damp) y += terms.stiffness_damping * v.segment<3>(3 * nodes[c]);
     local.segment<3>(3 * c).noalias() = rt * y - mesh_.rest_positions[nodes[c]];
   }
-  const Matrix24d& k = element_stiffness_[e];
+  const Matrix24d& k = StiffnessOf(e);
   const Vector24d sigma = k * local;
   for (int c = 0; c < 8; ++c)
     residual_.segment<3>(3 * nodes[c]).noalias() += r * sigma.segment<3>(3 * c);
@@ -433,6 +446,15 @@ void Simulator::AssembleElement(int e, const ElementTerms& terms, const Eigen::V
       assembler_.AddBlock(e, i, j, block);
     }
   }
+}
+
+LinearSolver::Symmetry Simulator::TangentSymmetry(Mode mode) const {
+  // Newton's dynamic tangent leaves out the (non-symmetric) geometric term, and every other block
+  // is symmetric up to round-off (element blocks R K R^T, contact and drag blocks w_i w_j J with J
+  // symmetric); only the primal-dual friction tangent is not.
+  return newton_tangent_ && mode == Mode::kDynamic && !use_friction_iterate_
+             ? LinearSolver::Symmetry::kSymmetric
+             : LinearSolver::Symmetry::kGeneral;
 }
 
 StepSummary Simulator::NewtonSolve(Mode mode) {
@@ -510,7 +532,8 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
     if (!solve.converged || (dynamic && solver_.RefactorPays())) {
       // The reference factor no longer fits (large deformation, contact): renew it here. When
       // that fails the previous factor stays in use.
-      summary.refactorized = solver_.Factorize(assembler_.matrix(), body_rotation).ok();
+      summary.refactorized =
+          solver_.Factorize(assembler_.matrix(), body_rotation, TangentSymmetry(mode)).ok();
       if (!solve.converged) {
         update_.setZero();
         solve = solver_.Solve(assembler_.matrix(), rhs_, body_rotation, linear, &update_);
@@ -709,7 +732,7 @@ Energies Simulator::ComputeEnergies() const {
     }
     const Eigen::Matrix3d r = PolarRotation(DeformationGradient(x, h));
     const Vector24d local = RotateCorners(r.transpose(), displaced) - rest;
-    energies.elastic += 0.5 * local.dot(element_stiffness_[e] * local);
+    energies.elastic += 0.5 * local.dot(StiffnessOf(e) * local);
   }
   return energies;
 }

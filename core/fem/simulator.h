@@ -173,10 +173,16 @@ class Simulator {
   // Per element the shear part of the stiffness, ElementStiffness(weights, h, 0, 1), without the
   // stiffness field's scale: d K / d poisson_ratio needs it. Built on the first backward pass.
   void BuildShearStiffness();
-  std::vector<Matrix24d, Eigen::aligned_allocator<Matrix24d>> element_shear_stiffness_;
+  std::vector<Matrix24d, Eigen::aligned_allocator<Matrix24d>> shear_matrices_;
+  std::vector<int> element_shear_index_;  // into shear_matrices_, per element
+  const Matrix24d& ShearStiffnessOf(int e) const {
+    return shear_matrices_[element_shear_index_[e]];
+  }
   std::vector<std::array<double, 8>> element_stiffness_weights_;
   std::vector<double> element_scale_;  // stiffness field scale per element
   StepSummary NewtonSolve(Mode mode);
+  // Whether the matrix Newton assembles in this mode is exactly symmetric (see LinearSolver).
+  LinearSolver::Symmetry TangentSymmetry(Mode mode) const;
 
   PhysicalParameters parameters_;
   SimulationOptions options_;
@@ -199,7 +205,15 @@ class Simulator {
   bool use_friction_iterate_ = false;
   Eigen::VectorXd v_before_;  // work storage of the Newton update
   void AdvanceFrictionIterate(const Eigen::VectorXd& v, const Eigen::VectorXd& dv);
-  std::vector<Matrix24d, Eigen::aligned_allocator<Matrix24d>> element_stiffness_;
+  // Element stiffness matrices, one per distinct (octant weights, stiffness scale): every full
+  // cell of a uniform body shares one. Streaming a 4.6 KB matrix per element dominated the
+  // assembly's memory traffic; a shared one stays in cache, and each distinct matrix is built
+  // once per SetParameters.
+  std::vector<Matrix24d, Eigen::aligned_allocator<Matrix24d>> stiffness_matrices_;
+  std::vector<int> element_stiffness_index_;  // into stiffness_matrices_, per element
+  const Matrix24d& StiffnessOf(int e) const {
+    return stiffness_matrices_[element_stiffness_index_[e]];
+  }
   std::vector<Eigen::Matrix3d> element_rotation_;
   // Parallel element loop of Assemble: the elements are cut into one contiguous range (a slab of
   // the grid) per thread; thread t assembles the elements of range t that share no node with

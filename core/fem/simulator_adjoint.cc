@@ -7,7 +7,9 @@
 //   J^T lambda = u'_bar + (dV/du') v'_bar + (dA/du') a'_bar,
 // the parameters receive -lambda^T dr/dp, and the state s receives its explicit share through V,
 // A and the lagged force. See core/doc/notation.md for the symbols.
+#include <array>
 #include <cmath>
+#include <map>
 
 #include "core/common/check.h"
 #include "core/fem/corotation.h"
@@ -18,11 +20,17 @@
 namespace softid::fem {
 
 void Simulator::BuildShearStiffness() {
-  if (!element_shear_stiffness_.empty()) return;
+  if (!element_shear_index_.empty()) return;
   const double h = mesh_.CellSize();
-  element_shear_stiffness_.resize(mesh_.NumElements());
-  for (int e = 0; e < mesh_.NumElements(); ++e)
-    element_shear_stiffness_[e] = ElementStiffness(element_stiffness_weights_[e], h, 0.0, 1.0);
+  element_shear_index_.resize(mesh_.NumElements());
+  std::map<std::array<double, 8>, int> distinct;  // weights -> matrix, exact match
+  for (int e = 0; e < mesh_.NumElements(); ++e) {
+    const auto [it, added] =
+        distinct.emplace(element_stiffness_weights_[e], static_cast<int>(shear_matrices_.size()));
+    if (added)
+      shear_matrices_.push_back(ElementStiffness(element_stiffness_weights_[e], h, 0.0, 1.0));
+    element_shear_index_[e] = it->second;
+  }
 }
 
 void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd& v,
@@ -72,14 +80,14 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
       l.segment<3>(3 * c).noalias() = rt * (x[c] + beta_k * vc) - mesh_.rest_positions[nodes[c]];
       rotated_lambda.segment<3>(3 * c).noalias() = rt * lambda_local.segment<3>(3 * c);
     }
-    const Matrix24d& k = element_stiffness_[e];
+    const Matrix24d& k = StiffnessOf(e);
     const Vector24d sigma = k * l;
     // lambda^T r_e = (R^T lambda)^T K l.
     const double work = rotated_lambda.dot(sigma);
     gradient->youngs_modulus -= work / p.youngs_modulus;
     // d K / d nu l = (dlambda/lambda) K l + s (dmu - mu dlambda/lambda) K_mu l.
     const double scale = element_scale_[e];
-    const Vector24d shear = element_shear_stiffness_[e] * l;
+    const Vector24d shear = ShearStiffnessOf(e) * l;
     gradient->poisson_ratio -=
         (dlambda_dnu / lame_lambda) * work +
         scale * (dmu_dnu - lame_mu * dlambda_dnu / lame_lambda) * rotated_lambda.dot(shear);
