@@ -43,7 +43,7 @@ struct SimulationOptions {
   // (torus-drop at 3k cells: 1e-6 -> 1e-3 is 1.5x faster, same state to 6 digits). In contact
   // Newton contracts only ~10x per iteration (its tangent leaves out the geometric term of
   // compressed elements), so 1e-3 still over-solved there: 1e-2 keeps the Newton counts (+0-6 %);
-  // over 1 s it ran torus-drop, pillow-ramp and bar-hanging at 20 cells 10-15 % and ball-bounce at
+  // over 1 s it ran torus-drop, pillow-ramp and bar-hanging at 20 cells 9-15 % and ball-bounce at
   // 26 cells 17 % faster, torus-drop at 26 cells 9 % slower (the refactorisation rule then renewed
   // the factor 4 times instead of 10, and GMRES paid for it); after 1 s the centre of mass is within
   // 2e-7 m of a 1e-8 solve's (1e-3: 1e-7 m), about newton_tolerance * h. 3e-2 was faster in every
