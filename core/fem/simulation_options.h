@@ -45,9 +45,9 @@ struct SimulationOptions {
   // compressed elements), so 1e-3 still over-solved there: 1e-2 keeps the Newton counts (+0-6 %);
   // over 1 s it ran torus-drop, pillow-ramp and bar-hanging at 20 cells 9-15 % and ball-bounce at
   // 26 cells 17 % faster, torus-drop at 26 cells 9 % slower (the refactorisation rule then renewed
-  // the factor 4 times instead of 10, and GMRES paid for it); after 1 s the centre of mass is within
-  // 2e-7 m of a 1e-8 solve's (1e-3: 1e-7 m), about newton_tolerance * h. 3e-2 was faster in every
-  // case (16-33 % at 26 cells) but raised the Newton counts 3-10 %, and 1e-1 by 10-25 %.
+  // the factor 4 times instead of 10, and GMRES paid for it); after 1 s the centre of mass is
+  // within 2e-7 m of a 1e-8 solve's (1e-3: 1e-7 m), about newton_tolerance * h. 3e-2 was faster in
+  // every case (16-33 % at 26 cells) but raised the Newton counts 3-10 %, and 1e-1 by 10-25 %.
   double linear_tolerance = 1e-2;   // relative residual [-], > 0
   int max_linear_iterations = 500;  // [-], >= 1
   // Relative residual of the adjoint's transposed solves [-], > 0. Unlike the forward solves, an
