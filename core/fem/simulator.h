@@ -181,7 +181,8 @@ class Simulator {
   std::vector<std::array<double, 8>> element_stiffness_weights_;
   std::vector<double> element_scale_;  // stiffness field scale per element
   StepSummary NewtonSolve(Mode mode);
-  // Whether the matrix Newton assembles in this mode is exactly symmetric (see LinearSolver).
+  // Whether the matrix Newton assembles in this mode is symmetric up to round-off (see
+  // LinearSolver::Symmetry).
   LinearSolver::Symmetry TangentSymmetry(Mode mode) const;
 
   PhysicalParameters parameters_;
