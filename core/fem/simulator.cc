@@ -512,8 +512,8 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
   if (friction_active && std::any_of(lagged_normal_force_.begin(), lagged_normal_force_.end(),
                                      [](double f) { return f > 0.0; })) {
     const double dv_du = options_.newmark_gamma / (options_.newmark_beta * dt);
-    tolerance = std::min(
-        tolerance, kFrictionVelocityTolerance * options_.friction_velocity_scale / dv_du);
+    tolerance =
+        std::min(tolerance, kFrictionVelocityTolerance * options_.friction_velocity_scale / dv_du);
   }
   struct IterateGuard {
     bool* flag;
