@@ -1,7 +1,9 @@
 #include "core/fem/simulation_options.h"
 
 #include <cmath>
+#include <string>
 
+#include "core/common/check.h"
 #include "core/common/json_fields.h"
 
 namespace softid::fem {
@@ -33,6 +35,13 @@ Status SimulationOptions::Validate() const {
   if (!(newmark_beta > 0.0 && newmark_beta <= 0.5)) {
     return Invalid("newmark_beta", newmark_beta, "must lie in (0, 0.5]");
   }
+  if (!(generalized_alpha_f >= 0.0 && generalized_alpha_f <= 0.5)) {
+    return Invalid("generalized_alpha_f", generalized_alpha_f, "must lie in [0, 0.5]");
+  }
+  if (!(generalized_alpha_m > -1.0 && generalized_alpha_m <= generalized_alpha_f)) {
+    return Invalid("generalized_alpha_m", generalized_alpha_m,
+                   "must lie in (-1, generalized_alpha_f]");
+  }
   if (max_newton_iterations < 1) {
     return Invalid("max_newton_iterations", max_newton_iterations, "must be at least 1");
   }
@@ -58,6 +67,16 @@ Status SimulationOptions::Validate() const {
   if (assembly_threads < 0)
     return Invalid("assembly_threads", assembly_threads, "must be non-negative");
   return Status::Ok();
+}
+
+void SimulationOptions::UseGeneralizedAlpha(double rho_infinity) {
+  SOFTID_THROW_UNLESS(rho_infinity >= 0.0 && rho_infinity <= 1.0,
+                      "rho_infinity = " + std::to_string(rho_infinity) + " must lie in [0, 1]");
+  generalized_alpha_m = (2.0 * rho_infinity - 1.0) / (rho_infinity + 1.0);
+  generalized_alpha_f = rho_infinity / (rho_infinity + 1.0);
+  newmark_gamma = 0.5 - generalized_alpha_m + generalized_alpha_f;
+  const double sum = 1.0 - generalized_alpha_m + generalized_alpha_f;
+  newmark_beta = 0.25 * sum * sum;
 }
 
 }  // namespace softid::fem

@@ -30,6 +30,18 @@ struct SimulationOptions {
   // gamma = 1/2 is the energy-conserving average-acceleration rule.
   double newmark_beta = 0.3025;  // [-], in (0, 0.5]
   double newmark_gamma = 0.6;    // [-], in [0.5, 1]
+  // Generalized-alpha weights (Chung & Hulbert 1993): the step equations hold at
+  // u_f = (1 - alpha_f) u_{n+1} + alpha_f u_n (v likewise) with the inertia of
+  // a_m = (1 - alpha_m) a_{n+1} + alpha_m a_n; u, v and a advance by Newmark. 0 and 0 is plain
+  // Newmark. UseGeneralizedAlpha sets these and the Newmark parameters together.
+  double generalized_alpha_m = 0.0;  // [-], in (-1, generalized_alpha_f]
+  double generalized_alpha_f = 0.0;  // [-], in [0, 0.5]
+
+  // The generalized-alpha scheme with high-frequency spectral radius rho_infinity in [0, 1]:
+  // second-order accurate for every rho_infinity, which sets how strongly the highest
+  // frequencies (penalty contact, the grid's own modes) are damped: 1 none, 0 annihilated in one
+  // step. (Newmark with gamma > 1/2 damps them too, but is only first-order accurate.)
+  void UseGeneralizedAlpha(double rho_infinity);
 
   // Newton iterations on the nonlinear (corotated, contact) step equations; converged when the
   // largest displacement update is below newton_tolerance * h. In contact Newton contracts ~10x

@@ -268,8 +268,11 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
   const double gamma = options_.newmark_gamma;
   const double alpha_m = parameters_.mass_damping;
   const double beta_k = parameters_.stiffness_damping;
-  // d a / d u and d v / d u of the Newmark update.
-  const double da_du = dynamic ? 1.0 / (beta * dt * dt) : 0.0;
+  // d a / d u and d v / d u of the Newmark update; under generalized-alpha the matrix is
+  // (dr/du) / (1 - alpha_f), so the inertia's share is (1 - alpha_m) / (1 - alpha_f) of it.
+  const double inertia_weight =
+      (1.0 - options_.generalized_alpha_m) / (1.0 - options_.generalized_alpha_f);
+  const double da_du = dynamic ? inertia_weight / (beta * dt * dt) : 0.0;
   const double dv_du = dynamic ? gamma / (beta * dt) : 0.0;
   const double mass_coefficient = da_du + alpha_m * dv_du;
   ElementTerms terms;
@@ -454,6 +457,26 @@ void Simulator::AssembleElement(int e, const ElementTerms& terms, const Eigen::V
   }
 }
 
+Eigen::Matrix3d Simulator::AssembleStep(const Eigen::VectorXd& u, const Eigen::VectorXd& v,
+                                        const Eigen::VectorXd& a, bool residual_only,
+                                        bool reuse_rotations) {
+  if (!UsesGeneralizedAlpha()) {
+    step_u_ = &u;
+    step_v_ = &v;
+    step_a_ = &a;
+  } else {
+    const double alpha_m = options_.generalized_alpha_m;
+    const double alpha_f = options_.generalized_alpha_f;
+    alpha_u_ = (1.0 - alpha_f) * u + alpha_f * state_.u;
+    alpha_v_ = (1.0 - alpha_f) * v + alpha_f * state_.v;
+    alpha_a_ = (1.0 - alpha_m) * a + alpha_m * state_.a;
+    step_u_ = &alpha_u_;
+    step_v_ = &alpha_v_;
+    step_a_ = &alpha_a_;
+  }
+  return Assemble(Mode::kDynamic, *step_u_, *step_v_, *step_a_, residual_only, reuse_rotations);
+}
+
 LinearSolver::Symmetry Simulator::TangentSymmetry(Mode mode) const {
   // Newton's dynamic tangent leaves out the (non-symmetric) geometric term, and every other block
   // is symmetric up to round-off (element blocks R K R^T, contact and drag blocks w_i w_j J with J
@@ -527,7 +550,17 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
           contact_, force_embedding_.Interpolate(mesh_, state_.v, p), lagged_normal_force_[p]);
     }
   }
-  Eigen::Matrix3d body_rotation = Assemble(mode, u_next_, v_next_, a_next_);
+  // The evaluation point moves by (1 - alpha_f) times an update, and Newton's matrix is the
+  // residual's Jacobian divided by that (see AssembleStep).
+  const double motion_scale = dynamic ? 1.0 - options_.generalized_alpha_f : 1.0;
+  const auto assemble = [&](bool residual_only, bool reuse_rotations) {
+    if (dynamic) return AssembleStep(u_next_, v_next_, a_next_, residual_only, reuse_rotations);
+    step_u_ = &u_next_;
+    step_v_ = &v_next_;
+    step_a_ = &a_next_;
+    return Assemble(mode, u_next_, v_next_, a_next_, residual_only, reuse_rotations);
+  };
+  Eigen::Matrix3d body_rotation = assemble(/*residual_only=*/false, /*reuse_rotations=*/false);
   double residual_norm = residual_.norm();
   update_.setZero();
   for (int it = 0; it < options_.max_newton_iterations; ++it) {
@@ -541,7 +574,7 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
         return summary;
       }
     }
-    rhs_ = -residual_;
+    rhs_ = (-1.0 / motion_scale) * residual_;
     LinearSolver::Summary solve =
         solver_.Solve(assembler_.matrix(), rhs_, body_rotation, linear, &update_);
     summary.linear_iterations += solve.iterations;
@@ -566,13 +599,24 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
       return summary;
     }
     const bool small = full_step <= tolerance;
-    const double friction_limit =
-        dynamic && !use_friction_iterate_ ? FrictionStepLimit(v_next_, update_) : 1.0;
-    const double step = small ? 1.0 : std::min(ContactStepLimit(u_next_, update_), friction_limit);
-    if (use_friction_iterate_) v_before_ = v_next_;
+    const double friction_limit = dynamic && !use_friction_iterate_
+                                      ? FrictionStepLimit(*step_v_, update_, motion_scale)
+                                      : 1.0;
+    const double step =
+        small ? 1.0 : std::min(ContactStepLimit(*step_u_, update_, motion_scale), friction_limit);
+    if (use_friction_iterate_) v_before_ = *step_v_;
     u_next_ += step * update_;
     if (dynamic) NewmarkKinematics(u_next_, &v_next_, &a_next_);
-    if (use_friction_iterate_) AdvanceFrictionIterate(v_before_, v_next_);
+    if (use_friction_iterate_) {
+      // The friction law acts at the evaluation point's velocity.
+      if (UsesGeneralizedAlpha()) {
+        const double alpha_f = options_.generalized_alpha_f;
+        alpha_v_ = (1.0 - alpha_f) * v_next_ + alpha_f * state_.v;
+        AdvanceFrictionIterate(v_before_, alpha_v_);
+      } else {
+        AdvanceFrictionIterate(v_before_, v_next_);
+      }
+    }
     summary.newton_iterations = it + 1;
     summary.max_update = step * full_step;
     // A converged update needs no new assembly: the state is final.
@@ -580,10 +624,10 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
       summary.converged = true;
       break;
     }
-    body_rotation = Assemble(mode, u_next_, v_next_, a_next_, /*residual_only=*/true);
+    body_rotation = assemble(/*residual_only=*/true, /*reuse_rotations=*/false);
     residual_norm = residual_.norm();
     if (!std::isfinite(residual_norm)) break;
-    rhs_ = -residual_;
+    rhs_ = (-1.0 / motion_scale) * residual_;
     solver_.Precondition(rhs_, body_rotation, &update_);
     ++summary.linear_iterations;
     const double estimate = update_.lpNorm<Eigen::Infinity>();
@@ -595,8 +639,7 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
       break;
     }
     if (it + 1 < options_.max_newton_iterations) {
-      body_rotation = Assemble(mode, u_next_, v_next_, a_next_, /*residual_only=*/false,
-                               /*reuse_rotations=*/true);
+      body_rotation = assemble(/*residual_only=*/false, /*reuse_rotations=*/true);
     }
   }
   if (!std::isfinite(residual_norm)) {
@@ -616,10 +659,10 @@ void Simulator::EvaluateStepResidual(const Eigen::VectorXd& u_next, Eigen::Vecto
   Eigen::VectorXd v(u_next.size()), a(u_next.size());
   NewmarkKinematics(u_next, &v, &a);
   newton_tangent_ = false;
-  Assemble(Mode::kDynamic, u_next, v, a);
+  AssembleStep(u_next, v, a);
   newton_tangent_ = true;
   if (residual) *residual = residual_;
-  if (jacobian) *jacobian = assembler_.matrix();
+  if (jacobian) *jacobian = (1.0 - options_.generalized_alpha_f) * assembler_.matrix();
 }
 
 void Simulator::AdvanceFrictionIterate(const Eigen::VectorXd& v, const Eigen::VectorXd& v_new) {
@@ -658,7 +701,8 @@ void Simulator::UpdateLaggedNormalForces() {
   }
 }
 
-double Simulator::ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update) const {
+double Simulator::ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update,
+                                   double motion_scale) const {
   if (!parameters_.ground) return 1.0;
   constexpr double kMaxPenetrationStep = 4.0;  // contact smoothing lengths
   constexpr double kMinStep = 1.0 / 64.0;
@@ -666,7 +710,7 @@ double Simulator::ContactStepLimit(const Eigen::VectorXd& u, const Eigen::Vector
   double step = 1.0;
   for (int p = 0; p < force_embedding_.NumPoints(); ++p) {
     const Eigen::Vector3d move = force_embedding_.Interpolate(mesh_, update, p);
-    const double change = contact_.plane.normal.dot(move);
+    const double change = motion_scale * contact_.plane.normal.dot(move);
     if (change >= 0.0) continue;
     const double d = contact_.plane.SignedDistance(force_embedding_.rest_positions[p] +
                                                    force_embedding_.Interpolate(mesh_, u, p));
@@ -676,12 +720,14 @@ double Simulator::ContactStepLimit(const Eigen::VectorXd& u, const Eigen::Vector
   return std::max(step, kMinStep);
 }
 
-double Simulator::FrictionStepLimit(const Eigen::VectorXd& v, const Eigen::VectorXd& update) const {
+double Simulator::FrictionStepLimit(const Eigen::VectorXd& v, const Eigen::VectorXd& update,
+                                    double motion_scale) const {
   if (!parameters_.ground || parameters_.friction_coefficient <= 0.0) return 1.0;
   constexpr double kMaxReversal = 4.0;  // friction velocity scales past zero slip
   constexpr double kMinStep = 1.0 / 64.0;
   const double eps = contact_.friction_velocity_scale;
-  const double dv_du = options_.newmark_gamma / (options_.newmark_beta * options_.time_step);
+  const double dv_du =
+      motion_scale * options_.newmark_gamma / (options_.newmark_beta * options_.time_step);
   const Eigen::Vector3d& n = contact_.plane.normal;
   double step = 1.0;
   for (int p = 0; p < force_embedding_.NumPoints(); ++p) {

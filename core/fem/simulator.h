@@ -137,6 +137,21 @@ class Simulator {
   Eigen::Matrix3d Assemble(Mode mode, const Eigen::VectorXd& u, const Eigen::VectorXd& v,
                            const Eigen::VectorXd& a, bool residual_only = false,
                            bool reuse_rotations = false);
+  // Assemble for a dynamic step from state_ to the end-of-step (u, v, a): at the
+  // generalized-alpha point (u_f, v_f, a_m), which is kept in step_u_, step_v_, step_a_ (the
+  // arguments themselves under plain Newmark). The residual is r; the matrix is
+  // (dr/du) / (1 - alpha_f), whose mass term Assemble scales accordingly.
+  Eigen::Matrix3d AssembleStep(const Eigen::VectorXd& u, const Eigen::VectorXd& v,
+                               const Eigen::VectorXd& a, bool residual_only = false,
+                               bool reuse_rotations = false);
+  bool UsesGeneralizedAlpha() const {
+    return options_.generalized_alpha_m != 0.0 || options_.generalized_alpha_f != 0.0;
+  }
+  // The generalized-alpha evaluation point of the last AssembleStep.
+  const Eigen::VectorXd* step_u_ = nullptr;
+  const Eigen::VectorXd* step_v_ = nullptr;
+  const Eigen::VectorXd* step_a_ = nullptr;
+  Eigen::VectorXd alpha_u_, alpha_v_, alpha_a_;
   // Coefficients of one assembly shared by all elements.
   struct ElementTerms {
     bool dynamic = false;
@@ -152,11 +167,14 @@ class Simulator {
   void AssembleElement(int e, const ElementTerms& terms, const Eigen::VectorXd& u,
                        const Eigen::VectorXd& v);
   // Largest fraction of a Newton update (<= 1) that keeps every surface point above
-  // min(its distance, 0) - 4 contact smoothing lengths.
-  double ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update) const;
+  // min(its distance, 0) - 4 contact smoothing lengths; u is where contact is evaluated, which
+  // moves by motion_scale times the update (1 - alpha_f).
+  double ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update,
+                          double motion_scale) const;
   // Largest fraction of a Newton update (<= 1) that reverses no contact point's slip by more than
-  // 4 friction velocity scales.
-  double FrictionStepLimit(const Eigen::VectorXd& v, const Eigen::VectorXd& update) const;
+  // 4 friction velocity scales (v and motion_scale as above).
+  double FrictionStepLimit(const Eigen::VectorXd& v, const Eigen::VectorXd& update,
+                           double motion_scale) const;
   void NewmarkKinematics(const Eigen::VectorXd& u, Eigen::VectorXd* v, Eigen::VectorXd* a) const;
   Eigen::VectorXd InitialAcceleration(const Eigen::VectorXd& v);
   // Mass, element stiffness and contact law from parameters_; refactorises the reference.

@@ -199,8 +199,12 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
   SetState(previous);
   UpdateLaggedNormalForces();
   newton_tangent_ = false;
-  const Eigen::Matrix3d rotation = Assemble(Mode::kDynamic, next.u, next.v, next.a);
+  const Eigen::Matrix3d rotation = AssembleStep(next.u, next.v, next.a);
   newton_tangent_ = true;
+  // The assembled matrix is J / (1 - alpha_f) (see AssembleStep): the solve below gives
+  // (1 - alpha_f) lambda.
+  const double alpha_m = options_.generalized_alpha_m;
+  const double alpha_f = options_.generalized_alpha_f;
 
   Eigen::VectorXd lambda = Eigen::VectorXd::Zero(3 * n);
   if (!rhs.isZero(0.0)) {
@@ -232,20 +236,44 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
     if (solver_.RefactorPays()) (void)solver_.Factorize(jacobian, rotation);
   }
   adjoint_guess_ = lambda;
+  const bool generalized_alpha = UsesGeneralizedAlpha();
+  // (d r / d u_f)^T lambda from the matrix J' = dr/du_f + dv_du dr/dv_f + c M (c: Assemble's
+  // inertia coefficient), less its velocity and inertia parts below.
+  Eigen::VectorXd position_adjoint;
+  if (generalized_alpha) {
+    lambda /= 1.0 - alpha_f;
+    position_adjoint = assembler_.matrix().transpose() * lambda;
+  }
 
+  // The residual holds at the evaluation point (u_f, v_f, a_m) of AssembleStep.
   Eigen::VectorXd velocity_adjoint, previous_adjoint;
-  ResidualAdjoint(next.u, next.v, next.a, previous.u, lambda, &velocity_adjoint, &previous_adjoint,
-                  gradient, /*rotations_current=*/true);
+  ResidualAdjoint(*step_u_, *step_v_, *step_a_, previous.u, lambda, &velocity_adjoint,
+                  &previous_adjoint, gradient, /*rotations_current=*/true);
 
   // Explicit dependence of V and A on the previous state, with the residual's share
-  // (dr/dv)^T lambda and (dr/da)^T lambda = M lambda subtracted.
-  Eigen::VectorXd v_bar = adjoint->v - velocity_adjoint;
+  // (dr/dv)^T lambda = (1 - alpha_f) (dr/dv_f)^T lambda and
+  // (dr/da)^T lambda = (1 - alpha_m) M lambda subtracted.
+  Eigen::VectorXd v_bar = adjoint->v - (1.0 - alpha_f) * velocity_adjoint;
   Eigen::VectorXd a_bar = adjoint->a;
-  for (int i = 0; i < n; ++i) a_bar.segment<3>(3 * i) -= mass_[i] * lambda.segment<3>(3 * i);
+  for (int i = 0; i < n; ++i)
+    a_bar.segment<3>(3 * i) -= (1.0 - alpha_m) * mass_[i] * lambda.segment<3>(3 * i);
   const Eigen::VectorXd w = a_bar + (gamma * dt) * v_bar;  // adjoint flowing into A
   adjoint->u = previous_adjoint - da_du * w;
   adjoint->v = v_bar - (dt * da_du) * w;
   adjoint->a = (dt * (1.0 - gamma)) * v_bar - ((0.5 - beta) / beta) * w;
+  if (generalized_alpha) {
+    // The evaluation point's own dependence on the previous state: u_f and v_f through alpha_f,
+    // a_m through alpha_m.
+    const double inertia = (1.0 - alpha_m) / (1.0 - alpha_f) * da_du;
+    position_adjoint -= dv_du * velocity_adjoint;
+    for (int i = 0; i < n; ++i) {
+      const Eigen::Vector3d m_lambda = mass_[i] * lambda.segment<3>(3 * i);
+      position_adjoint.segment<3>(3 * i) -= inertia * m_lambda;
+      adjoint->a.segment<3>(3 * i) -= alpha_m * m_lambda;
+    }
+    adjoint->u -= alpha_f * position_adjoint;
+    adjoint->v -= alpha_f * velocity_adjoint;
+  }
   for (int i = 0; i < n; ++i) {
     if (!fixed_[i]) continue;
     adjoint->u.segment<3>(3 * i).setZero();

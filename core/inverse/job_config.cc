@@ -27,6 +27,7 @@ constexpr auto kJobConfigKeys = std::to_array<std::string_view>({
     "cells",
     "cell_size",
     "substeps",
+    "rho_infinity",
     "frames",
     "heldout_every",
     "starts",
@@ -432,6 +433,12 @@ Result<JobConfig> JobConfigFromJson(const Json& j) {
                                                        "must be \"auto\" or an integer >= 1"));
     }
   }
+  if (j.contains("rho_infinity")) {
+    const Json& value = j["rho_infinity"];
+    if (!value.is_number() || !(value.get<double>() >= 0.0 && value.get<double>() <= 1.0))
+      return json::Invalid("rho_infinity", value, "must be a number in [0, 1]");
+    config.rho_infinity = value.get<double>();
+  }
   if (j.contains("frames")) {
     SOFTID_ASSIGN_OR_RETURN(config.frames, ParseFrames(j["frames"]));
   }
@@ -569,6 +576,7 @@ Json ToJson(const JobConfig& config) {
   };
   // 0 means "absent" (use cells); written only when set so the round trip keeps it absent.
   if (config.cell_size != 0.0) j["cell_size"] = config.cell_size;
+  if (config.rho_infinity != JobConfig::kNewmark) j["rho_infinity"] = config.rho_infinity;
   return j;
 }
 

@@ -16,6 +16,8 @@
 //     "cells": 16,               // cells along the longest side of the mesh, >= 2
 //     "cell_size": 0.005,        // [m] > 0; overrides "cells" when present
 //     "substeps": "auto",        // steps per camera frame, >= 1, or "auto" (step doubling)
+//     "rho_infinity": 0.8,       // generalized-alpha time stepping with this high-frequency
+//                                // spectral radius in [0, 1]; absent: Newmark (gamma 0.6)
 //     "frames": {"first": 0, "last": -1},  // capture frames fitted; last -1 = the capture's last
 //     "heldout_every": 0,        // every k-th frame is held out for validation; 0 = none
 //     "starts": 4, "threads": 0, "seed": 1,
@@ -155,7 +157,12 @@ struct JobConfig {
   // capture made at 16 substeps: 2 substeps at 60 fps put Young's modulus 33 % off, 4 substeps
   // 2.4-3.8 %).
   int substeps = kAutoSubsteps;  // [-], >= 1 or kAutoSubsteps
-  FrameRange frames;             // all frames by default
+  // Time integration: generalized-alpha with this high-frequency spectral radius
+  // (fem::SimulationOptions::UseGeneralizedAlpha), or kNewmark (absent from JSON): the default
+  // Newmark parameters. Must match how the motion is best resolved, not how a capture was made.
+  static constexpr double kNewmark = -1.0;
+  double rho_infinity = kNewmark;  // [-], in [0, 1] or kNewmark
+  FrameRange frames;               // all frames by default
   // Every k-th fitted frame (frames.first + k - 1, frames.first + 2k - 1, ...) is held out of the
   // fit and only reported, to validate the result on data it did not see. 0 = none; 1 is
   // rejected because it would hold out every frame.

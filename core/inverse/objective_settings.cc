@@ -9,11 +9,12 @@ fem::SimulationOptions SimulationOptionsFor(const JobConfig& config) {
   fem::SimulationOptions simulation;
   simulation.cells_along_longest_side = config.cells;
   simulation.cell_size = config.cell_size;
+  if (config.rho_infinity != JobConfig::kNewmark)
+    simulation.UseGeneralizedAlpha(config.rho_infinity);
   // The band must fit in the padding, and the cost must be truncated where the grid cuts it off.
-  simulation.padding_cells =
-      std::max({simulation.padding_cells,
-                static_cast<int>(std::ceil(config.cost.truncation_cells)) + 1,
-                config.cost.band_cells});
+  simulation.padding_cells = std::max(
+      {simulation.padding_cells, static_cast<int>(std::ceil(config.cost.truncation_cells)) + 1,
+       config.cost.band_cells});
   return simulation;
 }
 

@@ -42,6 +42,10 @@ void SceneFlags::Register(CLI::App* app) {
   app->add_option("--cells", cells, "grid cells along the longest side")->capture_default_str();
   app->add_option("--cell-size", cell_size, "grid cell size [m] (overrides --cells)");
   app->add_option("--substeps", substeps, "time steps per frame")->capture_default_str();
+  app->add_option("--rho-infinity", rho_infinity,
+                  "generalized-alpha time stepping with this high-frequency spectral radius in "
+                  "[0, 1] (default: Newmark, gamma 0.6)")
+      ->check(CLI::Range(0.0, 1.0));
   app->add_option("--fps", fps, "frames per second")->capture_default_str();
   app->add_option("--duration", duration, "seconds to simulate (default: the scene's)");
 }
@@ -126,6 +130,7 @@ scenes::RunOptions SceneFlags::BuildRunOptions() const {
   scenes::RunOptions run;
   run.simulation.cells_along_longest_side = cells;
   run.simulation.cell_size = cell_size;
+  if (rho_infinity >= 0.0) run.simulation.UseGeneralizedAlpha(rho_infinity);
   run.fps = fps;
   run.substeps_per_frame = substeps;
   run.duration = duration;

@@ -28,6 +28,7 @@ struct SceneFlags {
   // Simulation.
   int cells = 20;
   double cell_size = 0.0;
+  double rho_infinity = -1.0;  // < 0: Newmark; else generalized-alpha (SimulationOptions)
   int substeps = 4;
   double fps = 60.0;
   std::optional<double> duration;

@@ -95,6 +95,8 @@ Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& 
         {"time_step", 1.0 / (options.run.fps * options.run.substeps_per_frame)},
         {"newmark_beta", options.run.simulation.newmark_beta},
         {"newmark_gamma", options.run.simulation.newmark_gamma},
+        {"generalized_alpha_m", options.run.simulation.generalized_alpha_m},
+        {"generalized_alpha_f", options.run.simulation.generalized_alpha_f},
         {"elements", summary.num_elements},
         {"simulated_mass", summary.mass},
         {"noise",

@@ -50,8 +50,16 @@ struct TrajectoryLoss {
   }
 };
 
-SimulationOptions TightOptions() {
+// The time integrator under test: plain Newmark (the default options) or generalized-alpha with
+// this high-frequency spectral radius.
+struct Integrator {
+  const char* name;
+  double rho_infinity;  // < 0: the default Newmark parameters
+};
+
+SimulationOptions TightOptions(const Integrator& integrator) {
   SimulationOptions options;
+  if (integrator.rho_infinity >= 0.0) options.UseGeneralizedAlpha(integrator.rho_infinity);
   options.cells_along_longest_side = 4;
   options.time_step = 1.0 / 200.0;
   options.newton_tolerance = 1e-11;
@@ -107,7 +115,9 @@ geometry::TriangleMesh SmallBox() {
   return geometry::MakeBox(Eigen::Vector3d(0.1, 0.07, 0.05), 0.025);
 }
 
-TEST(Adjoint, FreeFlightGradientMatchesFiniteDifferences) {
+class Adjoint : public testing::TestWithParam<Integrator> {};
+
+TEST_P(Adjoint, FreeFlightGradientMatchesFiniteDifferences) {
   PhysicalParameters p;
   p.youngs_modulus = 2e4;
   p.poisson_ratio = 0.32;
@@ -121,7 +131,7 @@ TEST(Adjoint, FreeFlightGradientMatchesFiniteDifferences) {
   p.drag_quadratic = 1.5;
   p.stiffness_field.kind = StiffnessField::Kind::kLinear;
   p.stiffness_field.log_gradient = Eigen::Vector3d(3.0, -2.0, 1.0);
-  Simulator sim(SmallBox(), p, TightOptions());
+  Simulator sim(SmallBox(), p, TightOptions(GetParam()));
   const TrajectoryLoss loss = RandomLoss(3 * sim.hex_mesh().NumNodes(), 12, 7);
   const ParameterGradient g = loss.Gradient(sim, p);
 
@@ -163,7 +173,7 @@ TEST(Adjoint, FreeFlightGradientMatchesFiniteDifferences) {
       1e-4, Eigen::Vector3d::Map(g.stiffness_field.data()).dot(direction));
 }
 
-TEST(Adjoint, ContactAndFrictionGradientMatchesFiniteDifferences) {
+TEST_P(Adjoint, ContactAndFrictionGradientMatchesFiniteDifferences) {
   PhysicalParameters p;
   p.youngs_modulus = 3e4;
   p.poisson_ratio = 0.3;
@@ -178,7 +188,7 @@ TEST(Adjoint, ContactAndFrictionGradientMatchesFiniteDifferences) {
       {Eigen::AlignedBox3d(Eigen::Vector3d(-1, -1, -1), Eigen::Vector3d(0.0, 1, 1)), 2.0});
   // Smooth friction and contact knees, so that Newton converges to round-off at every step and the
   // finite differences see the same discrete solution as the adjoint.
-  SimulationOptions options = TightOptions();
+  SimulationOptions options = TightOptions(GetParam());
   options.friction_velocity_scale = 0.05;
   options.contact_smoothing = 2e-3;
   Simulator sim(SmallBox(), p, options);
@@ -261,6 +271,13 @@ TEST(Adjoint, ContactAndFrictionGradientMatchesFiniteDifferences) {
       << "friction at mu = 0";
   EXPECT_GT(std::abs(gq.friction_coefficient), 0.0);
 }
+
+INSTANTIATE_TEST_SUITE_P(Integrators, Adjoint,
+                         testing::Values(Integrator{"Newmark", -1.0},
+                                         Integrator{"GeneralizedAlpha", 0.8}),
+                         [](const testing::TestParamInfo<Integrator>& info) {
+                           return std::string(info.param.name);
+                         });
 
 }  // namespace
 }  // namespace softid::fem

@@ -10,6 +10,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/inverse/objective_settings.h"
+
 namespace softid::inverse {
 namespace {
 
@@ -69,6 +71,7 @@ json FullConfig() {
     "cells": 24,
     "cell_size": 0.004,
     "substeps": 3,
+    "rho_infinity": 0.8,
     "frames": {"first": 2, "last": 40},
     "heldout_every": 5,
     "starts": 8,
@@ -122,6 +125,8 @@ TEST(JobConfig, DefaultsFromEmptyObject) {
   EXPECT_EQ(config->cells, 16);
   EXPECT_EQ(config->cell_size, 0.0);
   EXPECT_EQ(config->substeps, kAutoSubsteps);
+  EXPECT_EQ(config->rho_infinity, JobConfig::kNewmark);
+  EXPECT_EQ(SimulationOptionsFor(*config).generalized_alpha_f, 0.0);
   EXPECT_EQ(config->frames.first, 0);
   EXPECT_EQ(config->frames.last, -1);
   EXPECT_EQ(config->heldout_every, 0);
@@ -168,6 +173,13 @@ TEST(JobConfig, FullConfigRoundTrips) {
   EXPECT_EQ(config->cells, 24);
   EXPECT_EQ(config->cell_size, 0.004);
   EXPECT_EQ(config->substeps, 3);
+  EXPECT_EQ(config->rho_infinity, 0.8);
+  // rho = 0.8: alpha_m = 1/3, alpha_f = 4/9 (Chung & Hulbert), gamma = 1/2 - alpha_m + alpha_f.
+  const fem::SimulationOptions simulation = SimulationOptionsFor(*config);
+  EXPECT_NEAR(simulation.generalized_alpha_m, 1.0 / 3.0, 1e-15);
+  EXPECT_NEAR(simulation.generalized_alpha_f, 4.0 / 9.0, 1e-15);
+  EXPECT_NEAR(simulation.newmark_gamma, 0.5 - 1.0 / 3.0 + 4.0 / 9.0, 1e-15);
+  EXPECT_TRUE(simulation.Validate().ok());
   EXPECT_EQ(config->frames, (FrameRange{2, 40}));
   EXPECT_EQ(config->heldout_every, 5);
   EXPECT_EQ(config->starts, 8);
@@ -352,6 +364,10 @@ TEST(JobConfigRejects, NumericalSettings) {
                 "substeps = 0: ", "must be \"auto\" or an integer >= 1");
   ExpectInvalid(json::parse(R"({"substeps": "fast"})"),
                 "substeps = \"fast\": ", "must be \"auto\" or an integer >= 1");
+  ExpectInvalid(json::parse(R"({"rho_infinity": 1.5})"),
+                "rho_infinity = 1.5: ", "must be a number in [0, 1]");
+  ExpectInvalid(json::parse(R"({"rho_infinity": "newmark"})"),
+                "rho_infinity = \"newmark\": ", "must be a number in [0, 1]");
   ExpectInvalid(json::parse(R"({"starts": 0})"), "starts = 0: ", "must be an integer >= 1");
   ExpectInvalid(json::parse(R"({"threads": -1})"), "threads = -1: ", "must be an integer >= 0");
   ExpectInvalid(json::parse(R"({"seed": -3})"), "seed = -3: ", "must be an integer >= 0");
