@@ -319,11 +319,13 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
 
   // Surface forces: contact, friction, drag.
   if (has_surface_forces_) {
+    const Eigen::VectorXd& surface_u = surface_u_ != nullptr ? *surface_u_ : u;
+    const Eigen::VectorXd& surface_v = surface_v_ != nullptr ? *surface_v_ : v;
     for (int p = 0; p < force_embedding_.NumPoints(); ++p) {
       const Eigen::Vector3d xp =
-          force_embedding_.rest_positions[p] + force_embedding_.Interpolate(mesh_, u, p);
-      const Eigen::Vector3d vp =
-          dynamic ? force_embedding_.Interpolate(mesh_, v, p) : Eigen::Vector3d::Zero().eval();
+          force_embedding_.rest_positions[p] + force_embedding_.Interpolate(mesh_, surface_u, p);
+      const Eigen::Vector3d vp = dynamic ? force_embedding_.Interpolate(mesh_, surface_v, p)
+                                         : Eigen::Vector3d::Zero().eval();
       PointForce f;
       if (parameters_.ground) {
         f = GroundContactForce(contact_, surface_areas_[p], xp, vp,
@@ -344,6 +346,7 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
       // iteration) when light corner nodes rebound. GMRES does not need definiteness, and the
       // preconditioner factors the symmetric part with a shift fallback.
       jacobian += f.stiffness_indefinite;
+      jacobian *= surface_jacobian_scale_;
       const int e = force_embedding_.element[p];
       const auto& w = force_embedding_.weights[p];
       const auto& nodes = mesh_.element_nodes[e];
@@ -473,8 +476,16 @@ Eigen::Matrix3d Simulator::AssembleStep(const Eigen::VectorXd& u, const Eigen::V
     step_u_ = &alpha_u_;
     step_v_ = &alpha_v_;
     step_a_ = &alpha_a_;
+    surface_u_ = &u;
+    surface_v_ = &v;
+    surface_jacobian_scale_ = 1.0 / (1.0 - alpha_f);
   }
-  return Assemble(Mode::kDynamic, *step_u_, *step_v_, *step_a_, residual_only, reuse_rotations);
+  const Eigen::Matrix3d rotation =
+      Assemble(Mode::kDynamic, *step_u_, *step_v_, *step_a_, residual_only, reuse_rotations);
+  surface_u_ = nullptr;
+  surface_v_ = nullptr;
+  surface_jacobian_scale_ = 1.0;
+  return rotation;
 }
 
 LinearSolver::Symmetry Simulator::TangentSymmetry(Mode mode) const {
@@ -550,8 +561,7 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
           contact_, force_embedding_.Interpolate(mesh_, state_.v, p), lagged_normal_force_[p]);
     }
   }
-  // The evaluation point moves by (1 - alpha_f) times an update, and Newton's matrix is the
-  // residual's Jacobian divided by that (see AssembleStep).
+  // Newton's matrix is the residual's Jacobian divided by 1 - alpha_f (see AssembleStep).
   const double motion_scale = dynamic ? 1.0 - options_.generalized_alpha_f : 1.0;
   const auto assemble = [&](bool residual_only, bool reuse_rotations) {
     if (dynamic) return AssembleStep(u_next_, v_next_, a_next_, residual_only, reuse_rotations);
@@ -599,24 +609,13 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
       return summary;
     }
     const bool small = full_step <= tolerance;
-    const double friction_limit = dynamic && !use_friction_iterate_
-                                      ? FrictionStepLimit(*step_v_, update_, motion_scale)
-                                      : 1.0;
-    const double step =
-        small ? 1.0 : std::min(ContactStepLimit(*step_u_, update_, motion_scale), friction_limit);
-    if (use_friction_iterate_) v_before_ = *step_v_;
+    const double friction_limit =
+        dynamic && !use_friction_iterate_ ? FrictionStepLimit(v_next_, update_) : 1.0;
+    const double step = small ? 1.0 : std::min(ContactStepLimit(u_next_, update_), friction_limit);
+    if (use_friction_iterate_) v_before_ = v_next_;
     u_next_ += step * update_;
     if (dynamic) NewmarkKinematics(u_next_, &v_next_, &a_next_);
-    if (use_friction_iterate_) {
-      // The friction law acts at the evaluation point's velocity.
-      if (UsesGeneralizedAlpha()) {
-        const double alpha_f = options_.generalized_alpha_f;
-        alpha_v_ = (1.0 - alpha_f) * v_next_ + alpha_f * state_.v;
-        AdvanceFrictionIterate(v_before_, alpha_v_);
-      } else {
-        AdvanceFrictionIterate(v_before_, v_next_);
-      }
-    }
+    if (use_friction_iterate_) AdvanceFrictionIterate(v_before_, v_next_);
     summary.newton_iterations = it + 1;
     summary.max_update = step * full_step;
     // A converged update needs no new assembly: the state is final.
@@ -701,8 +700,7 @@ void Simulator::UpdateLaggedNormalForces() {
   }
 }
 
-double Simulator::ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update,
-                                   double motion_scale) const {
+double Simulator::ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update) const {
   if (!parameters_.ground) return 1.0;
   constexpr double kMaxPenetrationStep = 4.0;  // contact smoothing lengths
   constexpr double kMinStep = 1.0 / 64.0;
@@ -710,7 +708,7 @@ double Simulator::ContactStepLimit(const Eigen::VectorXd& u, const Eigen::Vector
   double step = 1.0;
   for (int p = 0; p < force_embedding_.NumPoints(); ++p) {
     const Eigen::Vector3d move = force_embedding_.Interpolate(mesh_, update, p);
-    const double change = motion_scale * contact_.plane.normal.dot(move);
+    const double change = contact_.plane.normal.dot(move);
     if (change >= 0.0) continue;
     const double d = contact_.plane.SignedDistance(force_embedding_.rest_positions[p] +
                                                    force_embedding_.Interpolate(mesh_, u, p));
@@ -720,14 +718,12 @@ double Simulator::ContactStepLimit(const Eigen::VectorXd& u, const Eigen::Vector
   return std::max(step, kMinStep);
 }
 
-double Simulator::FrictionStepLimit(const Eigen::VectorXd& v, const Eigen::VectorXd& update,
-                                    double motion_scale) const {
+double Simulator::FrictionStepLimit(const Eigen::VectorXd& v, const Eigen::VectorXd& update) const {
   if (!parameters_.ground || parameters_.friction_coefficient <= 0.0) return 1.0;
   constexpr double kMaxReversal = 4.0;  // friction velocity scales past zero slip
   constexpr double kMinStep = 1.0 / 64.0;
   const double eps = contact_.friction_velocity_scale;
-  const double dv_du =
-      motion_scale * options_.newmark_gamma / (options_.newmark_beta * options_.time_step);
+  const double dv_du = options_.newmark_gamma / (options_.newmark_beta * options_.time_step);
   const Eigen::Vector3d& n = contact_.plane.normal;
   double step = 1.0;
   for (int p = 0; p < force_embedding_.NumPoints(); ++p) {

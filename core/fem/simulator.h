@@ -137,10 +137,13 @@ class Simulator {
   Eigen::Matrix3d Assemble(Mode mode, const Eigen::VectorXd& u, const Eigen::VectorXd& v,
                            const Eigen::VectorXd& a, bool residual_only = false,
                            bool reuse_rotations = false);
-  // Assemble for a dynamic step from state_ to the end-of-step (u, v, a): at the
-  // generalized-alpha point (u_f, v_f, a_m), which is kept in step_u_, step_v_, step_a_ (the
-  // arguments themselves under plain Newmark). The residual is r; the matrix is
-  // (dr/du) / (1 - alpha_f), whose mass term Assemble scales accordingly.
+  // Assemble for a dynamic step from state_ to the end-of-step (u, v, a): elastic, damping and
+  // inertial forces at the generalized-alpha point (u_f, v_f, a_m), kept in step_u_, step_v_,
+  // step_a_ (the arguments themselves under plain Newmark); surface forces (contact, friction,
+  // drag) at the end of the step, (u, v). Friction at v_f would hold v_f at zero in stick, so
+  // the end velocity would flip sign every step (v' = -alpha_f / (1 - alpha_f) v): a block on a
+  // shallow ramp crept at 9x its creep speed. The residual is r; the matrix is
+  // (dr/du) / (1 - alpha_f), Assemble scaling the inertia and surface terms accordingly.
   Eigen::Matrix3d AssembleStep(const Eigen::VectorXd& u, const Eigen::VectorXd& v,
                                const Eigen::VectorXd& a, bool residual_only = false,
                                bool reuse_rotations = false);
@@ -152,6 +155,11 @@ class Simulator {
   const Eigen::VectorXd* step_v_ = nullptr;
   const Eigen::VectorXd* step_a_ = nullptr;
   Eigen::VectorXd alpha_u_, alpha_v_, alpha_a_;
+  // Where Assemble evaluates the surface forces when not at its (u, v) (generalized-alpha: the
+  // end of the step), and the factor of their Jacobian blocks, 1 / (1 - alpha_f).
+  const Eigen::VectorXd* surface_u_ = nullptr;
+  const Eigen::VectorXd* surface_v_ = nullptr;
+  double surface_jacobian_scale_ = 1.0;
   // Coefficients of one assembly shared by all elements.
   struct ElementTerms {
     bool dynamic = false;
@@ -167,14 +175,11 @@ class Simulator {
   void AssembleElement(int e, const ElementTerms& terms, const Eigen::VectorXd& u,
                        const Eigen::VectorXd& v);
   // Largest fraction of a Newton update (<= 1) that keeps every surface point above
-  // min(its distance, 0) - 4 contact smoothing lengths; u is where contact is evaluated, which
-  // moves by motion_scale times the update (1 - alpha_f).
-  double ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update,
-                          double motion_scale) const;
+  // min(its distance, 0) - 4 contact smoothing lengths.
+  double ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update) const;
   // Largest fraction of a Newton update (<= 1) that reverses no contact point's slip by more than
-  // 4 friction velocity scales (v and motion_scale as above).
-  double FrictionStepLimit(const Eigen::VectorXd& v, const Eigen::VectorXd& update,
-                           double motion_scale) const;
+  // 4 friction velocity scales.
+  double FrictionStepLimit(const Eigen::VectorXd& v, const Eigen::VectorXd& update) const;
   void NewmarkKinematics(const Eigen::VectorXd& u, Eigen::VectorXd* v, Eigen::VectorXd* a) const;
   Eigen::VectorXd InitialAcceleration(const Eigen::VectorXd& v);
   // Mass, element stiffness and contact law from parameters_; refactorises the reference.
@@ -184,10 +189,21 @@ class Simulator {
   // lambda and previous_adjoint = -(dr/du_previous)^T lambda, and adds -lambda^T dr/dparameters
   // to `gradient`. (dr/da)^T lambda is M lambda. rotations_current: element_rotation_ holds the
   // rotations at u (an assembly at u came last), which are then not recomputed.
+  // The surface forces are evaluated at `surface` (u, v) when given (generalized-alpha: the end
+  // of the step); their velocity adjoint then goes to surface->velocity_adjoint, and
+  // surface->jacobian_adjoint receives (dr_s/du + dv_du dr_s/dv)^T lambda, their share of the
+  // step matrix (unscaled).
+  struct SurfaceAdjoint {
+    const Eigen::VectorXd* u = nullptr;
+    const Eigen::VectorXd* v = nullptr;
+    Eigen::VectorXd velocity_adjoint;
+    Eigen::VectorXd jacobian_adjoint;
+  };
   void ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd& v, const Eigen::VectorXd& a,
                        const Eigen::VectorXd& u_previous, const Eigen::VectorXd& lambda,
                        Eigen::VectorXd* velocity_adjoint, Eigen::VectorXd* previous_adjoint,
-                       ParameterGradient* gradient, bool rotations_current = false);
+                       ParameterGradient* gradient, bool rotations_current = false,
+                       SurfaceAdjoint* surface = nullptr);
   // Per element the shear part of the stiffness, ElementStiffness(weights, h, 0, 1), without the
   // stiffness field's scale: d K / d poisson_ratio needs it. Built on the first backward pass.
   void BuildShearStiffness();

@@ -37,7 +37,7 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
                                 const Eigen::VectorXd& a, const Eigen::VectorXd& u_previous,
                                 const Eigen::VectorXd& lambda, Eigen::VectorXd* velocity_adjoint,
                                 Eigen::VectorXd* previous_adjoint, ParameterGradient* gradient,
-                                bool rotations_current) {
+                                bool rotations_current, SurfaceAdjoint* surface) {
   BuildShearStiffness();
   const PhysicalParameters& p = parameters_;
   const double h = mesh_.CellSize();
@@ -130,15 +130,24 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
   // Surface points: r_i -= w_i f_p, so -lambda^T dr/dq = lambda_p . df_p/dq with
   // lambda_p = sum_i w_i lambda_i.
   double d_stiffness = 0.0;
+  const Eigen::VectorXd& surface_u = surface != nullptr && surface->u != nullptr ? *surface->u : u;
+  const Eigen::VectorXd& surface_v = surface != nullptr && surface->v != nullptr ? *surface->v : v;
+  Eigen::VectorXd* surface_velocity_adjoint = velocity_adjoint;
+  const double dv_du = options_.newmark_gamma / (options_.newmark_beta * options_.time_step);
+  if (surface != nullptr) {
+    surface->velocity_adjoint.setZero(3 * n);
+    surface->jacobian_adjoint.setZero(3 * n);
+    surface_velocity_adjoint = &surface->velocity_adjoint;
+  }
   for (int pt = 0; pt < force_embedding_.NumPoints(); ++pt) {
     const Eigen::Vector3d lambda_p = force_embedding_.Interpolate(mesh_, lambda, pt);
     if (lambda_p.isZero(0.0)) continue;
-    const Eigen::Vector3d vp = force_embedding_.Interpolate(mesh_, v, pt);
+    const Eigen::Vector3d vp = force_embedding_.Interpolate(mesh_, surface_v, pt);
     const double area = surface_areas_[pt];
     Eigen::Vector3d velocity_part = Eigen::Vector3d::Zero();  // (df/dv)^T lambda_p
     if (p.ground) {
       const Eigen::Vector3d xp =
-          force_embedding_.rest_positions[pt] + force_embedding_.Interpolate(mesh_, u, pt);
+          force_embedding_.rest_positions[pt] + force_embedding_.Interpolate(mesh_, surface_u, pt);
       const Eigen::Vector3d xp_previous =
           force_embedding_.rest_positions[pt] + force_embedding_.Interpolate(mesh_, u_previous, pt);
       const GroundForceDerivatives d =
@@ -165,7 +174,21 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
     // -(dr/dv)^T lambda = (df/dv)^T lambda_p, spread back to the nodes.
     const auto& nodes = mesh_.element_nodes[force_embedding_.element[pt]];
     const auto& w = force_embedding_.weights[pt];
-    for (int c = 0; c < 8; ++c) velocity_adjoint->segment<3>(3 * nodes[c]) -= w[c] * velocity_part;
+    for (int c = 0; c < 8; ++c)
+      surface_velocity_adjoint->segment<3>(3 * nodes[c]) -= w[c] * velocity_part;
+    if (surface != nullptr) {
+      // The point's block of the step matrix, as Assemble builds it (exact tangent).
+      Eigen::Matrix3d jacobian = drag.damping * dv_du + drag.stiffness_indefinite;
+      if (p.ground) {
+        const Eigen::Vector3d xp = force_embedding_.rest_positions[pt] +
+                                   force_embedding_.Interpolate(mesh_, surface_u, pt);
+        const PointForce f = GroundContactForce(contact_, area, xp, vp, lagged_normal_force_[pt]);
+        jacobian += f.stiffness + dv_du * f.damping + f.stiffness_indefinite;
+      }
+      const Eigen::Vector3d product = jacobian.transpose() * lambda_p;
+      for (int c = 0; c < 8; ++c)
+        surface->jacobian_adjoint.segment<3>(3 * nodes[c]) += w[c] * product;
+    }
   }
   gradient->contact_stiffness += d_stiffness;
   if (p.ground && p.contact_stiffness <= 0.0)
@@ -175,6 +198,7 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
     if (!fixed_[i]) continue;
     velocity_adjoint->segment<3>(3 * i).setZero();
     previous_adjoint->segment<3>(3 * i).setZero();
+    if (surface != nullptr) surface->velocity_adjoint.segment<3>(3 * i).setZero();
   }
 }
 
@@ -237,23 +261,28 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
   }
   adjoint_guess_ = lambda;
   const bool generalized_alpha = UsesGeneralizedAlpha();
-  // (d r / d u_f)^T lambda from the matrix J' = dr/du_f + dv_du dr/dv_f + c M (c: Assemble's
-  // inertia coefficient), less its velocity and inertia parts below.
+  // (d r_b / d u_f)^T lambda of the body forces (elastic, damping, inertia) from the matrix
+  // J' = dr_b/du_f + dv_du dr_b/dv_f + c M + S / (1 - alpha_f) (c: Assemble's inertia
+  // coefficient, S the surface forces' blocks at the end of the step), less all but the first.
   Eigen::VectorXd position_adjoint;
   if (generalized_alpha) {
     lambda /= 1.0 - alpha_f;
     position_adjoint = assembler_.matrix().transpose() * lambda;
   }
 
-  // The residual holds at the evaluation point (u_f, v_f, a_m) of AssembleStep.
+  // The body forces hold at the evaluation point (u_f, v_f, a_m) of AssembleStep, the surface
+  // forces at the end of the step.
   Eigen::VectorXd velocity_adjoint, previous_adjoint;
+  SurfaceAdjoint surface{&next.u, &next.v, {}, {}};
   ResidualAdjoint(*step_u_, *step_v_, *step_a_, previous.u, lambda, &velocity_adjoint,
-                  &previous_adjoint, gradient, /*rotations_current=*/true);
+                  &previous_adjoint, gradient, /*rotations_current=*/true,
+                  generalized_alpha ? &surface : nullptr);
 
   // Explicit dependence of V and A on the previous state, with the residual's share
-  // (dr/dv)^T lambda = (1 - alpha_f) (dr/dv_f)^T lambda and
+  // (dr/dv)^T lambda = (1 - alpha_f) (dr_b/dv_f)^T lambda + (dr_s/dv)^T lambda and
   // (dr/da)^T lambda = (1 - alpha_m) M lambda subtracted.
   Eigen::VectorXd v_bar = adjoint->v - (1.0 - alpha_f) * velocity_adjoint;
+  if (generalized_alpha) v_bar -= surface.velocity_adjoint;
   Eigen::VectorXd a_bar = adjoint->a;
   for (int i = 0; i < n; ++i)
     a_bar.segment<3>(3 * i) -= (1.0 - alpha_m) * mass_[i] * lambda.segment<3>(3 * i);
@@ -265,7 +294,7 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
     // The evaluation point's own dependence on the previous state: u_f and v_f through alpha_f,
     // a_m through alpha_m.
     const double inertia = (1.0 - alpha_m) / (1.0 - alpha_f) * da_du;
-    position_adjoint -= dv_du * velocity_adjoint;
+    position_adjoint -= dv_du * velocity_adjoint + surface.jacobian_adjoint / (1.0 - alpha_f);
     for (int i = 0; i < n; ++i) {
       const Eigen::Vector3d m_lambda = mass_[i] * lambda.segment<3>(3 * i);
       position_adjoint.segment<3>(3 * i) -= inertia * m_lambda;
