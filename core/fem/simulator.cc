@@ -562,7 +562,7 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
     }
   }
   // Newton's matrix is the residual's Jacobian divided by 1 - alpha_f (see AssembleStep).
-  const double motion_scale = dynamic ? 1.0 - options_.generalized_alpha_f : 1.0;
+  const double matrix_scale = dynamic ? 1.0 - options_.generalized_alpha_f : 1.0;
   const auto assemble = [&](bool residual_only, bool reuse_rotations) {
     if (dynamic) return AssembleStep(u_next_, v_next_, a_next_, residual_only, reuse_rotations);
     step_u_ = &u_next_;
@@ -584,7 +584,7 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
         return summary;
       }
     }
-    rhs_ = (-1.0 / motion_scale) * residual_;
+    rhs_ = (-1.0 / matrix_scale) * residual_;
     LinearSolver::Summary solve =
         solver_.Solve(assembler_.matrix(), rhs_, body_rotation, linear, &update_);
     summary.linear_iterations += solve.iterations;
@@ -626,7 +626,7 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
     body_rotation = assemble(/*residual_only=*/true, /*reuse_rotations=*/false);
     residual_norm = residual_.norm();
     if (!std::isfinite(residual_norm)) break;
-    rhs_ = (-1.0 / motion_scale) * residual_;
+    rhs_ = (-1.0 / matrix_scale) * residual_;
     solver_.Precondition(rhs_, body_rotation, &update_);
     ++summary.linear_iterations;
     const double estimate = update_.lpNorm<Eigen::Infinity>();
