@@ -565,9 +565,6 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
   const double matrix_scale = dynamic ? 1.0 - options_.generalized_alpha_f : 1.0;
   const auto assemble = [&](bool residual_only, bool reuse_rotations) {
     if (dynamic) return AssembleStep(u_next_, v_next_, a_next_, residual_only, reuse_rotations);
-    step_u_ = &u_next_;
-    step_v_ = &v_next_;
-    step_a_ = &a_next_;
     return Assemble(mode, u_next_, v_next_, a_next_, residual_only, reuse_rotations);
   };
   Eigen::Matrix3d body_rotation = assemble(/*residual_only=*/false, /*reuse_rotations=*/false);
