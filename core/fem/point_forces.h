@@ -17,6 +17,12 @@ struct PointForce {
   // (its coefficient follows the penalty's slope). Kept apart so callers see which part of the
   // tangent is not positive semi-definite; Newton and the adjoint both use the sum.
   Eigen::Matrix3d stiffness_indefinite = Eigen::Matrix3d::Zero();  // [N/m]
+
+  // The force's block of an implicit step's matrix, -df/dx - (dv/dx) df/dv with dv/dx = dv_du
+  // (the Newmark velocity's derivative): the exact tangent, indefinite part included.
+  Eigen::Matrix3d StepJacobian(double dv_du) const {
+    return stiffness + dv_du * damping + stiffness_indefinite;
+  }
 };
 
 struct ContactLaw {

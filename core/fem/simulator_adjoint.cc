@@ -178,12 +178,12 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
       surface_velocity_adjoint->segment<3>(3 * nodes[c]) -= w[c] * velocity_part;
     if (surface != nullptr) {
       // The point's block of the step matrix, as Assemble builds it (exact tangent).
-      Eigen::Matrix3d jacobian = drag.damping * dv_du + drag.stiffness_indefinite;
+      Eigen::Matrix3d jacobian = drag.StepJacobian(dv_du);
       if (p.ground) {
         const Eigen::Vector3d xp = force_embedding_.rest_positions[pt] +
                                    force_embedding_.Interpolate(mesh_, surface_u, pt);
-        const PointForce f = GroundContactForce(contact_, area, xp, vp, lagged_normal_force_[pt]);
-        jacobian += f.stiffness + dv_du * f.damping + f.stiffness_indefinite;
+        jacobian += GroundContactForce(contact_, area, xp, vp, lagged_normal_force_[pt])
+                        .StepJacobian(dv_du);
       }
       const Eigen::Vector3d product = jacobian.transpose() * lambda_p;
       for (int c = 0; c < 8; ++c)
