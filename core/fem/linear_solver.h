@@ -17,6 +17,8 @@
 
 namespace softid::fem {
 
+class ThreadTeam;
+
 class LinearSolver {
  public:
   using Matrix = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
@@ -32,6 +34,9 @@ class LinearSolver {
   };
 
   LinearSolver();
+  // The triangular solves and products with the matrix run on `team` (not owned; it must outlive
+  // the solver, or be replaced before it goes). Null: on the calling thread.
+  void SetThreadTeam(ThreadTeam* team);
   ~LinearSolver();
   LinearSolver(LinearSolver&&) noexcept;
   LinearSolver& operator=(LinearSolver&&) noexcept;
@@ -45,6 +50,10 @@ class LinearSolver {
   Status Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
                    Symmetry symmetry = Symmetry::kGeneral);
   bool HasFactor() const;
+  // Share of the factor's entries that the team's members solve concurrently in a preconditioner
+  // application (its elimination tree's subtrees); the rest (the top separators) runs on one
+  // thread. 0 without a team or a factor.
+  double ParallelShare() const;
   int num_factorizations() const { return num_factorizations_; }
   // Ski-rental rule for renewing the factor: true once the GMRES work spent beyond what the fresh
   // factor needed (iterations above the first solve after factorising) exceeds the work of one
@@ -73,9 +82,12 @@ class LinearSolver {
                              Eigen::VectorXd* x, Operator op = Operator::kMatrix);
 
  private:
+  // Splits a's columns into `members` ranges of about equal nonzeros (column_ranges_).
+  void PartitionColumns(const Matrix& a, int members);
   void ApplyPreconditioner(const Eigen::Ref<const Eigen::VectorXd>& r, Eigen::VectorXd* z);
 
   struct Factor;
+  ThreadTeam* team_ = nullptr;
   std::unique_ptr<Factor> factor_;
   // Analysed for the pattern below; refilled by the next Factorize and swapped in on success.
   std::unique_ptr<Factor> spare_;
@@ -93,6 +105,9 @@ class LinearSolver {
   Eigen::MatrixXd hessenberg_;
   Eigen::VectorXd givens_c_, givens_s_, g_;
   Eigen::VectorXd r_, w_, rotated_;
+  // Parallel products: column range bounds per member and the members' partial results.
+  std::vector<int> column_ranges_;
+  std::vector<Eigen::VectorXd> partial_products_;
 };
 
 }  // namespace softid::fem

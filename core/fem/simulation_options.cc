@@ -64,8 +64,7 @@ Status SimulationOptions::Validate() const {
   if (!(surface_edge_fraction > 0.0)) {
     return Invalid("surface_edge_fraction", surface_edge_fraction, "must be positive");
   }
-  if (assembly_threads < 0)
-    return Invalid("assembly_threads", assembly_threads, "must be non-negative");
+  if (threads < 0) return Invalid("threads", threads, "must be non-negative");
   return Status::Ok();
 }
 

@@ -91,12 +91,14 @@ struct SimulationOptions {
   // of h, so coarse input meshes still deform smoothly with the grid.
   double surface_edge_fraction = 0.5;  // [-], > 0
 
-  // Threads of the assembly's element loop, at most 4 and only on meshes of several hundred
-  // elements; 0: one per core. Off by default: softid runs optimiser starts and jobs in parallel,
-  // and threads of their own then oversubscribe the cores (every assembly waits for its slowest
-  // thread). Results do not depend on thread timing, but the summation order (the last bits)
-  // depends on the thread count.
-  int assembly_threads = 1;  // [-], >= 0
+  // Threads of one simulation: the assembly's element loop, the preconditioner's triangular
+  // solves and the products with the step matrix run on a team of this many (at most 4, and only
+  // on meshes of several hundred elements); 0: one per core. 1 by default: softid runs optimiser
+  // starts and jobs in parallel, and threads of their own then oversubscribe the cores (every
+  // parallel region waits for its slowest thread); a fit gives each simulation the cores its
+  // concurrent starts leave free. Results do not depend on thread timing, but the summation
+  // order (the last bits) depends on the thread count.
+  int threads = 1;  // [-], >= 0
 
   Status Validate() const;
 };

@@ -6,7 +6,6 @@
 #include <cmath>
 #include <map>
 #include <stdexcept>
-#include <system_error>
 #include <thread>
 
 #include "core/common/check.h"
@@ -34,11 +33,11 @@ Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
   return m;
 }
 
-// Threads for the element loop of Assemble: at most this many, and only on meshes large enough
-// that the loop outweighs starting them (~20 us per thread and assembly) and the elements shared
-// between ranges (run by one thread) are few.
-constexpr int kMaxAssemblyThreads = 4;
-constexpr int kMinElementsPerAssemblyThread = 256;
+// Threads of a simulation's team: at most this many, and only on meshes large enough that a
+// parallel region outweighs waking them and the elements shared between the assembly's ranges
+// (run by one thread) are few.
+constexpr int kMaxSimulationThreads = 4;
+constexpr int kMinElementsPerThread = 256;
 
 // Newton's tolerance on the velocity update under friction, as a fraction of the friction
 // velocity scale. A block sliding on a 30 degree ramp (mu = 0.3, 8 cells, 0.4 s) ends 1 um from a
@@ -83,12 +82,13 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
 
   // Element ranges of the parallel assembly: a node touched by two ranges is shared.
   {
-    const int available = options.assembly_threads > 0
-                              ? options.assembly_threads
+    const int available = options.threads > 0
+                              ? options.threads
                               : static_cast<int>(std::thread::hardware_concurrency());
-    const int threads =
-        std::clamp(std::min(available, mesh_.NumElements() / kMinElementsPerAssemblyThread), 1,
-                   kMaxAssemblyThreads);
+    team_ = std::make_unique<ThreadTeam>(
+        std::clamp(std::min(available, mesh_.NumElements() / kMinElementsPerThread), 1,
+                   kMaxSimulationThreads));
+    const int threads = team_->size();
     const size_t num_elements = mesh_.element_nodes.size();
     auto range_of = [&](size_t e) { return static_cast<int>(e * threads / num_elements); };
     constexpr int kUntouched = -1, kShared = -2;
@@ -118,6 +118,7 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
   }
 
   assembler_ = ElementAssembler(n, mesh_.element_nodes);
+  solver_.SetThreadTeam(team_.get());
   residual_.resize(3 * n);
   update_.resize(3 * n);
   ApplyParameters();
@@ -290,19 +291,7 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
   auto run = [&](const std::vector<int>& elements) {
     for (int e : elements) AssembleElement(e, terms, u, v);
   };
-  {
-    std::vector<std::jthread> workers;
-    workers.reserve(element_chunks_.size());
-    size_t started = 1;
-    try {
-      for (; started < element_chunks_.size(); ++started)
-        workers.emplace_back(run, std::cref(element_chunks_[started]));
-    } catch (const std::system_error&) {
-      // No thread to be had: this thread takes over the ranges not started.
-    }
-    run(element_chunks_[0]);
-    for (size_t t = started; t < element_chunks_.size(); ++t) run(element_chunks_[t]);
-  }  // joins the workers
+  team_->Run([&](int member) { run(element_chunks_[member]); });
   run(shared_elements_);
   Eigen::Matrix3d rotation_sum = Eigen::Matrix3d::Zero();
   for (int e = 0; e < mesh_.NumElements(); ++e)
@@ -747,6 +736,7 @@ StepSummary Simulator::SolveStatic() {
   // The static Jacobian differs from the dynamic one: factorise it separately, then restore.
   LinearSolver dynamic_solver = std::move(solver_);
   solver_ = LinearSolver();
+  solver_.SetThreadTeam(team_.get());
   const StepSummary summary = NewtonSolve(Mode::kStatic);
   solver_ = std::move(dynamic_solver);
   return summary;

@@ -7,13 +7,14 @@
 // rotations are recomputed from u, so the adjoint can re-run the assembly of any step from the
 // stored states without storing matrices.
 //
-// Thread-compatibility: one Simulator per thread. The element loop of the assembly can run on
-// threads of its own (SimulationOptions::assembly_threads), with results independent of their
+// Thread-compatibility: one Simulator per thread. Its assembly and linear solves can run on a
+// team of threads of its own (SimulationOptions::threads), with results independent of their
 // timing.
 #pragma once
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <memory>
 #include <optional>
 #include <vector>
 
@@ -26,6 +27,7 @@
 #include "core/fem/point_forces.h"
 #include "core/fem/simulation_options.h"
 #include "core/fem/surface_embedding.h"
+#include "core/fem/thread_team.h"
 #include "core/geometry/signed_distance_field.h"
 #include "core/geometry/triangle_mesh.h"
 
@@ -80,6 +82,10 @@ class Simulator {
   // Longest side of the rest mesh bounds [m].
   double characteristic_length() const { return length_; }
   const ContactLaw& contact_law() const { return contact_; }
+  // Threads the simulation runs on (SimulationOptions::threads, limited by the mesh's size).
+  int num_threads() const { return team_->size(); }
+  // See LinearSolver::ParallelShare.
+  double solver_parallel_share() const { return solver_.ParallelShare(); }
 
   // Replaces the physical parameters, keeping the grid, the embedding and the surface (which
   // depend only on the rest mesh and the options), and resets to t = 0. Much cheaper than a new
@@ -257,6 +263,8 @@ class Simulator {
   // summed in a fixed order, whatever the thread timing.
   std::vector<std::vector<int>> element_chunks_;
   std::vector<int> shared_elements_;
+  // The team running the parallel loops (one member per element chunk), shared with solver_.
+  std::unique_ptr<ThreadTeam> team_;
   Eigen::VectorXd mass_;
   std::vector<char> fixed_;
   ContactLaw contact_;

@@ -77,6 +77,32 @@ TEST(Determinism, ContactAndFrictionRunIsBitwiseRepeatable) {
   ExpectSameStates(a, Forward(second, scene.parameters, kSteps));
 }
 
+// On a team of threads (assembly, triangular solves, products) a run is still bitwise repeatable,
+// and it follows the one-thread run to within Newton's tolerance: only the summation order differs.
+TEST(Determinism, ThreadedRunIsRepeatableAndFollowsTheOneThreadRun) {
+  RampScene scene;
+  scene.options.cells_along_longest_side = 16;  // 1,024 elements: enough for a team of two
+  constexpr int kSteps = 72;                    // 0.3 s: impact, slide and turn
+  SimulationOptions threaded_options = scene.options;
+  threaded_options.threads = 2;
+  Simulator threaded(scene.block, scene.parameters, threaded_options);
+  ASSERT_EQ(threaded.num_threads(), 2);
+  const Trajectory a = Forward(threaded, scene.parameters, kSteps);
+  EXPECT_GT(a.refactorizations, 0);
+  EXPECT_GT(threaded.solver_parallel_share(), 0.5);
+  ExpectSameStates(a, Forward(threaded, scene.parameters, kSteps));
+
+  Simulator single(scene.block, scene.parameters, scene.options);
+  ASSERT_EQ(single.num_threads(), 1);
+  const Trajectory b = Forward(single, scene.parameters, kSteps);
+  const double h = threaded.hex_mesh().CellSize();
+  double largest = 0.0;
+  for (int k = 0; k <= kSteps; ++k)
+    largest = std::max(largest, (a.states[k].u - b.states[k].u).lpNorm<Eigen::Infinity>());
+  // Measured 2e-11 m: the Newton paths coincide up to round-off. Newton's own tolerance bounds it.
+  EXPECT_LT(largest, scene.options.newton_tolerance * h) << "largest difference " << largest;
+}
+
 // L = sum_k w . u_k, its adjoint gradient: forward then backward, twice on one simulator.
 struct Evaluation {
   double loss = 0.0;

@@ -1,0 +1,66 @@
+// ThreadTeam: every member runs once per region, on threads of its own, and exceptions reach the
+// caller.
+#include "core/fem/thread_team.h"
+
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <set>
+#include <stdexcept>
+#include <thread>
+
+namespace softid::fem {
+namespace {
+
+TEST(ThreadTeam, EveryMemberRunsOncePerRegion) {
+  ThreadTeam team(3);
+  ASSERT_EQ(team.size(), 3);
+  std::vector<int> runs(3, 0);
+  constexpr int kRegions = 2000;
+  for (int region = 0; region < kRegions; ++region) team.Run([&](int member) { ++runs[member]; });
+  EXPECT_EQ(runs, std::vector<int>(3, kRegions));
+}
+
+TEST(ThreadTeam, MembersRunConcurrentlyOnTheirOwnThreads) {
+  ThreadTeam team(2);
+  std::atomic<int> arrived{0};
+  std::thread::id ids[2];
+  // Each member waits until both have arrived: this only finishes if they run concurrently.
+  team.Run([&](int member) {
+    ids[member] = std::this_thread::get_id();
+    ++arrived;
+    while (arrived.load() < 2) std::this_thread::yield();
+  });
+  EXPECT_EQ(ids[0], std::this_thread::get_id());
+  EXPECT_NE(ids[1], ids[0]);
+}
+
+TEST(ThreadTeam, TeamOfOneRunsOnTheCaller) {
+  ThreadTeam team(1);
+  std::thread::id id;
+  team.Run([&](int member) {
+    EXPECT_EQ(member, 0);
+    id = std::this_thread::get_id();
+  });
+  EXPECT_EQ(id, std::this_thread::get_id());
+}
+
+TEST(ThreadTeam, ExceptionReachesTheCallerAndTheTeamStaysUsable) {
+  ThreadTeam team(2);
+  EXPECT_THROW(team.Run([](int member) {
+    if (member == 1) throw std::runtime_error("member 1 failed");
+  }),
+               std::runtime_error);
+  int runs = 0;
+  team.Run([&](int member) {
+    if (member == 1) ++runs;
+  });
+  EXPECT_EQ(runs, 1);
+}
+
+TEST(ThreadTeam, RejectsAnEmptyTeam) {
+  EXPECT_THROW(ThreadTeam(0), std::invalid_argument);
+}
+
+}  // namespace
+}  // namespace softid::fem
