@@ -29,15 +29,22 @@ Eigen::Vector3d FrictionForce(const ContactLaw& law, const Eigen::Vector3d& v,
   return (-law.friction_coefficient * lagged_normal_force / speed) * vt;
 }
 
+bool GroundContactVanishes(const ContactLaw& law, const Eigen::Vector3d& x,
+                           double lagged_normal_force) {
+  const bool friction = law.friction_coefficient > 0.0 && lagged_normal_force > 0.0;
+  // s = -d / smoothing < -40: exp(-40), no normal force to double precision.
+  return !friction && law.plane.SignedDistance(x) > 40.0 * law.smoothing;
+}
+
 PointForce GroundContactForce(const ContactLaw& law, double area, const Eigen::Vector3d& x,
                               const Eigen::Vector3d& v, double lagged_normal_force,
                               const Eigen::Vector3d* friction_iterate) {
   PointForce out;
+  if (GroundContactVanishes(law, x, lagged_normal_force)) return out;
   const double a = 1.0 / law.smoothing;
   const double d = law.plane.SignedDistance(x);
   const double s = -a * d;  // > 0 when penetrating
   const bool friction = law.friction_coefficient > 0.0 && lagged_normal_force > 0.0;
-  if (s < -40.0 && !friction) return out;  // exp(-40): no normal force to double precision
   // sigma = logistic(s) is the derivative of softplus.
   const double softplus = Softplus(s);
   const double sigma = 1.0 / (1.0 + std::exp(-s));

@@ -55,6 +55,12 @@ PointForce GroundContactForce(const ContactLaw& law, double area, const Eigen::V
                               const Eigen::Vector3d& v, double lagged_normal_force,
                               const Eigen::Vector3d* friction_iterate = nullptr);
 
+// Whether GroundContactForce is exactly zero at x whatever the velocity: no friction acts and the
+// point is so far above the ground (40 smoothing lengths) that the softplus force is below double
+// precision. Lets the assembly skip a point's velocity.
+bool GroundContactVanishes(const ContactLaw& law, const Eigen::Vector3d& x,
+                           double lagged_normal_force);
+
 // The friction force -mu f_n_lagged v_t / sqrt(|v_t|^2 + eps^2) alone [N].
 Eigen::Vector3d FrictionForce(const ContactLaw& law, const Eigen::Vector3d& v,
                               double lagged_normal_force);

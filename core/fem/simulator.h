@@ -180,6 +180,10 @@ class Simulator {
   // assembled concurrently.
   void AssembleElement(int e, const ElementTerms& terms, const Eigen::VectorXd& u,
                        const Eigen::VectorXd& v);
+  // One surface point's contact, friction and drag force (into residual_) and tangent blocks (into
+  // assembler_), at (surface_u, surface_v). Touches only the nodes of the point's element.
+  void AssembleSurfacePoint(int p, const ElementTerms& terms, const Eigen::VectorXd& surface_u,
+                            const Eigen::VectorXd& surface_v, double dv_du);
   // Largest fraction of a Newton update (<= 1) that keeps every surface point above
   // min(its distance, 0) - 4 contact smoothing lengths.
   double ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update) const;
@@ -263,6 +267,10 @@ class Simulator {
   // summed in a fixed order, whatever the thread timing.
   std::vector<std::vector<int>> element_chunks_;
   std::vector<int> shared_elements_;
+  // Surface points (force_embedding_) likewise, by their element: points of range t's own
+  // elements (ascending), and those of shared elements.
+  std::vector<std::vector<int>> point_chunks_;
+  std::vector<int> shared_points_;
   // The team running the parallel loops (one member per element chunk), shared with solver_.
   std::unique_ptr<ThreadTeam> team_;
   Eigen::VectorXd mass_;
