@@ -59,17 +59,22 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
   if (field.kind == StiffnessField::Kind::kLinear) gradient->stiffness_field.resize(3, 0.0);
 
   // Elements: r_e = R K_e l, l = R^T (x + beta_k v) - X, K_e = s (lambda K_lambda + mu K_mu).
-  const auto& centre_gradients = CentreGradientsUnitCell();
-  (void)centre_gradients;
-  std::array<Eigen::Vector3d, 8> x;
-  for (int e = 0; e < mesh_.NumElements(); ++e) {
+  // Each range of the assembly's partition runs on its own member (an element writes the velocity
+  // adjoint of its own nodes only), the shared elements afterwards; each member sums its share of
+  // the parameter gradient, and the shares are added in member order.
+  struct ElementShare {
+    double youngs_modulus = 0.0, poisson_ratio = 0.0, stiffness_damping = 0.0;
+    std::vector<double> stiffness_field;
+  };
+  const auto backpropagate_element = [&](int e, ElementShare* share) {
     const auto& nodes = mesh_.element_nodes[e];
+    std::array<Eigen::Vector3d, 8> x;
     Vector24d lambda_local, v_local, l;
     for (int c = 0; c < 8; ++c) {
       x[c] = mesh_.rest_positions[nodes[c]] + u.segment<3>(3 * nodes[c]);
       lambda_local.segment<3>(3 * c) = lambda.segment<3>(3 * nodes[c]);
     }
-    if (lambda_local.isZero(0.0)) continue;
+    if (lambda_local.isZero(0.0)) return;
     const Eigen::Matrix3d r =
         rotations_current ? element_rotation_[e] : PolarRotation(DeformationGradient(x, h));
     const Eigen::Matrix3d rt = r.transpose();
@@ -84,16 +89,16 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
     const Vector24d sigma = k * l;
     // lambda^T r_e = (R^T lambda)^T K l.
     const double work = rotated_lambda.dot(sigma);
-    gradient->youngs_modulus -= work / p.youngs_modulus;
+    share->youngs_modulus -= work / p.youngs_modulus;
     // d K / d nu l = (dlambda/lambda) K l + s (dmu - mu dlambda/lambda) K_mu l.
     const double scale = element_scale_[e];
     const Vector24d shear = ShearStiffnessOf(e) * l;
-    gradient->poisson_ratio -=
+    share->poisson_ratio -=
         (dlambda_dnu / lame_lambda) * work +
         scale * (dmu_dnu - lame_mu * dlambda_dnu / lame_lambda) * rotated_lambda.dot(shear);
     // d r_e / d beta_k = R K R^T v.
     const Vector24d k_rotated_lambda = k * rotated_lambda;
-    gradient->stiffness_damping -= k_rotated_lambda.dot(v_local);
+    share->stiffness_damping -= k_rotated_lambda.dot(v_local);
     // Velocity: d r_e / d v = beta_k R K R^T.
     if (beta_k != 0.0) {
       for (int c = 0; c < 8; ++c) {
@@ -108,11 +113,25 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
       for (size_t i = 0; i < field.regions.size(); ++i) {
         if (field.regions[i].box.contains(centre)) region = static_cast<int>(i);
       }
-      if (region >= 0) gradient->stiffness_field[region] -= work / scale;
+      if (region >= 0) share->stiffness_field[region] -= work / scale;
     } else if (field.kind == StiffnessField::Kind::kLinear) {
       const Eigen::Vector3d offset = mesh_.ElementCentre(e) - field.origin;
-      for (int i = 0; i < 3; ++i) gradient->stiffness_field[i] -= work * offset[i];
+      for (int i = 0; i < 3; ++i) share->stiffness_field[i] -= work * offset[i];
     }
+  };
+  std::vector<ElementShare> shares(element_chunks_.size() + 1);
+  for (ElementShare& share : shares)
+    share.stiffness_field.assign(gradient->stiffness_field.size(), 0.0);
+  team_->Run([&](int member) {
+    for (int e : element_chunks_[member]) backpropagate_element(e, &shares[member]);
+  });
+  for (int e : shared_elements_) backpropagate_element(e, &shares.back());
+  for (const ElementShare& share : shares) {
+    gradient->youngs_modulus += share.youngs_modulus;
+    gradient->poisson_ratio += share.poisson_ratio;
+    gradient->stiffness_damping += share.stiffness_damping;
+    for (size_t i = 0; i < share.stiffness_field.size(); ++i)
+      gradient->stiffness_field[i] += share.stiffness_field[i];
   }
 
   // Nodes: inertia, mass damping, gravity; r_i = m_i (a_i + alpha v_i - g).

@@ -143,5 +143,38 @@ TEST(Determinism, ForwardAdjointGradientIsBitwiseRepeatable) {
   EXPECT_NE(a.gradient.friction_coefficient, 0.0);
 }
 
+// The adjoint pass on a team (assembly, transposed solves, the element loop of the parameter
+// gradient) is bitwise repeatable and gives the one-thread gradient up to round-off.
+TEST(Determinism, ThreadedGradientIsRepeatableAndFollowsTheOneThreadGradient) {
+  RampScene scene;
+  scene.options.cells_along_longest_side = 16;
+  constexpr int kSteps = 48;
+  SimulationOptions threaded_options = scene.options;
+  threaded_options.threads = 2;
+  Simulator threaded(scene.block, scene.parameters, threaded_options);
+  ASSERT_EQ(threaded.num_threads(), 2);
+  const Evaluation a = ForwardAdjoint(threaded, scene.parameters, kSteps);
+  const Evaluation b = ForwardAdjoint(threaded, scene.parameters, kSteps);
+  EXPECT_EQ(ToJson(a.gradient).dump(), ToJson(b.gradient).dump());
+
+  Simulator single(scene.block, scene.parameters, scene.options);
+  const Evaluation c = ForwardAdjoint(single, scene.parameters, kSteps);
+  EXPECT_NEAR(a.loss, c.loss, 1e-9 * std::abs(c.loss));
+  const auto expect_close = [](double threaded_value, double single_value, const char* name) {
+    EXPECT_NEAR(threaded_value, single_value, 1e-6 * std::abs(single_value)) << name;
+  };
+  expect_close(a.gradient.youngs_modulus, c.gradient.youngs_modulus, "youngs_modulus");
+  expect_close(a.gradient.poisson_ratio, c.gradient.poisson_ratio, "poisson_ratio");
+  expect_close(a.gradient.density, c.gradient.density, "density");
+  expect_close(a.gradient.stiffness_damping, c.gradient.stiffness_damping, "stiffness_damping");
+  expect_close(a.gradient.friction_coefficient, c.gradient.friction_coefficient,
+               "friction_coefficient");
+  for (int i = 0; i < 3; ++i) {
+    expect_close(a.gradient.gravity[i], c.gradient.gravity[i], "gravity");
+    expect_close(a.gradient.initial_velocity[i], c.gradient.initial_velocity[i],
+                 "initial_velocity");
+  }
+}
+
 }  // namespace
 }  // namespace softid::fem
