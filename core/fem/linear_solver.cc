@@ -355,13 +355,16 @@ void UseSingleThreadedBlas() {
 LinearSolver::LinearSolver() {
   UseSingleThreadedBlas();
 }
-LinearSolver::~LinearSolver() = default;
+LinearSolver::~LinearSolver() {
+  FinishFactorize();
+}
 
 double LinearSolver::ParallelShare() const {
   return factor_ != nullptr ? factor_->single.parallel_share() : 0.0;
 }
 
 void LinearSolver::SetThreadTeam(ThreadTeam* team) {
+  FinishFactorize();
   team_ = team;
   const int threads = team != nullptr ? team->size() : 1;
   if (factor_ != nullptr && factor_->single.threads() != threads)
@@ -378,15 +381,16 @@ bool LinearSolver::RefactorPays() const {
   return factor_ != nullptr && excess_work_ > factor_work_;
 }
 
-Status LinearSolver::Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
-                               Symmetry symmetry) {
+LinearSolver::Matrix LinearSolver::SymmetricPart(const Matrix& a, Symmetry symmetry) {
   // The consistent tangent is not symmetric; its symmetric part is what a Cholesky factor can
   // approximate (the lower triangle alone can be far from positive definite).
   SOFTID_ASSERT(symmetry == Symmetry::kGeneral ||
                 (a - Matrix(a.transpose())).norm() <= 1e-12 * a.norm());
-  Matrix symmetrised;
-  if (symmetry == Symmetry::kGeneral) symmetrised = 0.5 * (a + Matrix(a.transpose()));
-  const Matrix& symmetric = symmetry == Symmetry::kGeneral ? symmetrised : a;
+  if (symmetry == Symmetry::kGeneral) return 0.5 * (a + Matrix(a.transpose()));
+  return a;
+}
+
+bool LinearSolver::PrepareSpare(const Matrix& symmetric) {
   // The assembly pattern is fixed, so the fill-reducing ordering and symbolic analysis (METIS
   // dominates a factorisation at ~10^4 unknowns) are done once and reused: the numeric factor
   // goes into the spare, which becomes current only when it succeeds.
@@ -409,25 +413,30 @@ Status LinearSolver::Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
     spare_->flops = spare_->llt.cholmod().fl;
     spare_->factor_nonzeros = spare_->llt.cholmod().lnz;
   }
-  Factor& fresh = *spare_;
-  fresh.llt.setShift(0.0);
-  fresh.llt.factorize(symmetric);
+  return same_pattern;
+}
+
+int LinearSolver::FactorNumerically(const Matrix& symmetric, int threads, Factor* fresh) {
+  fresh->llt.setShift(0.0);
+  fresh->llt.factorize(symmetric);
   int attempts = 1;
   // Under strong compression the consistent tangent's geometric part makes the matrix indefinite.
   // As a preconditioner a factor of A + shift I serves as well: try growing shifts relative to the
   // mean diagonal.
   const double mean_diagonal = symmetric.diagonal().cwiseAbs().mean();
   for (double relative_shift : {1e-4, 1e-2, 1e-1, 1.0}) {
-    if (fresh.llt.info() == Eigen::Success) break;
-    fresh.llt.setShift(relative_shift * mean_diagonal);
-    fresh.llt.factorize(symmetric);
+    if (fresh->llt.info() == Eigen::Success) break;
+    fresh->llt.setShift(relative_shift * mean_diagonal);
+    fresh->llt.factorize(symmetric);
     ++attempts;
   }
-  if (fresh.llt.info() != Eigen::Success) {
-    return Status::FailedPrecondition(
-        "step matrix is far from positive definite (Cholesky failed)");
-  }
-  fresh.single.Assign(fresh.llt.factor(), team_ != nullptr ? team_->size() : 1);
+  if (fresh->llt.info() != Eigen::Success) return -attempts;
+  fresh->single.Assign(fresh->llt.factor(), threads);
+  return attempts;
+}
+
+void LinearSolver::AdoptSpare(bool same_pattern, const Eigen::Matrix3d& rotation, int attempts,
+                              Eigen::Index matrix_nonzeros) {
   std::swap(factor_, spare_);
   if (!same_pattern) spare_.reset();  // the old factor has the old pattern's analysis
   reference_rotation_ = rotation;
@@ -435,10 +444,70 @@ Status LinearSolver::Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
   // A failed attempt stops at its first non-positive pivot; counting it in full errs towards
   // keeping a factor that was hard to get.
   factor_work_ = attempts * kFactorFlopWeight * factor_->flops +
-                 kFactorWorkPerMatrixEntry * static_cast<double>(a.nonZeros());
+                 kFactorWorkPerMatrixEntry * static_cast<double>(matrix_nonzeros);
   baseline_iterations_ = -1;
   excess_work_ = 0.0;
+}
+
+Status LinearSolver::Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
+                               Symmetry symmetry) {
+  FinishFactorize();
+  const Matrix symmetric = SymmetricPart(a, symmetry);
+  const bool same_pattern = PrepareSpare(symmetric);
+  const int attempts = FactorNumerically(symmetric, team_ != nullptr ? team_->size() : 1, &*spare_);
+  if (attempts < 0) {
+    return Status::FailedPrecondition(
+        "step matrix is far from positive definite (Cholesky failed)");
+  }
+  AdoptSpare(same_pattern, rotation, attempts, a.nonZeros());
   return Status::Ok();
+}
+
+// The work of a background factorisation, owned by the solver until FinishFactorize: the matrix
+// (a copy: the caller's changes on) and the outcome, written by the background thread only.
+// Destroying it waits for the job (a solver moved onto or destroyed never leaves it running on
+// freed memory; pending_ is declared before the factors, so a move assignment joins before it
+// replaces them).
+struct LinearSolver::PendingFactorization {
+  explicit PendingFactorization(ThreadTeam* team) : team(team) {}
+  ~PendingFactorization() { team->WaitForBackground(); }
+  PendingFactorization(const PendingFactorization&) = delete;
+  PendingFactorization& operator=(const PendingFactorization&) = delete;
+  ThreadTeam* team;
+  Matrix symmetric;
+  Eigen::Matrix3d rotation;
+  Eigen::Index matrix_nonzeros = 0;
+  bool same_pattern = true;
+  int attempts = 0;  // negative: failed
+};
+
+Status LinearSolver::StartFactorize(const Matrix& a, const Eigen::Matrix3d& rotation,
+                                    Symmetry symmetry) {
+  if (team_ == nullptr || team_->size() < 2) return Factorize(a, rotation, symmetry);
+  FinishFactorize();
+  pending_ = std::make_unique<PendingFactorization>(team_);
+  pending_->symmetric = SymmetricPart(a, symmetry);
+  pending_->rotation = rotation;
+  pending_->matrix_nonzeros = a.nonZeros();
+  pending_->same_pattern = PrepareSpare(pending_->symmetric);
+  // The job touches only the pending record and the spare factor, both on the heap and left alone
+  // by the solver until FinishFactorize joins it.
+  PendingFactorization* pending = pending_.get();
+  Factor* fresh = spare_.get();
+  const int threads = team_->size();
+  team_->StartBackground([pending, fresh, threads] {
+    pending->attempts = FactorNumerically(pending->symmetric, threads, fresh);
+  });
+  return Status::Ok();
+}
+
+bool LinearSolver::FinishFactorize() {
+  if (pending_ == nullptr) return false;
+  team_->WaitForBackground();
+  const std::unique_ptr<PendingFactorization> pending = std::move(pending_);
+  if (pending->attempts < 0) return false;
+  AdoptSpare(pending->same_pattern, pending->rotation, pending->attempts, pending->matrix_nonzeros);
+  return true;
 }
 
 namespace {

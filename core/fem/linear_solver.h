@@ -49,6 +49,18 @@ class LinearSolver {
   // that is not positive definite; a previous factor is then kept.
   Status Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
                    Symmetry symmetry = Symmetry::kGeneral);
+  // Factorize in the background on a team of two or more (synchronously otherwise): the current
+  // factor keeps preconditioning until FinishFactorize, which the caller calls at a point of its
+  // own choosing, so that the result does not depend on timing. While it runs, the team's
+  // parallel regions run on the calling thread alone. A factorisation of ~10^4 unknowns takes
+  // ~100 ms, several Newton iterations' worth, which the caller's work now overlaps.
+  // Returns Factorize's status when it ran synchronously, else Ok.
+  Status StartFactorize(const Matrix& a, const Eigen::Matrix3d& rotation,
+                        Symmetry symmetry = Symmetry::kGeneral);
+  // Waits for a factorisation StartFactorize began and makes it current when it succeeded (a
+  // failed one leaves the previous factor). Returns whether a new factor became current.
+  bool FinishFactorize();
+  bool FactorizationPending() const { return pending_ != nullptr; }
   bool HasFactor() const;
   // Share of the factor's entries that the team's members solve concurrently in a preconditioner
   // application (its elimination tree's subtrees); the rest (the top separators) runs on one
@@ -87,7 +99,19 @@ class LinearSolver {
   void ApplyPreconditioner(const Eigen::Ref<const Eigen::VectorXd>& r, Eigen::VectorXd* z);
 
   struct Factor;
+  struct PendingFactorization;
+  static Matrix SymmetricPart(const Matrix& a, Symmetry symmetry);
+  // Readies spare_ for a's pattern (a new symbolic analysis when it changed); returns whether the
+  // pattern is the previous one.
+  bool PrepareSpare(const Matrix& symmetric);
+  // Numeric factorisation into `fresh` (shifted when indefinite) and its single-precision copy
+  // planned for `threads`: the number of attempts, negative when every one failed. Touches only
+  // `fresh`.
+  static int FactorNumerically(const Matrix& symmetric, int threads, Factor* fresh);
+  void AdoptSpare(bool same_pattern, const Eigen::Matrix3d& rotation, int attempts,
+                  Eigen::Index matrix_nonzeros);
   ThreadTeam* team_ = nullptr;
+  std::unique_ptr<PendingFactorization> pending_;
   std::unique_ptr<Factor> factor_;
   // Analysed for the pattern below; refilled by the next Factorize and swapped in on success.
   std::unique_ptr<Factor> spare_;

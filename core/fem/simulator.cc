@@ -547,6 +547,9 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
   const bool dynamic = mode == Mode::kDynamic;
   const double dt = options_.time_step;
   const double h = mesh_.CellSize();
+  // A factor renewed in the background during the previous step takes over here, at the same
+  // point whatever the timing.
+  solver_.FinishFactorize();
   u_next_ = state_.u;
   v_next_ = state_.v;
   a_next_ = state_.a;
@@ -630,19 +633,21 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
     LinearSolver::Summary solve =
         solver_.Solve(assembler_.matrix(), rhs_, body_rotation, linear, &update_);
     summary.linear_iterations += solve.iterations;
-    if (!solve.converged || (dynamic && solver_.RefactorPays())) {
-      // The reference factor no longer fits (large deformation, contact): renew it here. When
-      // that fails the previous factor stays in use.
+    if (dynamic && solve.converged && solver_.RefactorPays() && !solver_.FactorizationPending()) {
+      // The reference factor no longer fits (large deformation, contact): renew it, in the
+      // background on a team (this step goes on with the old one; the next step adopts it).
+      summary.refactorized =
+          solver_.StartFactorize(assembler_.matrix(), body_rotation, TangentSymmetry(mode)).ok();
+    } else if (!solve.converged) {
+      // Needed now. When that fails the previous factor stays in use.
       summary.refactorized =
           solver_.Factorize(assembler_.matrix(), body_rotation, TangentSymmetry(mode)).ok();
-      if (!solve.converged) {
-        update_.setZero();
-        solve = solver_.Solve(assembler_.matrix(), rhs_, body_rotation, linear, &update_);
-        summary.linear_iterations += solve.iterations;
-        if (!solve.converged && !(solve.relative_residual < 1e-6)) {
-          summary.diverged = true;
-          return summary;
-        }
+      update_.setZero();
+      solve = solver_.Solve(assembler_.matrix(), rhs_, body_rotation, linear, &update_);
+      summary.linear_iterations += solve.iterations;
+      if (!solve.converged && !(solve.relative_residual < 1e-6)) {
+        summary.diverged = true;
+        return summary;
       }
     }
     const double full_step = update_.lpNorm<Eigen::Infinity>();

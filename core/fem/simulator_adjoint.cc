@@ -238,6 +238,8 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
     if (fixed_[i]) rhs.segment<3>(3 * i).setZero();
   }
 
+  // A factor renewed in the background during the previous (later) step takes over here.
+  solver_.FinishFactorize();
   // The exact Jacobian at the end of the step.
   SetState(previous);
   UpdateLaggedNormalForces();
@@ -276,7 +278,8 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
     }
     // The same ski-rental rule as the forward pass: renew the factor once the extra iterations
     // of a stale one have cost more than a factorisation.
-    if (solver_.RefactorPays()) (void)solver_.Factorize(jacobian, rotation);
+    if (solver_.RefactorPays() && !solver_.FactorizationPending())
+      (void)solver_.StartFactorize(jacobian, rotation);
   }
   adjoint_guess_ = lambda;
   const bool generalized_alpha = UsesGeneralizedAlpha();

@@ -19,6 +19,7 @@ ThreadTeam::ThreadTeam(int size) {
 }
 
 ThreadTeam::~ThreadTeam() {
+  WaitForBackground();
   {
     std::lock_guard lock(mutex_);
     stopping_ = true;
@@ -28,8 +29,8 @@ ThreadTeam::~ThreadTeam() {
 }
 
 void ThreadTeam::Run(const std::function<void(int)>& task) {
-  if (workers_.empty()) {
-    task(0);
+  if (workers_.empty() || BackgroundRunning()) {
+    for (int member = 0; member < size(); ++member) task(member);
     return;
   }
   {
@@ -55,6 +56,19 @@ void ThreadTeam::Run(const std::function<void(int)>& task) {
     error = nullptr;
   }
   if (first) std::rethrow_exception(first);
+}
+
+void ThreadTeam::StartBackground(std::function<void()> job) {
+  SOFTID_DEMAND(!BackgroundRunning());
+  try {
+    background_ = std::thread(job);
+  } catch (const std::system_error&) {
+    job();  // no thread to be had: the caller does the job now
+  }
+}
+
+void ThreadTeam::WaitForBackground() {
+  if (background_.joinable()) background_.join();
 }
 
 void ThreadTeam::WorkerLoop(int member) {

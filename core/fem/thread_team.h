@@ -27,8 +27,18 @@ class ThreadTeam {
   int size() const { return static_cast<int>(workers_.size()) + 1; }
 
   // Runs task(t) for t in [0, size()), concurrently; rethrows the first exception a member threw
-  // once every member has finished.
+  // once every member has finished. While a background job runs, the caller runs every member's
+  // task itself, in member order: each task does the same work either way, so the results are
+  // the same (only slower).
   void Run(const std::function<void(int)>& task);
+
+  // Starts `job` on a thread of its own, to overlap with the caller's work; the team's members
+  // then stay off the cores (see Run). Only one job at a time; `job` must not throw.
+  // @pre !BackgroundRunning()
+  void StartBackground(std::function<void()> job);
+  bool BackgroundRunning() const { return background_.joinable(); }
+  // Waits for the background job, if any, to finish.
+  void WaitForBackground();
 
  private:
   void WorkerLoop(int member);
@@ -41,6 +51,7 @@ class ThreadTeam {
   int running_ = 0;      // workers still inside the current region
   bool stopping_ = false;
   std::vector<std::exception_ptr> errors_;  // per member
+  std::thread background_;
 };
 
 }  // namespace softid::fem

@@ -144,7 +144,9 @@ TEST(Determinism, ForwardAdjointGradientIsBitwiseRepeatable) {
 }
 
 // The adjoint pass on a team (assembly, transposed solves, the element loop of the parameter
-// gradient) is bitwise repeatable and gives the one-thread gradient up to round-off.
+// gradient) is bitwise repeatable. On a team the factor is renewed in the background and adopted
+// at the next step, so the Newton iterates differ from one thread's within Newton's tolerance:
+// loss and gradient agree to about that (measured: loss 8e-6, gradients up to 3e-4 relative).
 TEST(Determinism, ThreadedGradientIsRepeatableAndFollowsTheOneThreadGradient) {
   RampScene scene;
   scene.options.cells_along_longest_side = 16;
@@ -155,13 +157,14 @@ TEST(Determinism, ThreadedGradientIsRepeatableAndFollowsTheOneThreadGradient) {
   ASSERT_EQ(threaded.num_threads(), 2);
   const Evaluation a = ForwardAdjoint(threaded, scene.parameters, kSteps);
   const Evaluation b = ForwardAdjoint(threaded, scene.parameters, kSteps);
+  EXPECT_EQ(a.loss, b.loss);
   EXPECT_EQ(ToJson(a.gradient).dump(), ToJson(b.gradient).dump());
 
   Simulator single(scene.block, scene.parameters, scene.options);
   const Evaluation c = ForwardAdjoint(single, scene.parameters, kSteps);
-  EXPECT_NEAR(a.loss, c.loss, 1e-9 * std::abs(c.loss));
+  EXPECT_NEAR(a.loss, c.loss, 1e-4 * std::abs(c.loss));
   const auto expect_close = [](double threaded_value, double single_value, const char* name) {
-    EXPECT_NEAR(threaded_value, single_value, 1e-6 * std::abs(single_value)) << name;
+    EXPECT_NEAR(threaded_value, single_value, 3e-3 * std::abs(single_value)) << name;
   };
   expect_close(a.gradient.youngs_modulus, c.gradient.youngs_modulus, "youngs_modulus");
   expect_close(a.gradient.poisson_ratio, c.gradient.poisson_ratio, "poisson_ratio");

@@ -175,6 +175,53 @@ TEST(LinearSolver, TeamOfTwoSolvesAsOneThreadDoes) {
   EXPECT_TRUE(z_single == z_parallel);
 }
 
+// A factorisation in the background leaves the current factor in use until FinishFactorize, then
+// gives exactly the factor a synchronous one gives; a failed one leaves the previous factor.
+TEST(LinearSolver, BackgroundFactorisationIsAdoptedOnlyWhenFinished) {
+  const LinearSolver::Matrix first = GridMatrix(12, 0.0);
+  LinearSolver::Matrix second = first;
+  second.diagonal() *= 2.0;
+  const Eigen::VectorXd b = RandomVector(first.rows());
+  const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
+  ThreadTeam team(2);
+  LinearSolver background, reference_first, reference_second;
+  for (LinearSolver* solver : {&background, &reference_first, &reference_second})
+    solver->SetThreadTeam(&team);
+  ASSERT_TRUE(background.Factorize(first, identity).ok());
+  ASSERT_TRUE(reference_first.Factorize(first, identity).ok());
+  ASSERT_TRUE(reference_second.Factorize(second, identity).ok());
+  Eigen::VectorXd z, z_first, z_second;
+  reference_first.Precondition(b, identity, &z_first);
+  reference_second.Precondition(b, identity, &z_second);
+  ASSERT_FALSE(z_first == z_second);
+
+  ASSERT_TRUE(background.StartFactorize(second, identity).ok());
+  EXPECT_TRUE(background.FactorizationPending());
+  background.Precondition(b, identity, &z);  // the team runs on this thread meanwhile
+  EXPECT_TRUE(z == z_first);
+  EXPECT_TRUE(background.FinishFactorize());
+  EXPECT_FALSE(background.FactorizationPending());
+  EXPECT_EQ(background.num_factorizations(), 2);
+  background.Precondition(b, identity, &z);
+  EXPECT_TRUE(z == z_second);
+
+  // Not positive definite even with the largest shift: the previous factor stays.
+  LinearSolver::Matrix broken = second;
+  broken.coeffRef(0, 0) = -1e6;
+  ASSERT_TRUE(background.StartFactorize(broken, identity).ok());
+  EXPECT_FALSE(background.FinishFactorize());
+  background.Precondition(b, identity, &z);
+  EXPECT_TRUE(z == z_second);
+
+  // Without a team the factorisation runs at once.
+  LinearSolver alone;
+  ASSERT_TRUE(alone.Factorize(first, identity).ok());
+  ASSERT_TRUE(alone.StartFactorize(second, identity).ok());
+  EXPECT_FALSE(alone.FactorizationPending());
+  alone.Precondition(b, identity, &z);
+  EXPECT_LT((z - z_second).norm(), 1e-6 * z_second.norm());
+}
+
 TEST(LinearSolver, DirectSolveHandlesAnIndefiniteNonSymmetricTransposedSystem) {
   // Shifted by more than the smallest eigenvalue of the Laplacian: indefinite.
   const LinearSolver::Matrix a = MakeMatrix(200, 0.05, 0.5);
