@@ -9,6 +9,7 @@
 
 #include "core/fem/linear_solver.h"
 #include "core/fem/simulator.h"
+#include "core/fem/thread_team.h"
 #include "core/scenes/scene.h"
 
 namespace softid {
@@ -71,12 +72,20 @@ void BM_Factorize(benchmark::State& state) {
 }
 BENCHMARK(BM_Factorize)->Unit(benchmark::kMillisecond);
 
+// A solver on a team of Threads() with the factor of `matrix`.
+struct FactoredSolver {
+  fem::ThreadTeam team{Threads()};
+  fem::LinearSolver solver;
+  FactoredSolver(const fem::LinearSolver::Matrix& matrix, benchmark::State& state) {
+    solver.SetThreadTeam(&team);
+    if (!solver.Factorize(matrix, Eigen::Matrix3d::Identity()).ok()) state.SkipWithError("factor");
+  }
+};
+
 void BM_Precondition(benchmark::State& state) {
   ImpactFixture& f = ImpactFixture::Get();
-  fem::ThreadTeam team(Threads());
-  fem::LinearSolver solver;
-  solver.SetThreadTeam(&team);
-  if (!solver.Factorize(f.matrix, Eigen::Matrix3d::Identity()).ok()) state.SkipWithError("factor");
+  FactoredSolver factored(f.matrix, state);
+  fem::LinearSolver& solver = factored.solver;
   Eigen::VectorXd x;
   for (auto _ : state) {
     solver.Precondition(f.rhs, Eigen::Matrix3d::Identity(), &x);
@@ -88,12 +97,10 @@ BENCHMARK(BM_Precondition)->Unit(benchmark::kMicrosecond);
 // Ten GMRES iterations (tolerance out of reach) preconditioned by the factor of a nearby matrix.
 void BM_TenGmresIterations(benchmark::State& state) {
   ImpactFixture& f = ImpactFixture::Get();
-  fem::ThreadTeam team(Threads());
-  fem::LinearSolver solver;
-  solver.SetThreadTeam(&team);
   fem::LinearSolver::Matrix nearby = f.matrix;
   nearby.diagonal() *= 1.5;
-  if (!solver.Factorize(nearby, Eigen::Matrix3d::Identity()).ok()) state.SkipWithError("factor");
+  FactoredSolver factored(nearby, state);
+  fem::LinearSolver& solver = factored.solver;
   fem::LinearSolver::Options options;
   options.relative_tolerance = 1e-30;
   options.max_iterations = 10;
