@@ -28,6 +28,10 @@ struct JobRunnerContext {
   std::chrono::milliseconds lease{60000};
   // How often the lease is renewed and a cancel request polled between iterations.
   std::chrono::milliseconds heartbeat_interval{2000};
+  // Cores a job may use when its config leaves "threads" at 0 (every core): the machine's cores
+  // shared among the workers, so parallel jobs do not oversubscribe it (a job's starts and its
+  // simulations' teams take what it is given). 0: every core.
+  int cores_per_job = 0;
   std::shared_ptr<spdlog::logger> logger;
 };
 

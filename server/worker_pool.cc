@@ -2,7 +2,9 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <exception>
+#include <thread>
 
 namespace softid::server {
 
@@ -15,6 +17,8 @@ WorkerPool::WorkerPool(store::JobStore* jobs, const store::BlobStore* blobs, Job
   context_.work_root = options_.work_root;
   context_.lease = options_.lease;
   context_.heartbeat_interval = options_.heartbeat_interval;
+  const int cores = static_cast<int>(std::thread::hardware_concurrency());
+  context_.cores_per_job = cores > 0 ? std::max(1, cores / std::max(1, options_.num_workers)) : 0;
   context_.logger = logger ? std::move(logger) : spdlog::default_logger();
 }
 
@@ -26,7 +30,8 @@ void WorkerPool::Start() {
   for (int i = 0; i < options_.num_workers; ++i) {
     threads_.emplace_back([this, i] { WorkerLoop(i); });
   }
-  context_.logger->info("worker pool: {} worker(s) started", options_.num_workers);
+  context_.logger->info("worker pool: {} worker(s) started, {} core(s) per job",
+                        options_.num_workers, context_.cores_per_job);
 }
 
 void WorkerPool::Wake() {

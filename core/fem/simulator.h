@@ -271,7 +271,8 @@ class Simulator {
   // elements (ascending), and those of shared elements.
   std::vector<std::vector<int>> point_chunks_;
   std::vector<int> shared_points_;
-  // The team running the parallel loops (one member per element chunk), shared with solver_.
+  // The team running the parallel loops (one member per element chunk), shared with solver_;
+  // declared before solver_, which must finish its background work on it before it goes.
   std::unique_ptr<ThreadTeam> team_;
   Eigen::VectorXd mass_;
   std::vector<char> fixed_;
