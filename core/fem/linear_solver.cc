@@ -6,6 +6,7 @@
 #include <Eigen/SparseLU>
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <mutex>
 #include <utility>
 
@@ -496,7 +497,11 @@ Status LinearSolver::StartFactorize(const Matrix& a, const Eigen::Matrix3d& rota
   Factor* fresh = spare_.get();
   const int threads = team_->size();
   team_->StartBackground([pending, fresh, threads] {
-    pending->attempts = FactorNumerically(pending->symmetric, threads, fresh);
+    try {
+      pending->attempts = FactorNumerically(pending->symmetric, threads, fresh);
+    } catch (const std::exception&) {
+      pending->attempts = -1;  // out of memory, say: the previous factor stays
+    }
   });
   return Status::Ok();
 }

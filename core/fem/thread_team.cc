@@ -59,16 +59,22 @@ void ThreadTeam::Run(const std::function<void(int)>& task) {
 }
 
 void ThreadTeam::StartBackground(std::function<void()> job) {
-  SOFTID_DEMAND(!BackgroundRunning());
+  WaitForBackground();
+  background_running_.store(true, std::memory_order_release);
   try {
-    background_ = std::thread(job);
+    background_ = std::thread([this, job] {
+      job();
+      background_running_.store(false, std::memory_order_release);
+    });
   } catch (const std::system_error&) {
     job();  // no thread to be had: the caller does the job now
+    background_running_.store(false, std::memory_order_release);
   }
 }
 
 void ThreadTeam::WaitForBackground() {
   if (background_.joinable()) background_.join();
+  background_running_.store(false, std::memory_order_release);
 }
 
 void ThreadTeam::WorkerLoop(int member) {

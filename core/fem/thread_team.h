@@ -6,6 +6,7 @@
 // Thread-compatibility: one caller at a time (the simulation that owns the team).
 #pragma once
 
+#include <atomic>
 #include <condition_variable>
 #include <exception>
 #include <functional>
@@ -32,11 +33,11 @@ class ThreadTeam {
   // the same (only slower).
   void Run(const std::function<void(int)>& task);
 
-  // Starts `job` on a thread of its own, to overlap with the caller's work; the team's members
-  // then stay off the cores (see Run). Only one job at a time; `job` must not throw.
-  // @pre !BackgroundRunning()
+  // Starts `job` on a thread of its own, to overlap with the caller's work; until it finishes the
+  // team's members stay off the cores (see Run). One job at a time: a previous one is waited for
+  // first. `job` must not throw.
   void StartBackground(std::function<void()> job);
-  bool BackgroundRunning() const { return background_.joinable(); }
+  bool BackgroundRunning() const { return background_running_.load(std::memory_order_acquire); }
   // Waits for the background job, if any, to finish.
   void WaitForBackground();
 
@@ -52,6 +53,7 @@ class ThreadTeam {
   bool stopping_ = false;
   std::vector<std::exception_ptr> errors_;  // per member
   std::thread background_;
+  std::atomic<bool> background_running_{false};  // the job has not finished yet
 };
 
 }  // namespace softid::fem

@@ -58,6 +58,28 @@ TEST(ThreadTeam, ExceptionReachesTheCallerAndTheTeamStaysUsable) {
   EXPECT_EQ(runs, 1);
 }
 
+// A background job runs beside the caller; meanwhile every member's task runs on the caller, and
+// once the job has finished the members are back on their own threads.
+TEST(ThreadTeam, BackgroundJobRunsBesideTheCaller) {
+  ThreadTeam team(2);
+  std::atomic<bool> release{false}, job_done{false};
+  team.StartBackground([&] {
+    while (!release.load()) std::this_thread::yield();  // finishes only if the caller goes on
+    job_done = true;
+  });
+  EXPECT_TRUE(team.BackgroundRunning());
+  std::thread::id ids[2];
+  team.Run([&](int member) { ids[member] = std::this_thread::get_id(); });
+  EXPECT_EQ(ids[0], std::this_thread::get_id());
+  EXPECT_EQ(ids[1], std::this_thread::get_id());
+  release = true;
+  team.WaitForBackground();
+  EXPECT_TRUE(job_done.load());
+  EXPECT_FALSE(team.BackgroundRunning());
+  team.Run([&](int member) { ids[member] = std::this_thread::get_id(); });
+  EXPECT_NE(ids[1], std::this_thread::get_id());
+}
+
 TEST(ThreadTeam, RejectsAnEmptyTeam) {
   EXPECT_THROW(ThreadTeam(0), std::invalid_argument);
 }
