@@ -31,16 +31,20 @@ Jet Logistic(const Jet& s) {
 
 }  // namespace
 
+bool GroundContactDerivativesVanish(const ContactLaw& law, const Eigen::Vector3d& x,
+                                    const Eigen::Vector3d& x_previous) {
+  // exp(-40): no force, and no lagged normal force for friction, to double precision.
+  const double limit = 40.0 * law.smoothing;
+  return law.plane.SignedDistance(x) > limit && law.plane.SignedDistance(x_previous) > limit;
+}
+
 GroundForceDerivatives GroundContactForceDerivatives(const ContactLaw& law, double area,
                                                      const Eigen::Vector3d& x,
                                                      const Eigen::Vector3d& v,
                                                      const Eigen::Vector3d& x_previous) {
   GroundForceDerivatives out;
+  if (GroundContactDerivativesVanish(law, x, x_previous)) return out;
   const double a = 1.0 / law.smoothing;
-  const double s_now = -a * law.plane.SignedDistance(x);
-  const double s_previous = -a * law.plane.SignedDistance(x_previous);
-  // exp(-40): no force, and no lagged normal force for friction, to double precision.
-  if (s_now < -40.0 && s_previous < -40.0) return out;
 
   Vector3J n, vel, xp;
   for (int i = 0; i < 3; ++i) {

@@ -21,6 +21,11 @@ struct GroundForceDerivatives {
   Eigen::Matrix3d d_previous_position = Eigen::Matrix3d::Zero();  // d f / d x_prev
 };
 
+// Whether GroundContactForceDerivatives is all zero: the point is 40 smoothing lengths above the
+// ground now and at the previous step (no force, no lagged normal force, to double precision).
+bool GroundContactDerivativesVanish(const ContactLaw& law, const Eigen::Vector3d& x,
+                                    const Eigen::Vector3d& x_previous);
+
 // GroundContactForce(law, area, x, v, ContactNormalForce(law, area, x_previous)) and its
 // derivatives. Friction terms are differentiated even when law.friction_coefficient is 0, so the
 // gradient with respect to mu at mu = 0 is available (the diagnosis screens friction there).

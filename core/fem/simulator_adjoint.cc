@@ -147,8 +147,9 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
   }
 
   // Surface points: r_i -= w_i f_p, so -lambda^T dr/dq = lambda_p . df_p/dq with
-  // lambda_p = sum_i w_i lambda_i.
-  double d_stiffness = 0.0;
+  // lambda_p = sum_i w_i lambda_i. A point writes to its element's nodes only, so the points run
+  // on the team like the forward assembly's (each range's own, then the shared ones), each member
+  // summing its share of the parameter gradient; the shares are added in member order.
   const Eigen::VectorXd& surface_u = surface != nullptr && surface->u != nullptr ? *surface->u : u;
   const Eigen::VectorXd& surface_v = surface != nullptr && surface->v != nullptr ? *surface->v : v;
   Eigen::VectorXd* surface_velocity_adjoint = velocity_adjoint;
@@ -158,49 +159,57 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
     surface->jacobian_adjoint.setZero(3 * n);
     surface_velocity_adjoint = &surface->velocity_adjoint;
   }
-  for (int pt = 0; pt < force_embedding_.NumPoints(); ++pt) {
+  const bool drag = p.drag_linear > 0.0 || p.drag_quadratic > 0.0;
+  struct SurfaceShare {
+    Eigen::Vector3d ground_normal = Eigen::Vector3d::Zero();
+    double ground_offset = 0.0, stiffness = 0.0, contact_damping = 0.0, friction_coefficient = 0.0;
+    double drag_linear = 0.0, drag_quadratic = 0.0;
+  };
+  const auto backpropagate_point = [&](int pt, SurfaceShare* share) {
     const Eigen::Vector3d lambda_p = force_embedding_.Interpolate(mesh_, lambda, pt);
-    if (lambda_p.isZero(0.0)) continue;
+    if (lambda_p.isZero(0.0)) return;
     const Eigen::Vector3d vp = force_embedding_.Interpolate(mesh_, surface_v, pt);
     const double area = surface_areas_[pt];
-    Eigen::Vector3d velocity_part = Eigen::Vector3d::Zero();  // (df/dv)^T lambda_p
-    if (p.ground) {
-      const Eigen::Vector3d xp =
-          force_embedding_.rest_positions[pt] + force_embedding_.Interpolate(mesh_, surface_u, pt);
-      const Eigen::Vector3d xp_previous =
-          force_embedding_.rest_positions[pt] + force_embedding_.Interpolate(mesh_, u_previous, pt);
-      const GroundForceDerivatives d =
-          GroundContactForceDerivatives(contact_, area, xp, vp, xp_previous);
-      gradient->ground_normal += d.d_normal.transpose() * lambda_p;
-      gradient->ground_offset += d.d_offset.dot(lambda_p);
-      d_stiffness += d.d_stiffness.dot(lambda_p);
-      gradient->contact_damping += d.d_damping.dot(lambda_p);
-      gradient->friction_coefficient += d.d_friction.dot(lambda_p);
-      velocity_part += d.d_velocity.transpose() * lambda_p;
-      const Eigen::Vector3d previous_part = d.d_previous_position.transpose() * lambda_p;
-      const auto& nodes = mesh_.element_nodes[force_embedding_.element[pt]];
-      const auto& w = force_embedding_.weights[pt];
-      for (int c = 0; c < 8; ++c)
-        previous_adjoint->segment<3>(3 * nodes[c]) += w[c] * previous_part;
-    }
     // Drag f = -(A/4) (c1 + c2 |v|) v; its derivatives exist at c = 0 too (for screening).
     const double projected = 0.25 * area;
     const double speed = vp.norm();
-    gradient->drag_linear -= projected * vp.dot(lambda_p);
-    gradient->drag_quadratic -= projected * speed * vp.dot(lambda_p);
-    const PointForce drag = AirDragForce(p.drag_linear, p.drag_quadratic, area, vp);
-    velocity_part -= drag.damping.transpose() * lambda_p;
-    // -(dr/dv)^T lambda = (df/dv)^T lambda_p, spread back to the nodes.
+    share->drag_linear -= projected * vp.dot(lambda_p);
+    share->drag_quadratic -= projected * speed * vp.dot(lambda_p);
     const auto& nodes = mesh_.element_nodes[force_embedding_.element[pt]];
     const auto& w = force_embedding_.weights[pt];
+    Eigen::Vector3d velocity_part = Eigen::Vector3d::Zero();  // (df/dv)^T lambda_p
+    bool ground_force = false;
+    Eigen::Vector3d xp = Eigen::Vector3d::Zero();
+    if (p.ground) {
+      xp = force_embedding_.rest_positions[pt] + force_embedding_.Interpolate(mesh_, surface_u, pt);
+      const Eigen::Vector3d xp_previous =
+          force_embedding_.rest_positions[pt] + force_embedding_.Interpolate(mesh_, u_previous, pt);
+      ground_force = !GroundContactDerivativesVanish(contact_, xp, xp_previous);
+      if (ground_force) {
+        const GroundForceDerivatives d =
+            GroundContactForceDerivatives(contact_, area, xp, vp, xp_previous);
+        share->ground_normal += d.d_normal.transpose() * lambda_p;
+        share->ground_offset += d.d_offset.dot(lambda_p);
+        share->stiffness += d.d_stiffness.dot(lambda_p);
+        share->contact_damping += d.d_damping.dot(lambda_p);
+        share->friction_coefficient += d.d_friction.dot(lambda_p);
+        velocity_part += d.d_velocity.transpose() * lambda_p;
+        const Eigen::Vector3d previous_part = d.d_previous_position.transpose() * lambda_p;
+        for (int c = 0; c < 8; ++c)
+          previous_adjoint->segment<3>(3 * nodes[c]) += w[c] * previous_part;
+      }
+    }
+    // Far from the ground without drag the point exerts no force: nothing else to add.
+    if (!ground_force && !drag) return;
+    const PointForce drag_force = AirDragForce(p.drag_linear, p.drag_quadratic, area, vp);
+    velocity_part -= drag_force.damping.transpose() * lambda_p;
+    // -(dr/dv)^T lambda = (df/dv)^T lambda_p, spread back to the nodes.
     for (int c = 0; c < 8; ++c)
       surface_velocity_adjoint->segment<3>(3 * nodes[c]) -= w[c] * velocity_part;
     if (surface != nullptr) {
       // The point's block of the step matrix, as Assemble builds it (exact tangent).
-      Eigen::Matrix3d jacobian = drag.StepJacobian(dv_du);
-      if (p.ground) {
-        const Eigen::Vector3d xp = force_embedding_.rest_positions[pt] +
-                                   force_embedding_.Interpolate(mesh_, surface_u, pt);
+      Eigen::Matrix3d jacobian = drag_force.StepJacobian(dv_du);
+      if (ground_force) {
         jacobian += GroundContactForce(contact_, area, xp, vp, lagged_normal_force_[pt])
                         .StepJacobian(dv_du);
       }
@@ -208,6 +217,21 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
       for (int c = 0; c < 8; ++c)
         surface->jacobian_adjoint.segment<3>(3 * nodes[c]) += w[c] * product;
     }
+  };
+  std::vector<SurfaceShare> surface_shares(point_chunks_.size() + 1);
+  team_->Run([&](int member) {
+    for (int pt : point_chunks_[member]) backpropagate_point(pt, &surface_shares[member]);
+  });
+  for (int pt : shared_points_) backpropagate_point(pt, &surface_shares.back());
+  double d_stiffness = 0.0;
+  for (const SurfaceShare& share : surface_shares) {
+    gradient->ground_normal += share.ground_normal;
+    gradient->ground_offset += share.ground_offset;
+    d_stiffness += share.stiffness;
+    gradient->contact_damping += share.contact_damping;
+    gradient->friction_coefficient += share.friction_coefficient;
+    gradient->drag_linear += share.drag_linear;
+    gradient->drag_quadratic += share.drag_quadratic;
   }
   gradient->contact_stiffness += d_stiffness;
   if (p.ground && p.contact_stiffness <= 0.0)
