@@ -46,11 +46,12 @@ struct StateAdjoint {
 
 struct StepSummary {
   int newton_iterations = 0;
-  int linear_iterations = 0;  // summed over Newton iterations, with convergence estimates
-  bool converged = false;     // Newton met its tolerance
-  bool diverged = false;      // non-finite state or a failed linear solve: the run is invalid
-  bool refactorized = false;  // the preconditioner was renewed during this step
-  double max_update = -1.0;   // last Newton update, max norm [m]
+  int linear_iterations = 0;   // summed over Newton iterations, with convergence estimates
+  int tangent_assemblies = 0;  // Newton's matrix assembled (the residual alone is cheaper)
+  bool converged = false;      // Newton met its tolerance
+  bool diverged = false;       // non-finite state or a failed linear solve: the run is invalid
+  bool refactorized = false;   // the preconditioner was renewed during this step
+  double max_update = -1.0;    // last Newton update, max norm [m]
 };
 
 struct Energies {
@@ -225,6 +226,10 @@ class Simulator {
   std::vector<std::array<double, 8>> element_stiffness_weights_;
   std::vector<double> element_scale_;  // stiffness field scale per element
   StepSummary NewtonSolve(Mode mode);
+  // Whether the next dynamic step first tries the preconditioner's estimate as its only update:
+  // after a step that converged with one Newton update. Reset with the state, so a run depends on
+  // its start alone.
+  bool estimate_first_ = false;
   // Whether the matrix Newton assembles in this mode is symmetric up to round-off (see
   // LinearSolver::Symmetry).
   LinearSolver::Symmetry TangentSymmetry(Mode mode) const;
