@@ -10,6 +10,7 @@
 #include <fstream>
 #include <thread>
 
+#include "core/common/cpu_support.h"
 #include "server/server.h"
 
 namespace {
@@ -49,6 +50,8 @@ int DefaultWorkers() {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Links the start-up check that this CPU runs the build's instruction set.
+  if (!softid::CpuSupportsBuild()) return 2;
   softid::server::ServerOptions options;
   options.num_workers = DefaultWorkers();
   std::string data_dir;

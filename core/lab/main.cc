@@ -4,9 +4,12 @@
 
 #include <CLI/CLI.hpp>
 
+#include "core/common/cpu_support.h"
 #include "core/lab/commands.h"
 
 int main(int argc, char** argv) {
+  // Links the start-up check that this CPU runs the build's instruction set.
+  if (!softid::CpuSupportsBuild()) return 2;
   auto logger = spdlog::stderr_color_mt("softid-lab");
   spdlog::set_default_logger(logger);
   spdlog::set_pattern("[%H:%M:%S.%e] [%^%l%$] %v");
