@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <numeric>
 #include <stdexcept>
@@ -629,27 +630,37 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
   update_.setZero();
   Eigen::Matrix3d body_rotation;
   double residual_norm = 0.0;
-  if (dynamic && estimate_first_) {
-    // The previous step needed one Newton update (free flight, gentle contact): the predictor is
-    // nearly right and the rotated factor nearly the step matrix, so the preconditioner's
-    // estimate from the residual may already be converged (SimulationOptions::
-    // newton_estimate_first).
+  // The residual alone at u_next_ and the preconditioner's estimate of the next update from it,
+  // P^-1 (-r), into update_ (one pair of triangular solves instead of a tangent and GMRES):
+  // returns its max norm, NaN when the residual is not finite.
+  const auto estimate_update = [&] {
     body_rotation = assemble(/*residual_only=*/true, /*reuse_rotations=*/false);
     residual_norm = residual_.norm();
+    if (!std::isfinite(residual_norm)) return std::numeric_limits<double>::quiet_NaN();
+    rhs_ = (-1.0 / matrix_scale) * residual_;
+    solver_.Precondition(rhs_, body_rotation, &update_);
+    ++summary.linear_iterations;
+    return update_.lpNorm<Eigen::Infinity>();
+  };
+  // A small estimate is taken as the last update: the step has converged.
+  const auto take_estimate = [&](double estimate) {
+    u_next_ += update_;
+    if (dynamic) NewmarkKinematics(u_next_, &v_next_, &a_next_);
+    summary.max_update = estimate;
+    summary.converged = true;
+  };
+  if (dynamic && estimate_first_) {
+    // The previous step needed one Newton update (free flight, gentle contact): the predictor is
+    // nearly right and the rotated factor nearly the step matrix, so the estimate may already be
+    // converged (SimulationOptions::newton_estimate_first).
+    const double estimate = estimate_update();
     if (!std::isfinite(residual_norm)) {
       summary.diverged = true;
       return summary;
     }
-    rhs_ = (-1.0 / matrix_scale) * residual_;
-    solver_.Precondition(rhs_, body_rotation, &update_);
-    ++summary.linear_iterations;
-    const double estimate = update_.lpNorm<Eigen::Infinity>();
     if (estimate <= tolerance) {
-      u_next_ += update_;
-      NewmarkKinematics(u_next_, &v_next_, &a_next_);
+      take_estimate(estimate);
       summary.newton_iterations = 1;
-      summary.max_update = estimate;
-      summary.converged = true;
       return finish();
     }
     if (!std::isfinite(estimate)) update_.setZero();
@@ -710,18 +721,10 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
       summary.converged = true;
       break;
     }
-    body_rotation = assemble(/*residual_only=*/true, /*reuse_rotations=*/false);
-    residual_norm = residual_.norm();
+    const double estimate = estimate_update();
     if (!std::isfinite(residual_norm)) break;
-    rhs_ = (-1.0 / matrix_scale) * residual_;
-    solver_.Precondition(rhs_, body_rotation, &update_);
-    ++summary.linear_iterations;
-    const double estimate = update_.lpNorm<Eigen::Infinity>();
     if (estimate <= tolerance) {
-      u_next_ += update_;
-      if (dynamic) NewmarkKinematics(u_next_, &v_next_, &a_next_);
-      summary.max_update = estimate;
-      summary.converged = true;
+      take_estimate(estimate);
       break;
     }
     if (it + 1 < options_.max_newton_iterations) {
