@@ -58,6 +58,36 @@ TEST(LinearSolver, GmresSolvesAPreconditionedSystem) {
   EXPECT_LT((a * x - b).norm(), 1e-9 * b.norm());
 }
 
+// At tolerances >= 1e-8 GMRES reports its recurrence's residual without a final product; it must
+// be the true one: over a stale preconditioner (many iterations, a restart), for both operators
+// and from a zero and a non-zero initial guess, the reported and the true residual agree.
+TEST(LinearSolver, ReportedResidualIsTheTrueResidual) {
+  const LinearSolver::Matrix reference = MakeMatrix(300, 0.0, 0.0);
+  const LinearSolver::Matrix a = MakeMatrix(300, 0.1, 0.0);
+  const Eigen::VectorXd b = RandomVector(a.rows());
+  LinearSolver solver;
+  ASSERT_TRUE(solver.Factorize(reference, Eigen::Matrix3d::Identity()).ok());
+  LinearSolver::Options options;
+  options.relative_tolerance = 1e-6;
+  options.restart = 6;
+  for (const auto op : {LinearSolver::Operator::kMatrix, LinearSolver::Operator::kTransposed}) {
+    for (const double guess : {0.0, 0.5}) {
+      Eigen::VectorXd x = Eigen::VectorXd::Constant(a.rows(), guess);
+      const LinearSolver::Summary summary =
+          solver.Solve(a, b, Eigen::Matrix3d::Identity(), options, &x, op);
+      ASSERT_TRUE(summary.converged);
+      EXPECT_GT(summary.iterations, options.restart);  // the stale factor needed a restart
+      const Eigen::VectorXd residual = op == LinearSolver::Operator::kMatrix
+                                           ? Eigen::VectorXd(b - a * x)
+                                           : Eigen::VectorXd(b - a.transpose() * x);
+      const double true_relative = residual.norm() / b.norm();
+      EXPECT_LE(true_relative, options.relative_tolerance);
+      EXPECT_NEAR(summary.relative_residual, true_relative, 1e-3 * true_relative)
+          << "guess " << guess;
+    }
+  }
+}
+
 // A symmetric matrix may be factored as it is (Symmetry::kSymmetric, no (A + A^T) / 2 formed):
 // the factor is the same, so the preconditioner gives bitwise the same estimate, which solves
 // the SPD system to the single-precision factor's accuracy.
