@@ -32,7 +32,10 @@ struct RefinementOptions {
   // Central-difference step in the optimiser's variables (log variables: a 0.1 % change; gravity:
   // 1 mm/s^2): large against the simulation's solver noise, small against the curvature.
   double jacobian_step = 1e-3;
-  // Stop when a step lowers the cost by less than this fraction (Ceres' function_tolerance).
+  // Stop when a step lowers the cost by less than this fraction (Ceres' function_tolerance), or
+  // when an accepted step's Gauss-Newton model predicted less than that, or when a step shorter
+  // than jacobian_step is rejected (near the minimum the actual change is the forward runs' noise,
+  // a few 1e-6 relative, so these test the model instead).
   double function_tolerance = 1e-6;
   double gradient_tolerance = 1e-10;  // as Ceres' Solver::Options
   double parameter_tolerance = 1e-8;  // as Ceres' Solver::Options
@@ -44,8 +47,8 @@ struct RefinementOptions {
 struct RefinementSummary {
   int iterations = 0;
   double initial_cost = 0.0, final_cost = 0.0;  // [m^2]
-  bool converged = false;                       // Ceres: CONVERGENCE
-  std::string termination;                      // Ceres' message
+  bool converged = false;   // Ceres: CONVERGENCE, or the model's predicted change (USER_SUCCESS)
+  std::string termination;  // Ceres' message
   int evaluations = 0, failed_evaluations = 0;  // forward runs (Jacobian columns included)
   long long steps = 0, unconverged_steps = 0;   // simulation steps of those runs
   double forward_seconds = 0.0;
