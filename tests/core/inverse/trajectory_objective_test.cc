@@ -152,6 +152,13 @@ TEST(TrajectoryObjective, EvaluationIsBitwiseRepeatable) {
   EXPECT_EQ(a->cost, b->cost);
   EXPECT_EQ(a->frame_costs, b->frame_costs);
   EXPECT_EQ(fem::ToJson(a->gradient).dump(), fem::ToJson(b->gradient).dump());
+  // A value-only evaluation (the line search's) gives the same cost: with a gradient, the frame
+  // costs come from the backward pass instead.
+  Result<ObjectiveEvaluation> value_only = objective.Evaluate(p, false);
+  ASSERT_TRUE(value_only.ok());
+  EXPECT_EQ(value_only->cost, a->cost);
+  EXPECT_EQ(value_only->frame_costs, a->frame_costs);
+  EXPECT_GT(a->cost, 0.0);
 }
 
 }  // namespace
