@@ -86,6 +86,7 @@ struct Benchmark {
   int quick_starts = 3;         // with --quick
   int cells = 16;               // grid of the generator and the fit
   int substeps = 2;             // steps per frame, generator and fit
+  double fps = 60.0;            // frames per second of the capture [1/s]
   double duration = 0.0;        // [s]; 0 = the scene's own
   double quick_duration = 0.0;  // [s] with --quick; 0 = as duration
   int max_iterations = 50;
@@ -98,6 +99,9 @@ struct Benchmark {
   bool fit_mass = false;
   // Run the identifiability analysis at the best start and print its verdict for these variables.
   std::vector<std::string> identifiability_focus;
+  // Wall-time target of one start [s] (0: none): the row then also reports the slowest start's
+  // wall time against it. Starts that run alone get every core (JobConfig::threads).
+  double start_seconds_target = 0.0;
 };
 
 // The benchmark named `name`; InvalidArgument listing the known names otherwise.
@@ -112,10 +116,12 @@ nlohmann::json DrawStart(const Benchmark& benchmark, const fem::PhysicalParamete
                          std::mt19937_64& rng);
 
 // The job config of one start: `fit`, the start values, every other parameter fixed at the truth
-// (density only when the capture has no mass), the benchmark's grid and time step, one start.
+// (density only when the capture has no mass), the benchmark's grid and time step, one start
+// whose simulation runs on `cores` threads.
 Result<inverse::JobConfig> MakeStartConfig(const Benchmark& benchmark, const Row& row,
                                            const fem::PhysicalParameters& truth,
                                            const nlohmann::json& initial, bool capture_has_mass,
-                                           int max_iterations, int refine_iterations);
+                                           int max_iterations, int refine_iterations,
+                                           int cores = 1);
 
 }  // namespace softid::lab::reproduce
