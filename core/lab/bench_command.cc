@@ -243,6 +243,9 @@ int RunBench(const BenchFlags& flags) {
     const double cpu_minutes = minutes * adjoint_cpu_ms_at_3000 / adjoint_ms_at_3000;
     std::printf("  from CPU time: %.2f ms per forward+adjoint step, projected %.1f min per start\n",
                 adjoint_cpu_ms_at_3000, cpu_minutes);
+    std::printf(
+        "  a projection: `softid-lab reproduce teddy-job` runs such a job (80 frames of one step, "
+        "4 parameters, 50 iterations) and times it\n");
   }
   return kExitOk;
 }
