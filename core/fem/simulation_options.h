@@ -80,11 +80,12 @@ struct SimulationOptions {
   double linear_tolerance = 1e-2;   // relative residual [-], > 0
   int max_linear_iterations = 500;  // [-], >= 1
   // Relative residual of the adjoint's transposed solves [-], > 0. Unlike the forward solves, an
-  // inexact adjoint solve is an error in the gradient itself, but 1e-5 keeps it far below what a
-  // line search notices: against 1e-6 the adjoint ran ~19 % faster (torus-drop, 3,100 cells) and
-  // Table 1 c1-50, bar-hanging and the diagnosis proof gave the same results. Gradient tests
-  // tighten it to 1e-12.
-  double adjoint_linear_tolerance = 1e-5;
+  // inexact adjoint solve is an error in the gradient itself. 1e-5 made the adjoint ~19 % faster
+  // (torus-drop, 3,100 cells) and left Table 1 c1-50, bar-hanging and the diagnosis proof
+  // unchanged, but L-BFGS in pillow-ramp's curved 9-variable valleys then took other paths: of its
+  // first 4 starts 1 instead of 2 reached the minimum (session 15; a small sample, but the gradient
+  // is what those valleys are walked by). Gradient tests tighten it to 1e-12.
+  double adjoint_linear_tolerance = 1e-6;
 
   // Width of the smooth onset of contact force (softplus length) [m]; 0 selects 1e-3 L, L the
   // longest side of the rest mesh.

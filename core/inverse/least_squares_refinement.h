@@ -33,9 +33,8 @@ struct RefinementOptions {
   // 1 mm/s^2): large against the simulation's solver noise, small against the curvature.
   double jacobian_step = 1e-3;
   // Stop when a step lowers the cost by less than this fraction (Ceres' function_tolerance), or
-  // when an accepted step's Gauss-Newton model predicted less than that, or when a step shorter
-  // than jacobian_step is rejected (near the minimum the actual change is the forward runs' noise,
-  // a few 1e-6 relative, so these test the model instead).
+  // when an accepted step's Gauss-Newton model predicted less than that (near the minimum the
+  // actual change is the forward runs' noise, a few 1e-6 relative).
   double function_tolerance = 1e-6;
   double gradient_tolerance = 1e-10;  // as Ceres' Solver::Options
   double parameter_tolerance = 1e-8;  // as Ceres' Solver::Options
