@@ -6,9 +6,18 @@
 #include <Eigen/SparseLU>
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
+#include <cstdint>
 #include <exception>
 #include <mutex>
 #include <utility>
+
+#if defined(__F16C__) && defined(__AVX2__) && defined(__FMA__)
+#include <immintrin.h>
+#define SOFTID_HALF_PRECISION_FACTOR 1
+#else
+#define SOFTID_HALF_PRECISION_FACTOR 0
+#endif
 
 #include "core/common/check.h"
 #include "core/fem/thread_team.h"
@@ -52,11 +61,135 @@ class SupernodalLlt
   const cholmod_factor& factor() const { return *m_cholmodFactor; }
 };
 
-// A single-precision copy of a supernodal factor L (L L^T = A(p, p)) and its two triangular
-// solves. The solves stream all of L from memory and dominate GMRES; in float, L takes half the
-// bytes (17 instead of 34 MB at 12.9k unknowns): 1.7x faster solves. As a preconditioner it loses
-// nothing: GMRES keeps the preconditioned basis (flexible GMRES), so the solution's accuracy
-// comes from the double products with A alone.
+#if SOFTID_HALF_PRECISION_FACTOR
+// The below-diagonal blocks of the factor in IEEE half precision (F16C conversions), each column
+// scaled by its largest magnitude (so the halves lie in [-1, 1] whatever the problem's units). The
+// solves stream these blocks from memory; in halves they take half the bytes of floats.
+using StoredBelow = std::uint16_t;
+
+// y[0, m) = sum_j x_j h[:, j] for an m x n column-major block h (leading dimension m).
+void HalfBlockTimes(const StoredBelow* h, int m, int n, const float* x, float* y) {
+  std::fill(y, y + m, 0.0f);
+  const int m8 = m - m % 8;
+  int j = 0;
+  for (; j + 4 <= n; j += 4) {
+    const StoredBelow* c0 = h + static_cast<std::ptrdiff_t>(j) * m;
+    const StoredBelow* c1 = c0 + m;
+    const StoredBelow* c2 = c1 + m;
+    const StoredBelow* c3 = c2 + m;
+    const __m256 x0 = _mm256_set1_ps(x[j]), x1 = _mm256_set1_ps(x[j + 1]);
+    const __m256 x2 = _mm256_set1_ps(x[j + 2]), x3 = _mm256_set1_ps(x[j + 3]);
+    for (int i = 0; i < m8; i += 8) {
+      __m256 acc = _mm256_loadu_ps(y + i);
+      acc = _mm256_fmadd_ps(
+          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c0 + i))), x0, acc);
+      acc = _mm256_fmadd_ps(
+          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c1 + i))), x1, acc);
+      acc = _mm256_fmadd_ps(
+          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c2 + i))), x2, acc);
+      acc = _mm256_fmadd_ps(
+          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c3 + i))), x3, acc);
+      _mm256_storeu_ps(y + i, acc);
+    }
+    for (int i = m8; i < m; ++i) {
+      y[i] += _cvtsh_ss(c0[i]) * x[j] + _cvtsh_ss(c1[i]) * x[j + 1] + _cvtsh_ss(c2[i]) * x[j + 2] +
+              _cvtsh_ss(c3[i]) * x[j + 3];
+    }
+  }
+  for (; j < n; ++j) {
+    const StoredBelow* c0 = h + static_cast<std::ptrdiff_t>(j) * m;
+    const __m256 x0 = _mm256_set1_ps(x[j]);
+    for (int i = 0; i < m8; i += 8) {
+      const __m256 v = _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c0 + i)));
+      _mm256_storeu_ps(y + i, _mm256_fmadd_ps(v, x0, _mm256_loadu_ps(y + i)));
+    }
+    for (int i = m8; i < m; ++i) y[i] += _cvtsh_ss(c0[i]) * x[j];
+  }
+}
+
+float HorizontalSum(__m256 v) {
+  const __m128 pair = _mm_add_ps(_mm256_castps256_ps128(v), _mm256_extractf128_ps(v, 1));
+  const __m128 two = _mm_add_ps(pair, _mm_movehl_ps(pair, pair));
+  return _mm_cvtss_f32(_mm_add_ss(two, _mm_shuffle_ps(two, two, 1)));
+}
+
+// t_j = sum_i h[i, j] x_i, j in [0, n), for an m x n column-major block h (leading dimension m).
+void HalfBlockTransposedTimes(const StoredBelow* h, int m, int n, const float* x, float* t) {
+  const int m8 = m - m % 8;
+  int j = 0;
+  for (; j + 4 <= n; j += 4) {
+    const StoredBelow* c0 = h + static_cast<std::ptrdiff_t>(j) * m;
+    const StoredBelow* c1 = c0 + m;
+    const StoredBelow* c2 = c1 + m;
+    const StoredBelow* c3 = c2 + m;
+    __m256 a0 = _mm256_setzero_ps(), a1 = _mm256_setzero_ps();
+    __m256 a2 = _mm256_setzero_ps(), a3 = _mm256_setzero_ps();
+    for (int i = 0; i < m8; i += 8) {
+      const __m256 xv = _mm256_loadu_ps(x + i);
+      a0 = _mm256_fmadd_ps(
+          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c0 + i))), xv, a0);
+      a1 = _mm256_fmadd_ps(
+          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c1 + i))), xv, a1);
+      a2 = _mm256_fmadd_ps(
+          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c2 + i))), xv, a2);
+      a3 = _mm256_fmadd_ps(
+          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c3 + i))), xv, a3);
+    }
+    float s0 = HorizontalSum(a0), s1 = HorizontalSum(a1), s2 = HorizontalSum(a2),
+          s3 = HorizontalSum(a3);
+    for (int i = m8; i < m; ++i) {
+      s0 += _cvtsh_ss(c0[i]) * x[i];
+      s1 += _cvtsh_ss(c1[i]) * x[i];
+      s2 += _cvtsh_ss(c2[i]) * x[i];
+      s3 += _cvtsh_ss(c3[i]) * x[i];
+    }
+    t[j] = s0;
+    t[j + 1] = s1;
+    t[j + 2] = s2;
+    t[j + 3] = s3;
+  }
+  for (; j < n; ++j) {
+    const StoredBelow* c0 = h + static_cast<std::ptrdiff_t>(j) * m;
+    __m256 a0 = _mm256_setzero_ps();
+    for (int i = 0; i < m8; i += 8) {
+      a0 = _mm256_fmadd_ps(
+          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c0 + i))),
+          _mm256_loadu_ps(x + i), a0);
+    }
+    float s0 = HorizontalSum(a0);
+    for (int i = m8; i < m; ++i) s0 += _cvtsh_ss(c0[i]) * x[i];
+    t[j] = s0;
+  }
+}
+
+// Stores column values v[0, m) scaled by 1 / scale (rounded to nearest).
+void StoreBelowColumn(const double* v, int m, float scale, StoredBelow* out) {
+  const float inverse = scale > 0.0f ? 1.0f / scale : 0.0f;
+  const __m256 inverse8 = _mm256_set1_ps(inverse);
+  int i = 0;
+  for (; i + 8 <= m; i += 8) {
+    const __m256 lo = _mm256_castps128_ps256(_mm256_cvtpd_ps(_mm256_loadu_pd(v + i)));
+    const __m256 both = _mm256_insertf128_ps(lo, _mm256_cvtpd_ps(_mm256_loadu_pd(v + i + 4)), 1);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(out + i),
+                     _mm256_cvtps_ph(_mm256_mul_ps(both, inverse8), _MM_FROUND_TO_NEAREST_INT));
+  }
+  for (; i < m; ++i)
+    out[i] = _cvtss_sh(static_cast<float>(v[i]) * inverse, _MM_FROUND_TO_NEAREST_INT);
+}
+#else
+// Without F16C the below-diagonal blocks stay in single precision (scale 1) and run on BLAS.
+using StoredBelow = float;
+void StoreBelowColumn(const double* v, int m, float /*scale*/, StoredBelow* out) {
+  for (int i = 0; i < m; ++i) out[i] = static_cast<float>(v[i]);
+}
+#endif
+
+// A reduced-precision copy of a supernodal factor L (L L^T = A(p, p)) and its two triangular
+// solves. The solves stream all of L from memory and dominate GMRES: the diagonal blocks are
+// kept in single precision and the blocks below them, most of L (~75 % at 3,100 cells), in half
+// precision where the CPU converts halves (F16C): 9 instead of 34 MB for the double factor at
+// 12.9k unknowns. As a preconditioner it loses little: GMRES keeps the preconditioned basis
+// (flexible GMRES), so the solution's accuracy comes from the double products with A alone.
 //
 // On a team of threads the solves split the supernodal elimination tree: each member takes whole
 // subtrees (about equal work, contiguous ranges in CHOLMOD's postorder), the rest (the top
@@ -64,7 +197,7 @@ class SupernodalLlt
 // update its own columns and its ancestors', which are top columns, so in the forward solve each
 // member accumulates its updates of top columns privately and they are summed in member order
 // afterwards; the backward solve only reads top columns. The result is independent of timing.
-class SinglePrecisionFactor {
+class ReducedPrecisionFactor {
  public:
   void Assign(const cholmod_factor& l, int threads) {
     SOFTID_DEMAND(l.is_super && l.is_ll && l.xtype == CHOLMOD_REAL);
@@ -75,17 +208,45 @@ class SinglePrecisionFactor {
     const int* px = static_cast<const int*>(l.px);
     super_.assign(super, super + nsuper + 1);
     pi_.assign(pi, pi + nsuper + 1);
-    px_.assign(px, px + nsuper + 1);
     rows_.assign(static_cast<const int*>(l.s), static_cast<const int*>(l.s) + pi[nsuper]);
     perm_.assign(static_cast<const int*>(l.Perm), static_cast<const int*>(l.Perm) + n_);
     const double* x = static_cast<const double*>(l.x);
-    values_.resize(static_cast<size_t>(px[nsuper]));
-    std::copy(x, x + px[nsuper], values_.begin());
-    int max_below = 0;
-    for (int s = 0; s < nsuper; ++s)
-      max_below = std::max(max_below, (pi[s + 1] - pi[s]) - (super[s + 1] - super[s]));
+    diagonal_offset_.assign(nsuper + 1, 0);
+    below_offset_.assign(nsuper + 1, 0);
+    int max_below = 0, max_columns = 0;
+    for (int s = 0; s < nsuper; ++s) {
+      const std::ptrdiff_t ncol = super[s + 1] - super[s], nrow = pi[s + 1] - pi[s];
+      diagonal_offset_[s + 1] = diagonal_offset_[s] + ncol * ncol;
+      below_offset_[s + 1] = below_offset_[s] + ncol * (nrow - ncol);
+      max_below = std::max(max_below, static_cast<int>(nrow - ncol));
+      max_columns = std::max(max_columns, static_cast<int>(ncol));
+    }
+    diagonal_values_.resize(static_cast<size_t>(diagonal_offset_[nsuper]));
+    below_values_.resize(static_cast<size_t>(below_offset_[nsuper]));
+    column_scale_.assign(n_, 1.0f);
+    for (int s = 0; s < nsuper; ++s) {
+      const int k1 = super[s], ncol = super[s + 1] - k1;
+      const int nrow = pi[s + 1] - pi[s], nbelow = nrow - ncol;
+      const double* block = x + px[s];  // nrow x ncol, column-major
+      float* diagonal = diagonal_values_.data() + diagonal_offset_[s];
+      StoredBelow* below = below_values_.data() + below_offset_[s];
+      for (int c = 0; c < ncol; ++c) {
+        const double* column = block + static_cast<std::ptrdiff_t>(c) * nrow;
+        for (int r = 0; r < ncol; ++r) diagonal[c * ncol + r] = static_cast<float>(column[r]);
+        float scale = 1.0f;
+        if (SOFTID_HALF_PRECISION_FACTOR) {
+          double largest = 0.0;
+          for (int r = ncol; r < nrow; ++r) largest = std::max(largest, std::abs(column[r]));
+          scale = static_cast<float>(largest);
+        }
+        column_scale_[k1 + c] = scale;
+        StoreBelowColumn(column + ncol, nbelow, scale,
+                         below + static_cast<std::ptrdiff_t>(c) * nbelow);
+      }
+    }
     y_.resize(n_);
     max_below_ = std::max(1, max_below);
+    max_columns_ = std::max(1, max_columns);
     SetThreads(threads);
   }
 
@@ -95,10 +256,23 @@ class SinglePrecisionFactor {
     members_.resize(member_ranges_.size());
     for (Member& member : members_) {
       member.below.resize(max_below_);
+      member.columns.resize(max_columns_);
       member.top_updates.assign(n_, 0.0f);
     }
   }
   int threads() const { return static_cast<int>(member_ranges_.size()); }
+  // Memory held [bytes].
+  size_t bytes() const {
+    size_t total =
+        sizeof(float) * (diagonal_values_.capacity() + column_scale_.capacity() + y_.capacity()) +
+        sizeof(StoredBelow) * below_values_.capacity() +
+        sizeof(int) * (super_.capacity() + pi_.capacity() + rows_.capacity() + perm_.capacity() +
+                       own_below_.capacity());
+    for (const Member& member : members_)
+      total += sizeof(float) * (member.below.capacity() + member.columns.capacity() +
+                                member.top_updates.capacity());
+    return total;
+  }
   // Share of L's entries the members solve concurrently (0 on one thread).
   double parallel_share() const { return parallel_share_; }
 
@@ -141,29 +315,55 @@ class SinglePrecisionFactor {
  private:
   struct Member {
     std::vector<float> below;        // one supernode's products below its diagonal block
+    std::vector<float> columns;      // one supernode's scaled solution entries
     std::vector<float> top_updates;  // forward-solve updates of top columns, summed later
   };
 
-  using BlockMap = Eigen::Map<const Eigen::MatrixXf, 0, Eigen::OuterStride<>>;
-  static BlockMap DiagonalBlock(const float* block, int ncol, int nrow) {
-    return BlockMap(block, ncol, ncol, Eigen::OuterStride<>(nrow));
+  using BlockMap = Eigen::Map<const Eigen::MatrixXf>;
+
+  // below = B y_s: the block below supernode s's diagonal times its solved entries.
+  void BelowTimes(int s, int ncol, int nbelow, Member* member) const {
+    const int k1 = super_[s];
+    const StoredBelow* block = below_values_.data() + below_offset_[s];
+    float* below = member->below.data();
+#if SOFTID_HALF_PRECISION_FACTOR
+    float* scaled = member->columns.data();
+    for (int c = 0; c < ncol; ++c) scaled[c] = column_scale_[k1 + c] * y_[k1 + c];
+    HalfBlockTimes(block, nbelow, ncol, scaled, below);
+#else
+    const int one = 1;
+    const float plus = 1.0f, zero = 0.0f;
+    sgemv_("N", &nbelow, &ncol, &plus, block, &nbelow, y_.data() + k1, &one, &zero, below, &one);
+#endif
+  }
+
+  // y_s -= B^T below.
+  void SubtractBelowTransposedTimes(int s, int ncol, int nbelow, Member* member) {
+    const int k1 = super_[s];
+    const StoredBelow* block = below_values_.data() + below_offset_[s];
+    const float* below = member->below.data();
+#if SOFTID_HALF_PRECISION_FACTOR
+    float* products = member->columns.data();
+    HalfBlockTransposedTimes(block, nbelow, ncol, below, products);
+    for (int c = 0; c < ncol; ++c) y_[k1 + c] -= column_scale_[k1 + c] * products[c];
+#else
+    const int one = 1;
+    const float plus = 1.0f, minus = -1.0f;
+    sgemv_("T", &nbelow, &ncol, &minus, block, &nbelow, below, &one, &plus, y_.data() + k1, &one);
+#endif
   }
 
   // Forward substitution through supernodes [first, last), in order.
   void Forward(int first, int last, Member* member) {
-    const int one = 1;
-    const float plus = 1.0f, zero = 0.0f;
     for (int s = first; s < last; ++s) {
       const int k1 = super_[s], ncol = super_[s + 1] - k1;
       const int nrow = pi_[s + 1] - pi_[s], nbelow = nrow - ncol;
-      const float* block = values_.data() + px_[s];
-      DiagonalBlock(block, ncol, nrow)
+      BlockMap(diagonal_values_.data() + diagonal_offset_[s], ncol, ncol)
           .triangularView<Eigen::Lower>()
           .solveInPlace(Eigen::Map<Eigen::VectorXf>(y_.data() + k1, ncol));
       if (nbelow == 0) continue;
-      float* below = member->below.data();
-      sgemv_("N", &nbelow, &ncol, &plus, block + ncol, &nrow, y_.data() + k1, &one, &zero, below,
-             &one);
+      BelowTimes(s, ncol, nbelow, member);
+      const float* below = member->below.data();
       const int* rows = rows_.data() + pi_[s] + ncol;
       const int own = own_below_[s];
       for (int i = 0; i < own; ++i) y_[rows[i]] -= below[i];
@@ -174,20 +374,16 @@ class SinglePrecisionFactor {
 
   // Backward substitution through supernodes [first, last), in reverse order.
   void Backward(int first, int last, Member* member) {
-    const int one = 1;
-    const float plus = 1.0f, minus = -1.0f;
     for (int s = last - 1; s >= first; --s) {
       const int k1 = super_[s], ncol = super_[s + 1] - k1;
       const int nrow = pi_[s + 1] - pi_[s], nbelow = nrow - ncol;
-      const float* block = values_.data() + px_[s];
       if (nbelow > 0) {
         float* below = member->below.data();
         const int* rows = rows_.data() + pi_[s] + ncol;
         for (int i = 0; i < nbelow; ++i) below[i] = y_[rows[i]];
-        sgemv_("T", &nbelow, &ncol, &minus, block + ncol, &nrow, below, &one, &plus, y_.data() + k1,
-               &one);
+        SubtractBelowTransposedTimes(s, ncol, nbelow, member);
       }
-      DiagonalBlock(block, ncol, nrow)
+      BlockMap(diagonal_values_.data() + diagonal_offset_[s], ncol, ncol)
           .transpose()
           .triangularView<Eigen::Upper>()
           .solveInPlace(Eigen::Map<Eigen::VectorXf>(y_.data() + k1, ncol));
@@ -297,9 +493,15 @@ class SinglePrecisionFactor {
       for (int k = super_[s]; k < super_[s + 1]; ++k) top_columns_.push_back(k);
   }
 
-  int n_ = 0, max_below_ = 1;
-  std::vector<int> super_, pi_, px_, rows_, perm_;
-  std::vector<float> values_;
+  int n_ = 0, max_below_ = 1, max_columns_ = 1;
+  std::vector<int> super_, pi_, rows_, perm_;
+  // Per supernode: its diagonal block (ncol x ncol, single precision) and the block below it
+  // (nbelow x ncol, StoredBelow, column c scaled by column_scale_[first column + c]), both
+  // column-major, at these offsets.
+  std::vector<std::ptrdiff_t> diagonal_offset_, below_offset_;
+  std::vector<float> diagonal_values_;
+  std::vector<StoredBelow> below_values_;
+  std::vector<float> column_scale_;
   std::vector<float> y_;
   // The plan: per member its subtrees as supernode ranges [first, last), ascending; the top
   // supernodes (ascending) and their columns; per supernode the number of rows below its diagonal
@@ -314,10 +516,17 @@ class SinglePrecisionFactor {
 
 struct LinearSolver::Factor {
   SupernodalLlt llt;
-  SinglePrecisionFactor single;
   // From CHOLMOD's symbolic analysis: flops of one numeric factorisation and nonzeros of L.
   double flops = 0.0;
   double factor_nonzeros = 0.0;
+};
+
+struct LinearSolver::FactorSnapshot {
+  ReducedPrecisionFactor reduced;
+  Eigen::Matrix3d reference_rotation = Eigen::Matrix3d::Identity();
+  double factor_nonzeros = 0.0;
+  // Work of the factorisation that made it, including failed shifted attempts (work-model units).
+  double factor_work = 0.0;
 };
 
 namespace {
@@ -332,9 +541,14 @@ namespace {
 // rule only needs the ratio to within a factor of ~1.5: a wrong weight shifts the balance between
 // refactorisations and extra iterations, never the result's accuracy.
 constexpr double kFactorFlopWeight = 0.28;
-// The solves run on the single-precision copy of L, measured 1.7x faster than CHOLMOD's double
-// solves on the same host and problem (4.3 vs 7.5 ms under the same load).
-constexpr double kSinglePrecisionSolveWeight = 0.6;
+// The solves run on the reduced-precision copy of L: in single precision they measured 1.7x
+// faster than CHOLMOD's double solves on the same host and problem (4.3 vs 7.5 ms under the same
+// load), with the blocks below the diagonal in half precision another ~1.4x (BM_Precondition,
+// interleaved runs: 0.75-0.9 vs 1.2 ms). With the weight 0.6 of single precision the rule
+// refactorised as before, now that iterations are cheaper too often: 0.4 ran pillow-ramp (1 s),
+// ball-bounce (0.5 s) and torus-drop's impact (0.3 s) 21 %, 12 % and 3 % faster, torus-drop over
+// 1 s 30 % slower (a factor taken at the impact then served its rest).
+constexpr double kReducedPrecisionSolveWeight = 0.4;
 // Forming the symmetric part and CHOLMOD's permuted transpose before each factorisation:
 // ~10 memory-bound flops per entry of A.
 constexpr double kFactorWorkPerMatrixEntry = 10.0;
@@ -361,25 +575,43 @@ LinearSolver::~LinearSolver() {
 }
 
 double LinearSolver::ParallelShare() const {
-  return factor_ != nullptr ? factor_->single.parallel_share() : 0.0;
+  return current_ != nullptr ? current_->reduced.parallel_share() : 0.0;
 }
 
 void LinearSolver::SetThreadTeam(ThreadTeam* team) {
   FinishFactorize();
   team_ = team;
   const int threads = team != nullptr ? team->size() : 1;
-  if (factor_ != nullptr && factor_->single.threads() != threads)
-    factor_->single.SetThreads(threads);
+  if (current_ != nullptr && current_->reduced.threads() != threads)
+    current_->reduced.SetThreads(threads);
+}
+
+void LinearSolver::UseFactor(const std::shared_ptr<FactorSnapshot>& factor) {
+  FinishFactorize();
+  if (factor == nullptr || factor == current_) return;
+  current_ = factor;
+  const int threads = team_ != nullptr ? team_->size() : 1;
+  if (current_->reduced.threads() != threads) current_->reduced.SetThreads(threads);
+  RestartRefactorRule();
+}
+
+size_t LinearSolver::FactorBytes(const FactorSnapshot& factor) {
+  return factor.reduced.bytes();
+}
+
+void LinearSolver::RestartRefactorRule() {
+  baseline_iterations_ = -1;
+  excess_work_ = 0.0;
 }
 LinearSolver::LinearSolver(LinearSolver&&) noexcept = default;
 LinearSolver& LinearSolver::operator=(LinearSolver&&) noexcept = default;
 
 bool LinearSolver::HasFactor() const {
-  return factor_ != nullptr;
+  return current_ != nullptr;
 }
 
 bool LinearSolver::RefactorPays() const {
-  return factor_ != nullptr && excess_work_ > factor_work_;
+  return current_ != nullptr && excess_work_ > current_->factor_work;
 }
 
 LinearSolver::Matrix LinearSolver::SymmetricPart(const Matrix& a, Symmetry symmetry) {
@@ -391,10 +623,9 @@ LinearSolver::Matrix LinearSolver::SymmetricPart(const Matrix& a, Symmetry symme
   return a;
 }
 
-bool LinearSolver::PrepareSpare(const Matrix& symmetric) {
+void LinearSolver::PrepareWorkspace(const Matrix& symmetric) {
   // The assembly pattern is fixed, so the fill-reducing ordering and symbolic analysis (METIS
-  // dominates a factorisation at ~10^4 unknowns) are done once and reused: the numeric factor
-  // goes into the spare, which becomes current only when it succeeds.
+  // dominates a factorisation at ~10^4 unknowns) are done once and reused.
   const bool same_pattern =
       symmetric.rows() + 1 == static_cast<Eigen::Index>(pattern_outer_.size()) &&
       symmetric.nonZeros() == static_cast<Eigen::Index>(pattern_inner_.size()) &&
@@ -405,70 +636,72 @@ bool LinearSolver::PrepareSpare(const Matrix& symmetric) {
                           symmetric.outerIndexPtr() + symmetric.rows() + 1);
     pattern_inner_.assign(symmetric.innerIndexPtr(),
                           symmetric.innerIndexPtr() + symmetric.nonZeros());
-    spare_.reset();  // analysed for another pattern (the current factor still preconditions)
+    workspace_.reset();  // analysed for another pattern (the current factor still preconditions)
   }
-  if (spare_ == nullptr) {
-    spare_ = std::make_unique<Factor>();
-    spare_->llt.cholmod().print = 0;  // failures are handled below, not printed to stderr
-    spare_->llt.analyzePattern(symmetric);
-    spare_->flops = spare_->llt.cholmod().fl;
-    spare_->factor_nonzeros = spare_->llt.cholmod().lnz;
+  if (workspace_ == nullptr) {
+    workspace_ = std::make_unique<Factor>();
+    workspace_->llt.cholmod().print = 0;  // failures are handled below, not printed to stderr
+    workspace_->llt.analyzePattern(symmetric);
+    workspace_->flops = workspace_->llt.cholmod().fl;
+    workspace_->factor_nonzeros = workspace_->llt.cholmod().lnz;
   }
-  return same_pattern;
 }
 
-int LinearSolver::FactorNumerically(const Matrix& symmetric, int threads, Factor* fresh) {
-  fresh->llt.setShift(0.0);
-  fresh->llt.factorize(symmetric);
+int LinearSolver::FactorNumerically(const Matrix& symmetric, int threads, Factor* workspace,
+                                    FactorSnapshot* fresh) {
+  SupernodalLlt& llt = workspace->llt;
+  llt.setShift(0.0);
+  llt.factorize(symmetric);
   int attempts = 1;
   // Under strong compression the consistent tangent's geometric part makes the matrix indefinite.
   // As a preconditioner a factor of A + shift I serves as well: try growing shifts relative to the
   // mean diagonal.
   const double mean_diagonal = symmetric.diagonal().cwiseAbs().mean();
   for (double relative_shift : {1e-4, 1e-2, 1e-1, 1.0}) {
-    if (fresh->llt.info() == Eigen::Success) break;
-    fresh->llt.setShift(relative_shift * mean_diagonal);
-    fresh->llt.factorize(symmetric);
+    if (llt.info() == Eigen::Success) break;
+    llt.setShift(relative_shift * mean_diagonal);
+    llt.factorize(symmetric);
     ++attempts;
   }
-  if (fresh->llt.info() != Eigen::Success) return -attempts;
-  fresh->single.Assign(fresh->llt.factor(), threads);
+  if (llt.info() != Eigen::Success) return -attempts;
+  fresh->reduced.Assign(llt.factor(), threads);
+  fresh->factor_nonzeros = workspace->factor_nonzeros;
   return attempts;
 }
 
-void LinearSolver::AdoptSpare(bool same_pattern, const Eigen::Matrix3d& rotation, int attempts,
-                              Eigen::Index matrix_nonzeros) {
-  std::swap(factor_, spare_);
-  if (!same_pattern) spare_.reset();  // the old factor has the old pattern's analysis
-  reference_rotation_ = rotation;
-  ++num_factorizations_;
+void LinearSolver::Adopt(std::shared_ptr<FactorSnapshot> fresh, const Eigen::Matrix3d& rotation,
+                         int attempts, Eigen::Index matrix_nonzeros) {
+  fresh->reference_rotation = rotation;
   // A failed attempt stops at its first non-positive pivot; counting it in full errs towards
   // keeping a factor that was hard to get.
-  factor_work_ = attempts * kFactorFlopWeight * factor_->flops +
-                 kFactorWorkPerMatrixEntry * static_cast<double>(matrix_nonzeros);
-  baseline_iterations_ = -1;
-  excess_work_ = 0.0;
+  fresh->factor_work = attempts * kFactorFlopWeight * workspace_->flops +
+                       kFactorWorkPerMatrixEntry * static_cast<double>(matrix_nonzeros);
+  current_ = std::move(fresh);
+  ++num_factorizations_;
+  RestartRefactorRule();
 }
 
 Status LinearSolver::Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
                                Symmetry symmetry) {
   FinishFactorize();
   const Matrix symmetric = SymmetricPart(a, symmetry);
-  const bool same_pattern = PrepareSpare(symmetric);
-  const int attempts = FactorNumerically(symmetric, team_ != nullptr ? team_->size() : 1, &*spare_);
+  PrepareWorkspace(symmetric);
+  auto fresh = std::make_shared<FactorSnapshot>();
+  const int attempts = FactorNumerically(symmetric, team_ != nullptr ? team_->size() : 1,
+                                         workspace_.get(), fresh.get());
   if (attempts < 0) {
     return Status::FailedPrecondition(
         "step matrix is far from positive definite (Cholesky failed)");
   }
-  AdoptSpare(same_pattern, rotation, attempts, a.nonZeros());
+  Adopt(std::move(fresh), rotation, attempts, a.nonZeros());
   return Status::Ok();
 }
 
 // The work of a background factorisation, owned by the solver until FinishFactorize: the matrix
 // (a copy: the caller's changes on) and the outcome, written by the background thread only.
 // Destroying it waits for the job (a solver moved onto or destroyed never leaves it running on
-// freed memory; pending_ is declared before the factors, so a move assignment joins before it
-// replaces them).
+// freed memory; pending_ is declared before the workspace, so a move assignment joins before it
+// replaces it).
 struct LinearSolver::PendingFactorization {
   explicit PendingFactorization(ThreadTeam* team) : team(team) {}
   ~PendingFactorization() { team->WaitForBackground(); }
@@ -478,7 +711,7 @@ struct LinearSolver::PendingFactorization {
   Matrix symmetric;
   Eigen::Matrix3d rotation;
   Eigen::Index matrix_nonzeros = 0;
-  bool same_pattern = true;
+  std::shared_ptr<FactorSnapshot> fresh = std::make_shared<FactorSnapshot>();
   int attempts = 0;  // negative: failed
 };
 
@@ -490,15 +723,16 @@ Status LinearSolver::StartFactorize(const Matrix& a, const Eigen::Matrix3d& rota
   pending_->symmetric = SymmetricPart(a, symmetry);
   pending_->rotation = rotation;
   pending_->matrix_nonzeros = a.nonZeros();
-  pending_->same_pattern = PrepareSpare(pending_->symmetric);
-  // The job touches only the pending record and the spare factor, both on the heap and left alone
+  PrepareWorkspace(pending_->symmetric);
+  // The job touches only the pending record and the workspace, both on the heap and left alone
   // by the solver until FinishFactorize joins it.
   PendingFactorization* pending = pending_.get();
-  Factor* fresh = spare_.get();
+  Factor* workspace = workspace_.get();
   const int threads = team_->size();
-  team_->StartBackground([pending, fresh, threads] {
+  team_->StartBackground([pending, workspace, threads] {
     try {
-      pending->attempts = FactorNumerically(pending->symmetric, threads, fresh);
+      pending->attempts =
+          FactorNumerically(pending->symmetric, threads, workspace, pending->fresh.get());
     } catch (const std::exception&) {
       pending->attempts = -1;  // out of memory, say: the previous factor stays
     }
@@ -511,7 +745,7 @@ bool LinearSolver::FinishFactorize() {
   team_->WaitForBackground();
   const std::unique_ptr<PendingFactorization> pending = std::move(pending_);
   if (pending->attempts < 0) return false;
-  AdoptSpare(pending->same_pattern, pending->rotation, pending->attempts, pending->matrix_nonzeros);
+  Adopt(std::move(pending->fresh), pending->rotation, pending->attempts, pending->matrix_nonzeros);
   return true;
 }
 
@@ -527,7 +761,7 @@ void RotateBlocks(const Eigen::Matrix3d& q, const Eigen::Ref<const Eigen::Vector
 void LinearSolver::ApplyPreconditioner(const Eigen::Ref<const Eigen::VectorXd>& r,
                                        Eigen::VectorXd* z) {
   RotateBlocks(preconditioner_rotation_.transpose(), r, &rotated_);
-  factor_->single.Solve(rotated_.data(), rotated_.data(), team_);
+  current_->reduced.Solve(rotated_.data(), rotated_.data(), team_);
   RotateBlocks(preconditioner_rotation_, rotated_, z);
 }
 
@@ -536,7 +770,7 @@ void LinearSolver::Precondition(const Eigen::VectorXd& b, const Eigen::Matrix3d&
   SOFTID_DEMAND(HasFactor());
   rotated_.resize(b.size());
   x->resize(b.size());
-  preconditioner_rotation_ = rotation * reference_rotation_.transpose();
+  preconditioner_rotation_ = rotation * current_->reference_rotation.transpose();
   ApplyPreconditioner(b, x);
 }
 
@@ -597,7 +831,7 @@ LinearSolver::Summary LinearSolver::Solve(const Matrix& a, const Eigen::VectorXd
   r_.resize(n);
   w_.resize(n);
   rotated_.resize(n);
-  preconditioner_rotation_ = rotation * reference_rotation_.transpose();
+  preconditioner_rotation_ = rotation * current_->reference_rotation.transpose();
 
   const double b_norm = b.norm();
   if (b_norm == 0.0) return SolvedByZero(x);
@@ -606,7 +840,7 @@ LinearSolver::Summary LinearSolver::Solve(const Matrix& a, const Eigen::VectorXd
   // Gram-Schmidt and update vector operations, which grow with the basis.
   const double nd = static_cast<double>(n);
   const double product_work = 2.0 * static_cast<double>(a.nonZeros());
-  const double iteration_work = kSinglePrecisionSolveWeight * 4.0 * factor_->factor_nonzeros +
+  const double iteration_work = kReducedPrecisionSolveWeight * 4.0 * current_->factor_nonzeros +
                                 2.0 * 15.0 / 3.0 * nd + product_work + 8.0 * nd;
   double work = 0.0;
   // y = op(a) x. The transposed product runs over the column-major storage as row dot products:

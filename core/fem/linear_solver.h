@@ -3,9 +3,10 @@
 // lower triangle of a reference matrix A_ref, rotated with the body: P^-1 = Q A_ref^-1 Q^T with
 // Q = blockdiag(R R_ref^T). A tumbling body's matrix is (nearly) R A_rest R^T, so one factor serves
 // many steps; refactorising every step would cost ~0.2-0.4 s at 10k DOFs. The caller renews the
-// factor when RefactorPays(). The triangular solves run on a single-precision copy of the factor
-// (half the memory traffic); GMRES keeps the preconditioned basis (flexible GMRES), so solutions
-// are as accurate as with the double factor.
+// factor when RefactorPays(). The triangular solves run on a reduced-precision copy of the factor
+// (single-precision diagonal blocks, half-precision blocks below them where the CPU converts
+// halves: about a third of the double factor's memory traffic); GMRES keeps the preconditioned
+// basis (flexible GMRES), so solutions are as accurate as with the double factor.
 #pragma once
 
 #include <Eigen/Core>
@@ -62,6 +63,20 @@ class LinearSolver {
   bool FinishFactorize();
   bool FactorizationPending() const { return pending_ != nullptr; }
   bool HasFactor() const;
+
+  // A factor as a handle: its reduced-precision copy of L (~11 MB at 12.9k unknowns), reference
+  // rotation and work, shared by the solver and whoever keeps the handle. A forward pass's factors
+  // serve its adjoint pass again (UseFactor), whose step matrices they approximate as well, so
+  // the adjoint need not factorise them anew.
+  struct FactorSnapshot;
+  // The current factor; null without one.
+  std::shared_ptr<FactorSnapshot> CurrentFactor() const { return current_; }
+  // Makes `factor` current, after joining a background factorisation (which is then discarded);
+  // the refactorisation rule starts over as after a factorisation. Null or the current factor:
+  // nothing changes.
+  void UseFactor(const std::shared_ptr<FactorSnapshot>& factor);
+  // Memory a factor holds [bytes].
+  static size_t FactorBytes(const FactorSnapshot& factor);
   // Share of the factor's entries that the team's members solve concurrently in a preconditioner
   // application (its elimination tree's subtrees); the rest (the top separators) runs on one
   // thread. 0 without a team or a factor.
@@ -101,26 +116,26 @@ class LinearSolver {
   struct Factor;
   struct PendingFactorization;
   static Matrix SymmetricPart(const Matrix& a, Symmetry symmetry);
-  // Readies spare_ for a's pattern (a new symbolic analysis when it changed); returns whether the
-  // pattern is the previous one.
-  bool PrepareSpare(const Matrix& symmetric);
-  // Numeric factorisation into `fresh` (shifted when indefinite) and its single-precision copy
-  // planned for `threads`: the number of attempts, negative when every one failed. Touches only
-  // `fresh`.
-  static int FactorNumerically(const Matrix& symmetric, int threads, Factor* fresh);
-  void AdoptSpare(bool same_pattern, const Eigen::Matrix3d& rotation, int attempts,
-                  Eigen::Index matrix_nonzeros);
+  // Readies workspace_ for a's pattern (a new symbolic analysis when it changed).
+  void PrepareWorkspace(const Matrix& symmetric);
+  // Numeric factorisation in `workspace` (shifted when indefinite) and its reduced-precision copy
+  // into `fresh`, planned for `threads`: the number of attempts, negative when every one failed.
+  // Touches only `workspace` and `fresh`.
+  static int FactorNumerically(const Matrix& symmetric, int threads, Factor* workspace,
+                               FactorSnapshot* fresh);
+  void Adopt(std::shared_ptr<FactorSnapshot> fresh, const Eigen::Matrix3d& rotation, int attempts,
+             Eigen::Index matrix_nonzeros);
+  // The refactorisation rule's counts start over for the current factor.
+  void RestartRefactorRule();
   ThreadTeam* team_ = nullptr;
   std::unique_ptr<PendingFactorization> pending_;
-  std::unique_ptr<Factor> factor_;
-  // Analysed for the pattern below; refilled by the next Factorize and swapped in on success.
-  std::unique_ptr<Factor> spare_;
+  // CHOLMOD's factor, analysed for the pattern below; each factorisation refills it.
+  std::unique_ptr<Factor> workspace_;
+  std::shared_ptr<FactorSnapshot> current_;
   std::vector<int> pattern_outer_, pattern_inner_;
-  Eigen::Matrix3d reference_rotation_ = Eigen::Matrix3d::Identity();
   Eigen::Matrix3d preconditioner_rotation_ = Eigen::Matrix3d::Identity();
   int num_factorizations_ = 0;
   // Work-model units (see kFactorFlopWeight in linear_solver.cc): memory-bound flops.
-  double factor_work_ = 0.0;      // last factorisation, including failed shifted attempts
   int baseline_iterations_ = -1;  // first solve after the factorisation
   double excess_work_ = 0.0;      // GMRES work beyond the baseline since the factorisation
   // Work storage, kept to avoid allocation per solve: Krylov basis V, preconditioned basis Z,
