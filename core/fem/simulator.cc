@@ -248,6 +248,8 @@ void Simulator::ApplyParameters() {
   Assemble(Mode::kDynamic, zero, zero, zero);
   has_surface_forces_ = saved_forces;
   // The solver keeps its symbolic analysis: only the numbers change with the parameters.
+  factor_history_.clear();
+  factor_history_bytes_ = 0;
   ThrowIfError(solver_.Factorize(assembler_.matrix(), Eigen::Matrix3d::Identity(),
                                  LinearSolver::Symmetry::kSymmetric));
 }
@@ -553,6 +555,7 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
   // A factor renewed in the background during the previous step takes over here, at the same
   // point whatever the timing.
   solver_.FinishFactorize();
+  if (dynamic) RecordFactor();
   u_next_ = state_.u;
   v_next_ = state_.v;
   a_next_ = state_.a;
@@ -693,6 +696,7 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
       // Needed now. When that fails the previous factor stays in use.
       summary.refactorized =
           solver_.Factorize(assembler_.matrix(), body_rotation, TangentSymmetry(mode)).ok();
+      if (dynamic) RecordFactor();
       update_.setZero();
       solve = solver_.Solve(assembler_.matrix(), rhs_, body_rotation, linear, &update_);
       summary.linear_iterations += solve.iterations;
@@ -736,6 +740,46 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
     return summary;
   }
   return finish();
+}
+
+namespace {
+// Memory the factor history of one simulation may hold: ~11 factors at 3,100 cells (11 MB each),
+// 2-3 at 10k cells; the forward passes of a fit renew the factor a few times per second simulated.
+constexpr size_t kFactorHistoryBytes = size_t{128} << 20;
+}  // namespace
+
+void Simulator::RecordFactor() {
+  backward_factor_time_ = std::numeric_limits<double>::quiet_NaN();
+  if (!options_.adjoint_reuses_forward_factors) return;
+  std::shared_ptr<LinearSolver::FactorSnapshot> factor = solver_.CurrentFactor();
+  if (factor == nullptr) return;
+  // Entries from this step on belong to an earlier run that went further (times are a whole
+  // number of steps apart).
+  const double time = state_.time;
+  while (!factor_history_.empty() &&
+         factor_history_.back().time > time - 0.5 * options_.time_step) {
+    if (factor_history_.back().factor != nullptr)
+      factor_history_bytes_ -= LinearSolver::FactorBytes(*factor_history_.back().factor);
+    factor_history_.pop_back();
+  }
+  if (!factor_history_.empty() && factor_history_.back().factor == factor) return;
+  const size_t bytes = LinearSolver::FactorBytes(*factor);
+  const bool kept = factor_history_bytes_ + bytes <= kFactorHistoryBytes;
+  if (kept) factor_history_bytes_ += bytes;
+  factor_history_.push_back({time, kept ? std::move(factor) : nullptr});
+}
+
+void Simulator::UseForwardFactor(double step_start_time) {
+  // The last entry at or before the step's start (times are a whole number of steps apart).
+  const auto after = std::upper_bound(
+      factor_history_.begin(), factor_history_.end(), step_start_time + 0.5 * options_.time_step,
+      [](double time, const FactorUse& use) { return time < use.time; });
+  if (after == factor_history_.begin()) return;
+  const FactorUse& use = *std::prev(after);
+  // Switch once per entry: a factor the adjoint renewed itself in between stays until the next.
+  if (use.time == backward_factor_time_) return;
+  backward_factor_time_ = use.time;
+  solver_.UseFactor(use.factor);
 }
 
 void Simulator::EvaluateStepResidual(const Eigen::VectorXd& u_next, Eigen::VectorXd* residual,

@@ -87,6 +87,8 @@ class Simulator {
   int num_threads() const { return team_->size(); }
   // See LinearSolver::ParallelShare.
   double solver_parallel_share() const { return solver_.ParallelShare(); }
+  // Factorisations of step matrices so far (forward and adjoint passes, and new parameters).
+  int num_factorizations() const { return solver_.num_factorizations(); }
 
   // Replaces the physical parameters, keeping the grid, the embedding and the surface (which
   // depend only on the rest mesh and the options), and resets to t = 0. Much cheaper than a new
@@ -294,6 +296,22 @@ class Simulator {
   // The last adjoint solution lambda of a backward pass: the next (earlier) step's initial guess,
   // since lambda changes little from step to step. Cleared by BackpropagateInitialState.
   Eigen::VectorXd adjoint_guess_;
+  // The factors the forward steps were solved with, each from the time of the step it became
+  // current at (ascending). The adjoint pass preconditions each step with the factor its forward
+  // step used (its transposed exact Jacobian is near the forward's tangent), instead of
+  // refactorising where that one went stale. A null factor: not kept (the history's memory
+  // reached kFactorHistoryBytes); the adjoint then keeps its own. A step taken from an earlier
+  // time drops what came after it; new parameters clear it.
+  struct FactorUse {
+    double time = 0.0;  // [s]
+    std::shared_ptr<LinearSolver::FactorSnapshot> factor;
+  };
+  std::vector<FactorUse> factor_history_;
+  size_t factor_history_bytes_ = 0;
+  // The history entry the adjoint pass has made current (its time), NaN after a forward step.
+  double backward_factor_time_ = 0.0;
+  void RecordFactor();
+  void UseForwardFactor(double step_start_time);
   SimulationState state_;
   // Work vectors of the Newton iteration.
   Eigen::VectorXd residual_, rhs_, update_, u_next_, v_next_, a_next_;

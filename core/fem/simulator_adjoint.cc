@@ -262,8 +262,10 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
     if (fixed_[i]) rhs.segment<3>(3 * i).setZero();
   }
 
-  // A factor renewed in the background during the previous (later) step takes over here.
+  // A factor renewed in the background during the previous (later) step takes over here, unless
+  // the forward pass solved this step with another (see factor_history_).
   solver_.FinishFactorize();
+  UseForwardFactor(previous.time);
   // The exact Jacobian at the end of the step.
   SetState(previous);
   UpdateLaggedNormalForces();

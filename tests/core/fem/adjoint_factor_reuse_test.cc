@@ -1,0 +1,75 @@
+// The adjoint pass preconditions each step with the factor its forward step was solved with
+// (SimulationOptions::adjoint_reuses_forward_factors): on a run whose forward pass renews its
+// factor, the backward pass then factorises less, and the gradient is the same to the adjoint's
+// tolerance.
+#include <gtest/gtest.h>
+
+#include "core/fem/simulator.h"
+#include "core/geometry/primitives.h"
+
+namespace softid::fem {
+namespace {
+
+struct BackwardRun {
+  ParameterGradient gradient;
+  int forward_factorizations = 0;
+  int backward_factorizations = 0;
+};
+
+// A soft block dropped onto the ground: the impact renews the forward's factor. The loss is the
+// sum of the nodes' heights over the run.
+BackwardRun RunBackward(bool reuse) {
+  PhysicalParameters p;
+  p.youngs_modulus = 2e4;
+  p.density = 300.0;
+  p.stiffness_damping = 0.002;
+  p.ground = GroundPlane{Eigen::Vector3d::UnitZ(), -0.03};
+  p.initial_velocity = Eigen::Vector3d(0.3, 0.0, -1.5);
+  SimulationOptions options;
+  options.cells_along_longest_side = 12;
+  options.time_step = 1.0 / 240.0;
+  options.adjoint_linear_tolerance = 1e-10;
+  options.adjoint_reuses_forward_factors = reuse;
+  Simulator sim(geometry::MakeBox(Eigen::Vector3d(0.12, 0.08, 0.05), 0.02), p, options);
+  BackwardRun run;
+  const int after_parameters = sim.num_factorizations();
+  std::vector<SimulationState> states = {sim.state()};
+  for (int k = 0; k < 48; ++k) {
+    EXPECT_TRUE(sim.Step().converged);
+    states.push_back(sim.state());
+  }
+  run.forward_factorizations = sim.num_factorizations() - after_parameters;
+  const int size = static_cast<int>(states[0].u.size());
+  Eigen::VectorXd heights = Eigen::VectorXd::Zero(size);
+  for (int i = 2; i < size; i += 3) heights[i] = 1.0;
+  StateAdjoint adjoint{Eigen::VectorXd::Zero(size), Eigen::VectorXd::Zero(size),
+                       Eigen::VectorXd::Zero(size)};
+  const int before_backward = sim.num_factorizations();
+  for (size_t k = states.size() - 1; k >= 1; --k) {
+    adjoint.u += heights;
+    EXPECT_TRUE(sim.BackpropagateStep(states[k - 1], states[k], &adjoint, &run.gradient).ok());
+  }
+  sim.BackpropagateInitialState(states[0], adjoint, &run.gradient);
+  run.backward_factorizations = sim.num_factorizations() - before_backward;
+  return run;
+}
+
+TEST(AdjointFactorReuse, BackwardPassFactorisesLessAndGivesTheSameGradient) {
+  const BackwardRun own = RunBackward(false);
+  const BackwardRun reused = RunBackward(true);
+  ASSERT_GE(own.forward_factorizations, 1);  // the scene renews the forward's factor
+  EXPECT_EQ(reused.forward_factorizations, own.forward_factorizations);
+  EXPECT_LT(reused.backward_factorizations, own.backward_factorizations);
+  EXPECT_NEAR(reused.gradient.youngs_modulus, own.gradient.youngs_modulus,
+              1e-6 * std::abs(own.gradient.youngs_modulus));
+  EXPECT_NEAR(reused.gradient.stiffness_damping, own.gradient.stiffness_damping,
+              1e-6 * std::abs(own.gradient.stiffness_damping));
+  EXPECT_LT((reused.gradient.gravity - own.gradient.gravity).norm(),
+            1e-6 * own.gradient.gravity.norm());
+  RecordProperty("forward_factorizations", own.forward_factorizations);
+  RecordProperty("backward_factorizations_own", own.backward_factorizations);
+  RecordProperty("backward_factorizations_reused", reused.backward_factorizations);
+}
+
+}  // namespace
+}  // namespace softid::fem
