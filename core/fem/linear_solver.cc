@@ -67,6 +67,11 @@ class SupernodalLlt
 // solves stream these blocks from memory; in halves they take half the bytes of floats.
 using StoredBelow = std::uint16_t;
 
+// Eight halves from p on, as floats.
+__m256 LoadHalves(const StoredBelow* p) {
+  return _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
+}
+
 // y[0, m) = sum_j x_j h[:, j] for an m x n column-major block h (leading dimension m).
 void HalfBlockTimes(const StoredBelow* h, int m, int n, const float* x, float* y) {
   std::fill(y, y + m, 0.0f);
@@ -81,14 +86,10 @@ void HalfBlockTimes(const StoredBelow* h, int m, int n, const float* x, float* y
     const __m256 x2 = _mm256_set1_ps(x[j + 2]), x3 = _mm256_set1_ps(x[j + 3]);
     for (int i = 0; i < m8; i += 8) {
       __m256 acc = _mm256_loadu_ps(y + i);
-      acc = _mm256_fmadd_ps(
-          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c0 + i))), x0, acc);
-      acc = _mm256_fmadd_ps(
-          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c1 + i))), x1, acc);
-      acc = _mm256_fmadd_ps(
-          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c2 + i))), x2, acc);
-      acc = _mm256_fmadd_ps(
-          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c3 + i))), x3, acc);
+      acc = _mm256_fmadd_ps(LoadHalves(c0 + i), x0, acc);
+      acc = _mm256_fmadd_ps(LoadHalves(c1 + i), x1, acc);
+      acc = _mm256_fmadd_ps(LoadHalves(c2 + i), x2, acc);
+      acc = _mm256_fmadd_ps(LoadHalves(c3 + i), x3, acc);
       _mm256_storeu_ps(y + i, acc);
     }
     for (int i = m8; i < m; ++i) {
@@ -100,7 +101,7 @@ void HalfBlockTimes(const StoredBelow* h, int m, int n, const float* x, float* y
     const StoredBelow* c0 = h + static_cast<std::ptrdiff_t>(j) * m;
     const __m256 x0 = _mm256_set1_ps(x[j]);
     for (int i = 0; i < m8; i += 8) {
-      const __m256 v = _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c0 + i)));
+      const __m256 v = LoadHalves(c0 + i);
       _mm256_storeu_ps(y + i, _mm256_fmadd_ps(v, x0, _mm256_loadu_ps(y + i)));
     }
     for (int i = m8; i < m; ++i) y[i] += _cvtsh_ss(c0[i]) * x[j];
@@ -126,14 +127,10 @@ void HalfBlockTransposedTimes(const StoredBelow* h, int m, int n, const float* x
     __m256 a2 = _mm256_setzero_ps(), a3 = _mm256_setzero_ps();
     for (int i = 0; i < m8; i += 8) {
       const __m256 xv = _mm256_loadu_ps(x + i);
-      a0 = _mm256_fmadd_ps(
-          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c0 + i))), xv, a0);
-      a1 = _mm256_fmadd_ps(
-          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c1 + i))), xv, a1);
-      a2 = _mm256_fmadd_ps(
-          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c2 + i))), xv, a2);
-      a3 = _mm256_fmadd_ps(
-          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c3 + i))), xv, a3);
+      a0 = _mm256_fmadd_ps(LoadHalves(c0 + i), xv, a0);
+      a1 = _mm256_fmadd_ps(LoadHalves(c1 + i), xv, a1);
+      a2 = _mm256_fmadd_ps(LoadHalves(c2 + i), xv, a2);
+      a3 = _mm256_fmadd_ps(LoadHalves(c3 + i), xv, a3);
     }
     float s0 = HorizontalSum(a0), s1 = HorizontalSum(a1), s2 = HorizontalSum(a2),
           s3 = HorizontalSum(a3);
@@ -152,9 +149,7 @@ void HalfBlockTransposedTimes(const StoredBelow* h, int m, int n, const float* x
     const StoredBelow* c0 = h + static_cast<std::ptrdiff_t>(j) * m;
     __m256 a0 = _mm256_setzero_ps();
     for (int i = 0; i < m8; i += 8) {
-      a0 = _mm256_fmadd_ps(
-          _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(c0 + i))),
-          _mm256_loadu_ps(x + i), a0);
+      a0 = _mm256_fmadd_ps(LoadHalves(c0 + i), _mm256_loadu_ps(x + i), a0);
     }
     float s0 = HorizontalSum(a0);
     for (int i = m8; i < m; ++i) s0 += _cvtsh_ss(c0[i]) * x[i];
