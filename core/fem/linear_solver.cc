@@ -5,6 +5,7 @@
 #include <Eigen/CholmodSupport>
 #include <Eigen/SparseLU>
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -72,16 +73,19 @@ __m256 LoadHalves(const StoredBelow* p) {
   return _mm256_cvtph_ps(_mm_loadu_si128(reinterpret_cast<const __m128i*>(p)));
 }
 
+// Columns j to j + 3 of an m-row column-major block h.
+std::array<const StoredBelow*, 4> FourColumns(const StoredBelow* h, int m, int j) {
+  const StoredBelow* first = h + static_cast<std::ptrdiff_t>(j) * m;
+  return {first, first + m, first + 2 * m, first + 3 * m};
+}
+
 // y[0, m) = sum_j x_j h[:, j] for an m x n column-major block h (leading dimension m).
 void HalfBlockTimes(const StoredBelow* h, int m, int n, const float* x, float* y) {
   std::fill(y, y + m, 0.0f);
   const int m8 = m - m % 8;
   int j = 0;
   for (; j + 4 <= n; j += 4) {
-    const StoredBelow* c0 = h + static_cast<std::ptrdiff_t>(j) * m;
-    const StoredBelow* c1 = c0 + m;
-    const StoredBelow* c2 = c1 + m;
-    const StoredBelow* c3 = c2 + m;
+    const auto [c0, c1, c2, c3] = FourColumns(h, m, j);
     const __m256 x0 = _mm256_set1_ps(x[j]), x1 = _mm256_set1_ps(x[j + 1]);
     const __m256 x2 = _mm256_set1_ps(x[j + 2]), x3 = _mm256_set1_ps(x[j + 3]);
     for (int i = 0; i < m8; i += 8) {
@@ -119,10 +123,7 @@ void HalfBlockTransposedTimes(const StoredBelow* h, int m, int n, const float* x
   const int m8 = m - m % 8;
   int j = 0;
   for (; j + 4 <= n; j += 4) {
-    const StoredBelow* c0 = h + static_cast<std::ptrdiff_t>(j) * m;
-    const StoredBelow* c1 = c0 + m;
-    const StoredBelow* c2 = c1 + m;
-    const StoredBelow* c3 = c2 + m;
+    const auto [c0, c1, c2, c3] = FourColumns(h, m, j);
     __m256 a0 = _mm256_setzero_ps(), a1 = _mm256_setzero_ps();
     __m256 a2 = _mm256_setzero_ps(), a3 = _mm256_setzero_ps();
     for (int i = 0; i < m8; i += 8) {
