@@ -91,8 +91,9 @@ SparseSurfaceCost::SparseSurfaceCost(const fem::HexMesh& mesh,
     exact_distance_ = std::make_shared<const geometry::MeshDistance>(std::move(*distance));
     face_normals_.reserve(rest_surface.triangles.size());
     for (const Eigen::Vector3i& t : rest_surface.triangles) {
-      const Eigen::Vector3d n = (rest_surface.vertices[t[1]] - rest_surface.vertices[t[0]])
-                                    .cross(rest_surface.vertices[t[2]] - rest_surface.vertices[t[0]]);
+      const Eigen::Vector3d n =
+          (rest_surface.vertices[t[1]] - rest_surface.vertices[t[0]])
+              .cross(rest_surface.vertices[t[2]] - rest_surface.vertices[t[0]]);
       face_normals_.push_back(n.norm() > 0.0 ? Eigen::Vector3d(n.normalized())
                                              : Eigen::Vector3d::Zero());
     }
@@ -238,8 +239,8 @@ double SparseSurfaceCost::ExactDistance(const Eigen::Vector3d& rest, double inte
   // next to a crease or a vertex (where several triangles are closest), so away from the surface
   // (beyond the interpolant's error, a few % of h) the interpolant's sign is used instead.
   const double side = offset.dot(face);
-  const bool outside = std::abs(interpolated) > 0.25 * grid_.cell_size ? interpolated > 0.0
-                                                                       : side >= 0.0;
+  const bool outside =
+      std::abs(interpolated) > 0.25 * grid_.cell_size ? interpolated > 0.0 : side >= 0.0;
   const double sign = outside ? 1.0 : -1.0;
   // grad phi = sign * (X - closest) / |X - closest|: the unit vector to X; on the surface itself
   // (distance ~ 0) that is the face normal.

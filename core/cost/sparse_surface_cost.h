@@ -152,8 +152,8 @@ class SparseSurfaceCost {
   // Candidate cells, band edge checks and scratch sizes, from rest_sdf_.
   void BuildCandidates();
   void BuildBins();
-  // kExact: the signed distance to the rest surface at X and its gradient d phi / d X; `interpolated`
-  // is the interpolant's value there (its sign is trusted away from the surface).
+  // kExact: the signed distance to the rest surface at X and its gradient d phi / d X;
+  // `interpolated` is the interpolant's value there (its sign is trusted away from the surface).
   double ExactDistance(const Eigen::Vector3d& rest, double interpolated,
                        Eigen::Vector3d* gradient) const;
   // Tries candidate i for point x; updates `best` if it contains x with a better (rho, cell).

@@ -498,7 +498,8 @@ TEST(SparseSurfaceCost, SurfaceFittedValuesLowerTheFloor) {
     EXPECT_LT(worst, 0.06 * h);
     // The exact distance leaves only Newton's tolerance: the points are exact images of X.
     const double exact_floor = exact.Evaluate(u, points, nullptr);
-    std::printf("  exact rest distance: floor C = %.3g phi_max^2\n", exact_floor / (phi_max * phi_max));
+    std::printf("  exact rest distance: floor C = %.3g phi_max^2\n",
+                exact_floor / (phi_max * phi_max));
     EXPECT_LT(exact_floor, 1e-6 * before);
   }
   const Eigen::VectorXd zero = Eigen::VectorXd::Zero(3 * scene.mesh.NumNodes());
