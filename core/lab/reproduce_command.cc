@@ -51,6 +51,9 @@ struct ReproduceFlags {
   int max_iterations = 0;
   int refine_iterations = -1;  // -1: the benchmark's
   std::uint64_t seed = 1;
+  // 1-based start numbers to run (default: all). Every start is still drawn from the seed, and the
+  // cores per start are those of the full row, so a start run alone follows the same path.
+  std::vector<int> only_starts;
 };
 
 double SecondsSince(Clock::time_point start) {
@@ -216,11 +219,25 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
   std::vector<nlohmann::json> initial;
   for (int s = 0; s < starts; ++s) initial.push_back(reproduce::DrawStart(b, truth, rng));
 
+  // The starts to run (indices into `initial`), and where their job configs go: each one reruns
+  // alone with `softid-lab fit CAPTURE --config FILE`.
+  std::vector<int> run;
+  if (flags.only_starts.empty()) {
+    for (int s = 0; s < starts; ++s) run.push_back(s);
+  } else {
+    for (int number : flags.only_starts) run.push_back(number - 1);
+  }
+  const std::filesystem::path config_dir = out / fmt::format("{}-{}-starts", b.name, row.id);
+  std::error_code ec;
+  std::filesystem::create_directories(config_dir, ec);
+  if (ec) return Status::Internal(fmt::format("{}: {}", config_dir.string(), ec.message()));
+
   inverse::FitResult combined;
   combined.fitted = b.fit;
-  combined.starts.resize(starts);
-  std::vector<inverse::JobConfig> configs(starts);
-  std::vector<bool> have_base(starts, false);
+  const int num_run = static_cast<int>(run.size());
+  combined.starts.resize(num_run);
+  std::vector<inverse::JobConfig> configs(num_run);
+  bool have_base = false;
   std::atomic<int> next{0};
   std::mutex mutex;
   Status error;
@@ -228,23 +245,28 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
   const int cores_per_start =
       std::max(1, static_cast<int>(std::thread::hardware_concurrency()) / std::max(1, threads));
   auto worker = [&]() {
-    for (int s = next++; s < starts; s = next++) {
+    for (int k = next++; k < num_run; k = next++) {
+      const int s = run[k];
       Result<inverse::JobConfig> config =
           reproduce::MakeStartConfig(b, row, truth, initial[s], capture.mass_kg.has_value(),
                                      max_iterations, refine_iterations, cores_per_start);
-      if (!config.ok()) {
+      Status written = config.ok()
+                           ? WriteJsonFile(config_dir / fmt::format("start-{:02d}.json", s + 1),
+                                           inverse::ToJson(*config))
+                           : config.status();
+      if (!written.ok()) {
         std::lock_guard lock(mutex);
-        error = config.status();
+        error = written;
         return;
       }
-      configs[s] = *config;
+      configs[k] = *config;
       Result<inverse::FitResult> fit = inverse::Fit(capture, *config);
       std::lock_guard lock(mutex);
-      inverse::StartResult& start = combined.starts[s];
+      inverse::StartResult& start = combined.starts[k];
       if (fit.ok()) {
         start = fit->starts[0];
-        if (!have_base[s]) combined.base = fit->base;
-        have_base[s] = true;
+        if (!have_base) combined.base = fit->base;
+        have_base = true;
       } else {
         start.failed = true;
         start.termination = fit.status().message();
@@ -267,11 +289,11 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
   };
   {
     std::vector<std::jthread> pool;
-    for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
+    for (int t = 1; t < std::min(threads, num_run); ++t) pool.emplace_back(worker);
     worker();
   }
   SOFTID_RETURN_IF_ERROR(error);
-  for (int s = 0; s < starts; ++s) {
+  for (int s = 0; s < num_run; ++s) {
     const inverse::StartResult& start = combined.starts[s];
     if (start.failed || start.evaluations == 0) continue;
     if (combined.best < 0 || start.final_cost < combined.starts[combined.best].final_cost)
@@ -280,11 +302,11 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
   combined.total_seconds = SecondsSince(begin);
 
   // Scores: per start and per quantity; convergence over the judged quantities.
-  summary.starts = starts;
+  summary.starts = num_run;
   nlohmann::json start_scores = nlohmann::json::array();
   std::vector<std::vector<double>> errors(b.quantities.size());
-  for (int s = 0; s < starts; ++s) {
-    const inverse::StartResult& start = combined.starts[s];
+  for (int k = 0; k < num_run; ++k) {
+    const inverse::StartResult& start = combined.starts[k];
     bool converged = !start.failed;
     nlohmann::json scores = nlohmann::json::object();
     std::vector<double> e(b.quantities.size());
@@ -300,9 +322,9 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
     if (converged) {
       for (size_t q = 0; q < e.size(); ++q) errors[q].push_back(e[q]);
     }
-    start_scores.push_back({{"index", s}, {"converged", converged}, {"errors", scores}});
+    start_scores.push_back({{"index", start.index}, {"converged", converged}, {"errors", scores}});
   }
-  summary.pass = summary.converged == starts;
+  summary.pass = summary.converged == num_run;
   if (b.start_seconds_target > 0.0) {
     // The slowest start and its work: a job's wall time is that of its starts run in parallel.
     const inverse::StartResult* slowest = nullptr;
@@ -384,10 +406,11 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
       {"cells", b.cells},
       {"substeps", b.substeps},
       {"duration", scene.duration},
-      {"starts", starts},
+      {"starts", num_run},
+      {"start_configs", config_dir.string()},
       {"converged", summary.converged},
       {"failed", summary.failed},
-      {"convergence_rate", static_cast<double>(summary.converged) / std::max(1, starts)},
+      {"convergence_rate", static_cast<double>(summary.converged) / std::max(1, num_run)},
       {"quantities", quantities},
       {"start_scores", start_scores},
       {"pass", summary.pass},
@@ -463,6 +486,12 @@ int RunReproduce(const ReproduceFlags& flags) {
   int threads =
       flags.threads > 0 ? flags.threads : static_cast<int>(std::thread::hardware_concurrency());
   threads = std::clamp(threads, 1, std::max(1, starts));
+  for (int number : flags.only_starts) {
+    if (number < 1 || number > starts) {
+      spdlog::error("--only-starts: {} is not a start of this run (1..{})", number, starts);
+      return kExitInvalidInput;
+    }
+  }
   std::vector<const Row*> rows;
   if (flags.rows.empty()) {
     for (const Row& row : b.rows) {
@@ -559,6 +588,10 @@ Command RegisterReproduce(CLI::App* app) {
                   "benchmark's, 20 for ball-bounce and pillow-ramp, 0 otherwise)")
       ->check(CLI::NonNegativeNumber);
   app->add_option("--seed", flags->seed, "seed of the random starts")->capture_default_str();
+  app->add_option("--only-starts", flags->only_starts,
+                  "run only these starts (1-based, comma-separated), each exactly as in the full "
+                  "row")
+      ->delimiter(',');
   return [flags] { return RunReproduce(*flags); };
 }
 
