@@ -265,14 +265,16 @@ void SparseSurfaceCost::TryCandidate(int i, const Eigen::Vector3d& x, Match* bes
   const std::array<double, 8> weights = geometry::TrilinearWeights(inversion.xi);
   double phi = 0.0;
   for (int c = 0; c < 8; ++c) phi += weights[c] * candidate.phi[c];
-  const double rho = TukeyLoss(phi, phi_max_);
+  // The deformed object is the union of its cells' images, so its signed distance at x is the
+  // smallest (most inside) rest signed distance among x's preimages. Taking the smallest |phi|
+  // instead rewarded folds: a crumpled surface offers every noisy point a sheet close by.
   if (best->candidate >= 0 &&
-      (rho > best->rho ||
-       (rho == best->rho && candidate.cell > candidates_[best->candidate].cell))) {
+      (phi > best->phi ||
+       (phi == best->phi && candidate.cell > candidates_[best->candidate].cell))) {
     return;
   }
   best->candidate = i;
-  best->rho = rho;
+  best->rho = TukeyLoss(phi, phi_max_);
   best->phi = phi;
   best->xi = inversion.xi;
   best->jacobian = inversion.jacobian;

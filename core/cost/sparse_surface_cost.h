@@ -115,7 +115,8 @@ class SparseSurfaceCost {
   // if gradient != nullptr, dC/du (resized to u.size(), overwritten) [m]. An empty point set gives
   // C = 0 and a zero gradient. If matches != nullptr it gets one PointMatch per point.
   // If several cells contain a point (shared faces, folded cells), the match with the smallest
-  // rho wins, ties to the smallest cell index. Non-finite points match nothing.
+  // signed phi wins (the point is inside the deformed object if any preimage is: the signed
+  // distance of a union), ties to the smallest cell index. Non-finite points match nothing.
   // @pre u.size() == 3 * mesh.NumNodes() (FE node i at u.segment<3>(3 i)), as
   //   fem::Simulator::state().u. @throws std::invalid_argument otherwise or if u is not finite
   //   (check the simulator's divergence flag first).

@@ -86,7 +86,7 @@ std::vector<PointMatch> BruteForceMatches(const Scene& scene, const SparseSurfac
       for (int c = 0; c < 8; ++c) phi += w[c] * scene.sdf.phi[nodes[c]];
       const double rho = TukeyLoss(phi, phi_max);
       PointMatch& best = matches[p];
-      if (best.matched && (rho > best.cost || (rho == best.cost && cell > best.cell))) continue;
+      if (best.matched && (phi > best.phi || (phi == best.phi && cell > best.cell))) continue;
       best = {true, phi, rho, Eigen::Vector3d::Zero(), cell};
     }
   }
@@ -563,7 +563,7 @@ TEST(SparseSurfaceCost, RotatedBodyNeedsAffineExtension) {
 }
 
 // The binned search finds exactly what a scan over all candidate cells finds, including ties at
-// deformed grid nodes shared by up to 8 cells (smallest rho, then smallest cell).
+// deformed grid nodes shared by up to 8 cells (smallest phi, then smallest cell).
 TEST(SparseSurfaceCost, BinningMatchesBruteForce) {
   const Scene scene = MakeTorusScene(/*cells=*/12, /*padding=*/4);
   SparseSurfaceCost cost(scene.mesh, scene.sdf);
@@ -631,6 +631,42 @@ TEST(SparseSurfaceCost, BinningMatchesBruteForce) {
               10)
         << distance;
   }
+}
+
+// Where two parts of the deformed object overlap (a fold, or a state no real body can reach), a
+// point there is inside material, whatever other sheet of surface passes through it: the cost
+// takes the most inside preimage (the signed distance of the union of the cells' images). Picking
+// the preimage closest to any surface instead made crumpled states cheaper than the truth.
+TEST(SparseSurfaceCost, OverlappingMaterialCountsAsInside) {
+  const Scene scene = MakeTorusScene(/*cells=*/20, /*padding=*/4);
+  SparseSurfaceCost cost(scene.mesh, scene.sdf);
+  // The half x > 0 of the torus (major radius 0.1 m, tube radius 0.04 m) moved by -0.22 m along x:
+  // its tube near y = 0 now lies 2 cm beyond the other half's, overlapping it.
+  const Eigen::Vector3d shift(-0.22, 0.0, 0.0);
+  Eigen::VectorXd u = Eigen::VectorXd::Zero(3 * scene.mesh.NumNodes());
+  for (int i = 0; i < scene.mesh.NumNodes(); ++i) {
+    if (scene.mesh.rest_positions[i].x() > 0.0) u.segment<3>(3 * i) = shift;
+  }
+  // Observed points on the outer side of the unmoved half's surface near y = 0: their preimage
+  // in the moved half lies 2 cm from its tube's centre line, 2 cm inside.
+  std::vector<Eigen::Vector3d> points;
+  for (const Eigen::Vector3d& v : scene.surface.vertices) {
+    if (std::abs(v.y()) < 0.02 && v.x() < -0.13 && std::abs(v.z()) < 0.01) points.push_back(v);
+  }
+  ASSERT_GE(points.size(), 4u);
+  std::vector<PointMatch> matches;
+  const double at_rest = cost.Evaluate(Eigen::VectorXd::Zero(u.size()), points, nullptr, &matches);
+  for (const PointMatch& m : matches) ASSERT_LT(std::abs(m.phi), 0.1 * scene.h());
+  const double overlapped = cost.Evaluate(u, points, nullptr, &matches);
+  for (size_t p = 0; p < points.size(); ++p) {
+    ASSERT_TRUE(matches[p].matched) << p;
+    // The rest SDF at the moved half's preimage, about -2 cm.
+    EXPECT_LT(matches[p].phi, -0.015) << p;
+    EXPECT_GT(matches[p].rest_position.x(), 0.0) << p;  // matched in the moved half
+  }
+  std::printf("points on a surface overlapped by the other half: C = %.3g (at rest %.3g)\n",
+              overlapped, at_rest);
+  EXPECT_GT(overlapped, 100.0 * at_rest);
 }
 
 // With the Simulator's own grid (default padding) the default cost fits, and the simulator's
