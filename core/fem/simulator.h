@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <limits>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -309,7 +310,7 @@ class Simulator {
   std::vector<FactorUse> factor_history_;
   size_t factor_history_bytes_ = 0;
   // The history entry the adjoint pass has made current (its time), NaN after a forward step.
-  double backward_factor_time_ = 0.0;
+  double backward_factor_time_ = std::numeric_limits<double>::quiet_NaN();
   void RecordFactor();
   void UseForwardFactor(double step_start_time);
   SimulationState state_;
