@@ -47,6 +47,9 @@ Status SimulationOptions::Validate() const {
   }
   if (!(newton_tolerance > 0.0))
     return Invalid("newton_tolerance", newton_tolerance, "must be positive");
+  if (!(max_extent_ratio > 1.0) || !std::isfinite(max_extent_ratio)) {
+    return Invalid("max_extent_ratio", max_extent_ratio, "must be greater than 1 and finite");
+  }
   if (!(linear_tolerance > 0.0))
     return Invalid("linear_tolerance", linear_tolerance, "must be positive");
   if (max_linear_iterations < 1) {

@@ -58,6 +58,12 @@ struct SimulationOptions {
   // began to break the torus's symmetry (1.5e-5 m).
   int max_newton_iterations = 12;  // [-], >= 1
   double newton_tolerance = 1e-4;  // [-], > 0
+  // A step that leaves the body's extent (the diagonal of its FE nodes' bounding box) above this
+  // multiple of the rest extent has diverged: no soft solid stretches that far (a rigid rotation
+  // changes the diagonal by at most sqrt(3)). Such runs stay finite for many steps (pillow-ramp
+  // with its ground plane through the body at t = 0: every Newton step unconverged, extent 7.5x
+  // after 2 steps, 16x after 4, 1e18 m later), and their cost must not count.
+  double max_extent_ratio = 10.0;  // [-], > 1
   // After a step that converged with one Newton update (free flight, gentle contact), the next
   // step first takes the preconditioner's estimate from its residual, P^-1 (-r), and ends there
   // when that is below Newton's tolerance, without assembling the tangent or running GMRES

@@ -98,6 +98,11 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
   ThrowIfError(sdf.status());
   sdf_ = std::move(sdf).value();
   mesh_ = BuildHexMesh(sdf_, options.min_cell_volume_fraction);
+  {
+    Eigen::AlignedBox3d rest_box;
+    for (const Eigen::Vector3d& x : mesh_.rest_positions) rest_box.extend(x);
+    rest_extent_ = rest_box.isEmpty() ? 0.0 : rest_box.diagonal().norm();
+  }
   SOFTID_THROW_UNLESS(mesh_.NumElements() > 0, "the mesh has no inside at this grid resolution");
   const double h = mesh_.CellSize();
   const int n = mesh_.NumNodes();
@@ -623,6 +628,10 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
     return Assemble(mode, u_next_, v_next_, a_next_, residual_only, reuse_rotations);
   };
   const auto finish = [&] {
+    if (ExceedsExtent(u_next_)) {
+      summary.diverged = true;
+      return summary;
+    }
     state_.u = u_next_;
     state_.v = v_next_;
     state_.a = a_next_;
@@ -740,6 +749,17 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
     return summary;
   }
   return finish();
+}
+
+bool Simulator::ExceedsExtent(const Eigen::VectorXd& u) const {
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(std::numeric_limits<double>::infinity());
+  Eigen::Vector3d hi = -lo;
+  for (size_t i = 0; i < mesh_.rest_positions.size(); ++i) {
+    const Eigen::Vector3d x = mesh_.rest_positions[i] + u.segment<3>(3 * i);
+    lo = lo.cwiseMin(x);
+    hi = hi.cwiseMax(x);
+  }
+  return !((hi - lo).norm() <= options_.max_extent_ratio * rest_extent_);
 }
 
 namespace {

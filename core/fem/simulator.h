@@ -50,9 +50,11 @@ struct StepSummary {
   int linear_iterations = 0;   // summed over Newton iterations, with convergence estimates
   int tangent_assemblies = 0;  // Newton's matrix assembled (the residual alone is cheaper)
   bool converged = false;      // Newton met its tolerance
-  bool diverged = false;       // non-finite state or a failed linear solve: the run is invalid
-  bool refactorized = false;   // the preconditioner was renewed during this step
-  double max_update = -1.0;    // last Newton update, max norm [m]
+  // Non-finite state, a failed linear solve, or a body stretched past
+  // SimulationOptions::max_extent_ratio: the run is invalid.
+  bool diverged = false;
+  bool refactorized = false;  // the preconditioner was renewed during this step
+  double max_update = -1.0;   // last Newton update, max norm [m]
 };
 
 struct Energies {
@@ -240,6 +242,10 @@ class Simulator {
   PhysicalParameters parameters_;
   SimulationOptions options_;
   double length_ = 0.0;
+  // Diagonal of the FE nodes' rest bounding box [m] (the divergence test's yardstick).
+  double rest_extent_ = 0.0;
+  // Whether the body at displacement u spans more than options_.max_extent_ratio x rest_extent_.
+  bool ExceedsExtent(const Eigen::VectorXd& u) const;
   geometry::SignedDistanceField sdf_;
   HexMesh mesh_;
   geometry::TriangleMesh surface_;

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <numbers>
 
 #include "core/geometry/primitives.h"
@@ -474,6 +475,65 @@ TEST(Simulator, SlideWithDefaultToleranceMatchesAConvergedOne) {
 }
 
 // Invalid parameters are rejected with the field named.
+// A soft block started with the ground plane cutting deep into it (parameters an optimiser's line
+// search can reach: pillow-ramp's spurious minimum) is thrown apart by the penalty forces. The
+// state stays finite (in that fit for 96 steps, the body growing to 1e18 m), so only the extent
+// test can call it diverged; a cost evaluated on such states matched every point somewhere.
+TEST(Simulator, BodyStretchedFarBeyondItsSizeHasDiverged) {
+  PhysicalParameters p;
+  p.youngs_modulus = 1960.0;
+  p.density = 80.0;
+  p.mass_damping = 0.16;
+  p.stiffness_damping = 0.0015;
+  p.gravity = Eigen::Vector3d(1.39, 0.71, -8.44);
+  const geometry::TriangleMesh block = geometry::MakeBox(Eigen::Vector3d(0.3, 0.2, 0.1), 0.025);
+  const Eigen::Vector3d normal = Eigen::Vector3d(0.387, 0.655, 0.649).normalized();
+  double lowest = std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector3d& v : block.vertices) lowest = std::min(lowest, normal.dot(v));
+  SimulationOptions options;
+  options.cells_along_longest_side = 16;
+  options.time_step = 1.0 / 120.0;
+
+  // Control: the plane 2 cm below the block; it lands and never comes near the limit.
+  p.ground = GroundPlane{normal, lowest - 0.02};
+  {
+    Simulator sim(block, p, options);
+    for (int step = 0; step < 60; ++step) ASSERT_FALSE(sim.Step().diverged) << step;
+  }
+  // The plane 7 cm into the block (its centre 4 cm above it).
+  p.ground = GroundPlane{normal, lowest + 0.07};
+  int diverged_at = -1;
+  {
+    Simulator sim(block, p, options);
+    for (int step = 1; step <= 20 && diverged_at < 0; ++step) {
+      if (sim.Step().diverged) diverged_at = step;
+    }
+  }
+  EXPECT_GT(diverged_at, 0) << "the blown-up run was not reported";
+  // Without the test the same run stays finite and stretches past 10x its size.
+  options.max_extent_ratio = 1e30;
+  Simulator unchecked(block, p, options);
+  Eigen::AlignedBox3d rest;
+  for (const Eigen::Vector3d& x : unchecked.hex_mesh().rest_positions) rest.extend(x);
+  double largest_ratio = 0.0;
+  int steps = 0;
+  for (int step = 1; step <= 20; ++step, ++steps) {
+    const bool failed = unchecked.Step().diverged;
+    if (failed || !unchecked.state().u.allFinite()) break;
+    Eigen::AlignedBox3d box;
+    const HexMesh& mesh = unchecked.hex_mesh();
+    for (int i = 0; i < mesh.NumNodes(); ++i)
+      box.extend(mesh.rest_positions[i] + unchecked.state().u.segment<3>(3 * i));
+    largest_ratio = std::max(largest_ratio, box.diagonal().norm() / rest.diagonal().norm());
+  }
+  std::printf(
+      "plane through the block: diverged at step %d; unchecked, %d finite steps, extent up to "
+      "%.3g x rest\n",
+      diverged_at, steps, largest_ratio);
+  EXPECT_EQ(steps, 20);  // no other divergence test fires
+  EXPECT_GT(largest_ratio, 10.0);
+}
+
 TEST(Simulator, RejectsInvalidParameters) {
   PhysicalParameters p;
   p.poisson_ratio = 0.5;
