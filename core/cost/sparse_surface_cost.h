@@ -157,7 +157,7 @@ class SparseSurfaceCost {
   // `interpolated` is the interpolant's value there (its sign is trusted away from the surface).
   double ExactDistance(const Eigen::Vector3d& rest, double interpolated,
                        Eigen::Vector3d* gradient) const;
-  // Tries candidate i for point x; updates `best` if it contains x with a better (rho, cell).
+  // Tries candidate i for point x; updates `best` if it contains x with a better (phi, cell).
   void TryCandidate(int i, const Eigen::Vector3d& x, Match* best) const;
 
   SurfaceCostOptions options_;
