@@ -4,6 +4,7 @@
 // with the matrix. SOFTID_THREADS=2 runs them on a team of two threads (default one).
 #include <benchmark/benchmark.h>
 
+#include <chrono>
 #include <cstdlib>
 #include <memory>
 
@@ -123,6 +124,27 @@ void BM_MatrixProduct(benchmark::State& state) {
   state.counters["nonzeros"] = static_cast<double>(f.matrix.nonZeros());
 }
 BENCHMARK(BM_MatrixProduct)->Unit(benchmark::kMicrosecond);
+
+// One empty parallel region on a team of two after `serial` microseconds of work on the caller
+// alone (a step's bookkeeping between GMRES's regions): the cost of waking the worker. Arg 1:
+// the team's spin before a worker sleeps [us] (0: sleep at once). Dev VM, quiet: ~70-90 us
+// sleeping, ~3-5 us spinning.
+void BM_TeamRegionAfterSerialWork(benchmark::State& state) {
+  fem::ThreadTeam team(2, std::chrono::microseconds(state.range(1)));
+  const auto serial = std::chrono::microseconds(state.range(0));
+  long sum = 0;
+  for (auto _ : state) {
+    state.PauseTiming();
+    const auto until = std::chrono::steady_clock::now() + serial;
+    while (std::chrono::steady_clock::now() < until) {
+    }
+    state.ResumeTiming();
+    team.Run([&](int member) { benchmark::DoNotOptimize(sum += member); });
+  }
+}
+BENCHMARK(BM_TeamRegionAfterSerialWork)
+    ->ArgsProduct({{20, 200}, {0, fem::ThreadTeam::kDefaultSpin.count()}})
+    ->Unit(benchmark::kMicrosecond);
 
 }  // namespace
 }  // namespace softid

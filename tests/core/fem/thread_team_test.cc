@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <chrono>
 #include <set>
 #include <stdexcept>
 #include <thread>
@@ -82,6 +83,32 @@ TEST(ThreadTeam, BackgroundJobRunsBesideTheCaller) {
 
 TEST(ThreadTeam, RejectsAnEmptyTeam) {
   EXPECT_THROW(ThreadTeam(0), std::invalid_argument);
+}
+
+TEST(ThreadTeam, RejectsANegativeSpin) {
+  EXPECT_THROW(ThreadTeam(2, std::chrono::microseconds(-1)), std::invalid_argument);
+}
+
+// Whether the members spin between regions or sleep at once, and whether the regions come back to
+// back or after serial work longer than the spin (the workers then fall asleep), every member runs
+// every region exactly once and sees the caller's writes from before the region.
+TEST(ThreadTeam, EveryRegionRunsOnceWhetherMembersSpinOrSleep) {
+  for (const int spin_us : {0, 50, 500}) {
+    ThreadTeam team(2, std::chrono::microseconds(spin_us));
+    std::vector<int> runs(2, 0);
+    int published = 0;
+    std::atomic<int> mismatches{0};
+    for (int region = 0; region < 300; ++region) {
+      published = region;
+      if (region % 50 == 0) std::this_thread::sleep_for(std::chrono::milliseconds(2));
+      team.Run([&](int member) {
+        ++runs[member];
+        if (published != region) ++mismatches;
+      });
+    }
+    EXPECT_EQ(runs, std::vector<int>(2, 300)) << "spin " << spin_us << " us";
+    EXPECT_EQ(mismatches.load(), 0) << "spin " << spin_us << " us";
+  }
 }
 
 }  // namespace
