@@ -63,7 +63,14 @@ ElementAssembler::ElementAssembler(int num_nodes,
 }
 
 void ElementAssembler::SetZero() {
-  std::fill(matrix_.valuePtr(), matrix_.valuePtr() + matrix_.nonZeros(), 0.0);
+  SetZero(0, 1);
+}
+
+void ElementAssembler::SetZero(int part, int parts) {
+  SOFTID_DEMAND(parts >= 1 && part >= 0 && part < parts);
+  const Eigen::Index nonzeros = matrix_.nonZeros();
+  const Eigen::Index begin = nonzeros * part / parts, end = nonzeros * (part + 1) / parts;
+  std::fill(matrix_.valuePtr() + begin, matrix_.valuePtr() + end, 0.0);
 }
 
 void ElementAssembler::AddNodeBlock(int node, const Eigen::Matrix3d& block) {

@@ -20,6 +20,9 @@ class ElementAssembler {
   Matrix& matrix() { return matrix_; }
   const Matrix& matrix() const { return matrix_; }
   void SetZero();
+  // Zeroes part `part` of `parts` about equal slices of the values (for a team of `parts` threads:
+  // the values are ~7 MB at 3,100 cells, and one thread's memset was ~6 % of a step).
+  void SetZero(int part, int parts);
   // Adds `block` to the 3x3 block of element-local corners (a, b).
   void AddBlock(int element, int a, int b, const Eigen::Matrix3d& block) {
     const int* offsets = &block_offsets_[(static_cast<size_t>(element) * 64 + a * 8 + b) * 3];

@@ -338,7 +338,9 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
   terms.jacobian = !residual_only;
   terms.reuse_rotations = reuse_rotations;
 
-  if (terms.jacobian) assembler_.SetZero();
+  if (terms.jacobian) {
+    team_->Run([&](int member) { assembler_.SetZero(member, team_->size()); });
+  }
   residual_.setZero();
 
   // Elements: the ranges' own elements in parallel, then the shared ones.

@@ -46,5 +46,28 @@ TEST(ElementAssembler, MatchesTripletAssembly) {
   }
 }
 
+// Zeroing in parts (one per thread of a team) clears every value exactly once, for any number of
+// parts, including more parts than a slice has values.
+TEST(ElementAssembler, ZeroingInPartsClearsEveryValue) {
+  const std::vector<std::array<int, 8>> elements = {{0, 1, 3, 4, 6, 7, 9, 10},
+                                                    {1, 2, 4, 5, 7, 8, 10, 11}};
+  for (const int parts : {1, 2, 3, 7, 5000}) {
+    ElementAssembler assembler(12, elements);
+    double* values = assembler.matrix().valuePtr();
+    const Eigen::Index nonzeros = assembler.matrix().nonZeros();
+    std::fill(values, values + nonzeros, 1.0);
+    for (int part = parts - 1; part >= 1; --part) assembler.SetZero(part, parts);
+    // The first part is left: exactly its slice is still set.
+    const Eigen::Index first_end = nonzeros / parts;
+    for (Eigen::Index k = 0; k < nonzeros; ++k) {
+      ASSERT_EQ(values[k], k < first_end ? 1.0 : 0.0) << "parts " << parts << ", value " << k;
+    }
+    assembler.SetZero(0, parts);
+    EXPECT_EQ(assembler.matrix().norm(), 0.0) << "parts " << parts;
+  }
+  ElementAssembler assembler(12, elements);
+  EXPECT_DEATH(assembler.SetZero(2, 2), "");
+}
+
 }  // namespace
 }  // namespace softid::fem
