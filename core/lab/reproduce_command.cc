@@ -585,7 +585,7 @@ Command RegisterReproduce(CLI::App* app) {
   app->add_option("--max-iterations", flags->max_iterations, "optimiser iterations per start");
   app->add_option("--refine-iterations", flags->refine_iterations,
                   "Levenberg-Marquardt iterations per start after L-BFGS (default: the "
-                  "benchmark's, 20 for ball-bounce and pillow-ramp, 0 otherwise)")
+                  "benchmark's, 40 for ball-bounce and pillow-ramp, 0 otherwise)")
       ->check(CLI::NonNegativeNumber);
   app->add_option("--seed", flags->seed, "seed of the random starts")->capture_default_str();
   app->add_option("--only-starts", flags->only_starts,
