@@ -812,7 +812,15 @@ constexpr double kRecurrenceTrustedTolerance = 1e-8;
 LinearSolver::Summary LinearSolver::Solve(const Matrix& a, const Eigen::VectorXd& b,
                                           const Eigen::Matrix3d& rotation, const Options& options,
                                           Eigen::VectorXd* x, Operator op) {
+  matrix_operator_.Bind(a, op == Operator::kTransposed, team_);
+  return Solve(matrix_operator_, b, rotation, options, x);
+}
+
+LinearSolver::Summary LinearSolver::Solve(LinearOperator& a, const Eigen::VectorXd& b,
+                                          const Eigen::Matrix3d& rotation, const Options& options,
+                                          Eigen::VectorXd* x) {
   SOFTID_DEMAND(HasFactor());
+  SOFTID_DEMAND(a.size() == b.size());
   Summary summary;
   const Eigen::Index n = b.size();
   const int m = std::max(1, options.restart);
@@ -835,38 +843,10 @@ LinearSolver::Summary LinearSolver::Solve(const Matrix& a, const Eigen::VectorXd
   // triangular solves, 2 nnz(L) flops each, and two block rotations), a product with A, and the
   // Gram-Schmidt and update vector operations, which grow with the basis.
   const double nd = static_cast<double>(n);
-  const double product_work = 2.0 * static_cast<double>(a.nonZeros());
+  const double product_work = a.ApplyWork();
   const double iteration_work = kReducedPrecisionSolveWeight * 4.0 * current_->factor_nonzeros +
                                 2.0 * 15.0 / 3.0 * nd + product_work + 8.0 * nd;
   double work = 0.0;
-  // y = op(a) x. The transposed product runs over the column-major storage as row dot products:
-  // no transposed copy of the matrix is made.
-  const int members = team_ != nullptr ? team_->size() : 1;
-  if (members > 1) PartitionColumns(a, members);
-  const auto apply = [&](const auto& in, Eigen::VectorXd* out) {
-    if (members == 1) {
-      if (op == Operator::kTransposed)
-        out->noalias() = a.transpose() * in;
-      else
-        out->noalias() = a * in;
-      return;
-    }
-    // Member m takes the columns [column_ranges_[m], column_ranges_[m + 1]) (equal nonzeros):
-    // transposed, the rows of the result they give; else a partial product, summed in member
-    // order.
-    team_->Run([&](int m) {
-      const int first = column_ranges_[m], count = column_ranges_[m + 1] - first;
-      if (op == Operator::kTransposed) {
-        out->segment(first, count).noalias() = a.middleCols(first, count).transpose() * in;
-      } else {
-        Eigen::VectorXd& partial = m == 0 ? *out : partial_products_[m];
-        partial.noalias() = a.middleCols(first, count) * in.segment(first, count);
-      }
-    });
-    if (op == Operator::kMatrix) {
-      for (int m = 1; m < members; ++m) *out += partial_products_[m];
-    }
-  };
   double residual = 0.0;
   // A zero initial guess (Newton's first solve of a step) has the residual b: no product.
   bool residual_is_b = x->isZero(0.0);
@@ -875,7 +855,7 @@ LinearSolver::Summary LinearSolver::Solve(const Matrix& a, const Eigen::VectorXd
       r_ = b;
       residual_is_b = false;
     } else {
-      apply(*x, &r_);
+      a.Apply(*x, &r_);
       r_ = b - r_;
       work += product_work + 3.0 * nd;
     }
@@ -892,7 +872,7 @@ LinearSolver::Summary LinearSolver::Solve(const Matrix& a, const Eigen::VectorXd
       work += iteration_work + 4.0 * nd * (j + 1);
       ApplyPreconditioner(basis_.col(j), &w_);
       preconditioned_.col(j) = w_;
-      apply(preconditioned_.col(j), &w_);
+      a.Apply(preconditioned_.col(j), &w_);
       for (int i = 0; i <= j; ++i) {  // modified Gram-Schmidt
         hessenberg_(i, j) = w_.dot(basis_.col(i));
         w_ -= hessenberg_(i, j) * basis_.col(i);
@@ -929,7 +909,7 @@ LinearSolver::Summary LinearSolver::Solve(const Matrix& a, const Eigen::VectorXd
       // so the recurrence's residual is the true one up to ~1e-14 relative: a product to check
       // it only pays for tolerances near that (the gradient tests' 1e-12).
       if (options.relative_tolerance >= kRecurrenceTrustedTolerance) break;
-      apply(*x, &r_);  // true residual (the recurrence can drift)
+      a.Apply(*x, &r_);  // true residual (the recurrence can drift)
       r_ = b - r_;
       work += product_work + 3.0 * nd;
       residual = r_.norm() / b_norm;
@@ -943,22 +923,6 @@ LinearSolver::Summary LinearSolver::Solve(const Matrix& a, const Eigen::VectorXd
     excess_work_ += work * (summary.iterations - baseline_iterations_) / summary.iterations;
   }
   return summary;
-}
-
-void LinearSolver::PartitionColumns(const Matrix& a, int members) {
-  const int n = static_cast<int>(a.cols());
-  column_ranges_.assign(members + 1, n);
-  column_ranges_[0] = 0;
-  const int* outer = a.outerIndexPtr();
-  for (int m = 1; m < members; ++m) {
-    const double target = static_cast<double>(a.nonZeros()) * m / members;
-    column_ranges_[m] =
-        static_cast<int>(std::lower_bound(outer, outer + n, target,
-                                          [](int entry, double value) { return entry < value; }) -
-                         outer);
-  }
-  partial_products_.resize(members);
-  for (int m = 1; m < members; ++m) partial_products_[m].resize(a.rows());
 }
 
 }  // namespace softid::fem

@@ -15,6 +15,8 @@
 #include <vector>
 
 #include "core/common/status.h"
+#include "core/fem/linear_operator.h"
+#include "core/fem/sparse_matrix_operator.h"
 
 namespace softid::fem {
 
@@ -99,6 +101,10 @@ class LinearSolver {
   // Solves op(a) x = b; x holds the initial guess on entry. @pre HasFactor()
   Summary Solve(const Matrix& a, const Eigen::VectorXd& b, const Eigen::Matrix3d& rotation,
                 const Options& options, Eigen::VectorXd* x, Operator op = Operator::kMatrix);
+  // Solves a x = b with `a` given by its products (e.g. the unassembled step matrix); x holds the
+  // initial guess on entry. The factor must approximate a's symmetric part. @pre HasFactor()
+  Summary Solve(LinearOperator& a, const Eigen::VectorXd& b, const Eigen::Matrix3d& rotation,
+                const Options& options, Eigen::VectorXd* x);
 
   // Solves op(a) x = b by sparse LU (Eigen's SparseLU, COLAMD ordering), without the factor: the
   // fallback for the rare system GMRES stagnates on, e.g. the exact (indefinite, non-symmetric)
@@ -109,8 +115,6 @@ class LinearSolver {
                              Eigen::VectorXd* x, Operator op = Operator::kMatrix);
 
  private:
-  // Splits a's columns into `members` ranges of about equal nonzeros (column_ranges_).
-  void PartitionColumns(const Matrix& a, int members);
   void ApplyPreconditioner(const Eigen::Ref<const Eigen::VectorXd>& r, Eigen::VectorXd* z);
 
   struct Factor;
@@ -144,9 +148,8 @@ class LinearSolver {
   Eigen::MatrixXd hessenberg_;
   Eigen::VectorXd givens_c_, givens_s_, g_;
   Eigen::VectorXd r_, w_, rotated_;
-  // Parallel products: column range bounds per member and the members' partial results.
-  std::vector<int> column_ranges_;
-  std::vector<Eigen::VectorXd> partial_products_;
+  // Products with a matrix passed to Solve, on team_.
+  SparseMatrixOperator matrix_operator_;
 };
 
 }  // namespace softid::fem

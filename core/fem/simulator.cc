@@ -337,6 +337,13 @@ Eigen::Matrix3d Simulator::Assemble(Mode mode, const Eigen::VectorXd& u, const E
   terms.mass_coefficient = mass_coefficient;
   terms.jacobian = !residual_only;
   terms.reuse_rotations = reuse_rotations;
+  terms.record_tangent = record_tangent_;
+  if (terms.record_tangent) {
+    tangent_stiffness_coefficient_ = terms.stiffness_coefficient;
+    tangent_mass_coefficient_ = mass_coefficient;
+    point_jacobians_.resize(force_embedding_.NumPoints());
+    point_active_.assign(force_embedding_.NumPoints(), 0);
+  }
 
   if (terms.jacobian) {
     team_->Run([&](int member) { assembler_.SetZero(member, team_->size()); });
@@ -413,10 +420,18 @@ void Simulator::AssembleSurfacePoint(int p, const ElementTerms& terms,
   // (separating contact): leaving that out made Newton converge only linearly (x0.63 per
   // iteration) when light corner nodes rebound. GMRES does not need definiteness, and the
   // preconditioner factors the symmetric part with a shift fallback.
-  const Eigen::Matrix3d jacobian = surface_jacobian_scale_ * f.StepJacobian(dv_du);
   const int e = force_embedding_.element[p];
   const auto& w = force_embedding_.weights[p];
   const auto& nodes = mesh_.element_nodes[e];
+  if (!terms.jacobian && !terms.record_tangent) {
+    for (int i = 0; i < 8; ++i) residual_.segment<3>(3 * nodes[i]) -= w[i] * f.force;
+    return;
+  }
+  const Eigen::Matrix3d jacobian = surface_jacobian_scale_ * f.StepJacobian(dv_du);
+  if (terms.record_tangent) {
+    point_jacobians_[p] = jacobian;
+    point_active_[p] = 1;
+  }
   for (int i = 0; i < 8; ++i) {
     residual_.segment<3>(3 * nodes[i]) -= w[i] * f.force;
     if (!terms.jacobian) continue;
@@ -624,10 +639,35 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
   }
   // Newton's matrix is the residual's Jacobian divided by 1 - alpha_f (see AssembleStep).
   const double matrix_scale = dynamic ? 1.0 - options_.generalized_alpha_f : 1.0;
+  // Matrix-free: GMRES applies the step matrix by elements (StepTangentOperator) from what every
+  // assembly of this step records; a matrix is assembled only to be factorised.
+  const bool matrix_free = dynamic && newton_tangent_ && options_.matrix_free_newton;
+  struct RecordGuard {
+    bool* flag;
+    ~RecordGuard() { *flag = false; }
+  } record_guard{&record_tangent_};
+  record_tangent_ = matrix_free;
+  Eigen::Matrix3d body_rotation;
   const auto assemble = [&](bool residual_only, bool reuse_rotations) {
     if (!residual_only) ++summary.tangent_assemblies;
+    if (matrix_free && !residual_only) {
+      // A tangent where the last assembly was (reuse_rotations) is already recorded.
+      if (reuse_rotations) return body_rotation;
+      residual_only = true;
+    }
     if (dynamic) return AssembleStep(u_next_, v_next_, a_next_, residual_only, reuse_rotations);
     return Assemble(mode, u_next_, v_next_, a_next_, residual_only, reuse_rotations);
+  };
+  // Newton's matrix at u_next_, where the last assembly was, for a factorisation.
+  const auto step_matrix = [&]() -> const LinearSolver::Matrix& {
+    if (matrix_free) AssembleStep(u_next_, v_next_, a_next_, /*residual_only=*/false, true);
+    return assembler_.matrix();
+  };
+  const auto solve_step = [&](const LinearSolver::Options& linear_options) {
+    if (!matrix_free)
+      return solver_.Solve(assembler_.matrix(), rhs_, body_rotation, linear_options, &update_);
+    StepTangentOperator tangent(TangentViews());
+    return solver_.Solve(tangent, rhs_, body_rotation, linear_options, &update_);
   };
   const auto finish = [&] {
     if (ExceedsExtent(u_next_)) {
@@ -642,7 +682,6 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
     return summary;
   };
   update_.setZero();
-  Eigen::Matrix3d body_rotation;
   double residual_norm = 0.0;
   // The residual alone at u_next_ and the preconditioner's estimate of the next update from it,
   // P^-1 (-r), into update_ (one pair of triangular solves instead of a tangent and GMRES):
@@ -695,21 +734,20 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
       }
     }
     rhs_ = (-1.0 / matrix_scale) * residual_;
-    LinearSolver::Summary solve =
-        solver_.Solve(assembler_.matrix(), rhs_, body_rotation, linear, &update_);
+    LinearSolver::Summary solve = solve_step(linear);
     summary.linear_iterations += solve.iterations;
     if (dynamic && solve.converged && solver_.RefactorPays() && !solver_.FactorizationPending()) {
       // The reference factor no longer fits (large deformation, contact): renew it, in the
       // background on a team (this step goes on with the old one; the next step adopts it).
       summary.refactorized =
-          solver_.StartFactorize(assembler_.matrix(), body_rotation, TangentSymmetry(mode)).ok();
+          solver_.StartFactorize(step_matrix(), body_rotation, TangentSymmetry(mode)).ok();
     } else if (!solve.converged) {
       // Needed now. When that fails the previous factor stays in use.
       summary.refactorized =
-          solver_.Factorize(assembler_.matrix(), body_rotation, TangentSymmetry(mode)).ok();
+          solver_.Factorize(step_matrix(), body_rotation, TangentSymmetry(mode)).ok();
       if (dynamic) RecordFactor();
       update_.setZero();
-      solve = solver_.Solve(assembler_.matrix(), rhs_, body_rotation, linear, &update_);
+      solve = solve_step(linear);
       summary.linear_iterations += solve.iterations;
       if (!solve.converged && !(solve.relative_residual < 1e-6)) {
         summary.diverged = true;
@@ -751,6 +789,28 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
     return summary;
   }
   return finish();
+}
+
+StepTangentOperator::Views Simulator::TangentViews() {
+  StepTangentOperator::Views views;
+  views.element_nodes = &mesh_.element_nodes;
+  views.stiffness_matrices = &stiffness_matrices_;
+  views.stiffness_index = &element_stiffness_index_;
+  views.rotations = &element_rotation_;
+  views.stiffness_coefficient = tangent_stiffness_coefficient_;
+  views.mass = &mass_;
+  views.mass_coefficient = tangent_mass_coefficient_;
+  views.fixed = &fixed_;
+  views.points = &force_embedding_;
+  views.point_jacobians = &point_jacobians_;
+  views.point_active = &point_active_;
+  views.element_chunks = &element_chunks_;
+  views.shared_elements = &shared_elements_;
+  views.point_chunks = &point_chunks_;
+  views.shared_points = &shared_points_;
+  views.team = team_.get();
+  views.assembled_nonzeros = static_cast<double>(assembler_.matrix().nonZeros());
+  return views;
 }
 
 bool Simulator::ExceedsExtent(const Eigen::VectorXd& u) const {

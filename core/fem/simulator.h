@@ -27,6 +27,7 @@
 #include "core/fem/physical_parameters.h"
 #include "core/fem/point_forces.h"
 #include "core/fem/simulation_options.h"
+#include "core/fem/step_tangent_operator.h"
 #include "core/fem/surface_embedding.h"
 #include "core/fem/thread_team.h"
 #include "core/geometry/signed_distance_field.h"
@@ -175,8 +176,11 @@ class Simulator {
   // Coefficients of one assembly shared by all elements.
   struct ElementTerms {
     bool dynamic = false;
-    bool jacobian = true;                // assemble the tangent blocks too
-    bool reuse_rotations = false;        // element_rotation_ is current
+    bool jacobian = true;          // assemble the tangent blocks too
+    bool reuse_rotations = false;  // element_rotation_ is current
+    // Keep what StepTangentOperator needs beyond the rotations: the point Jacobians (also in a
+    // residual-only assembly) and the coefficients.
+    bool record_tangent = false;
     double stiffness_damping = 0.0;      // beta_k, applied when dynamic
     double stiffness_coefficient = 1.0;  // of R K R^T in the tangent
     double mass_coefficient = 0.0;       // of the lumped mass in the tangent
@@ -285,6 +289,15 @@ class Simulator {
   // elements (ascending), and those of shared elements.
   std::vector<std::vector<int>> point_chunks_;
   std::vector<int> shared_points_;
+  // Newton's matrix-free tangent (SimulationOptions::matrix_free_newton): while record_tangent_,
+  // every assembly keeps the surface points' step Jacobians (where they act) and the tangent's
+  // coefficients, which with element_rotation_ are all StepTangentOperator reads.
+  bool record_tangent_ = false;
+  std::vector<Eigen::Matrix3d> point_jacobians_;
+  std::vector<char> point_active_;
+  double tangent_stiffness_coefficient_ = 1.0;
+  double tangent_mass_coefficient_ = 0.0;
+  StepTangentOperator::Views TangentViews();
   // The team running the parallel loops (one member per element chunk), shared with solver_;
   // declared before solver_, which must finish its background work on it before it goes.
   std::unique_ptr<ThreadTeam> team_;
