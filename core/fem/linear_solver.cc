@@ -583,8 +583,8 @@ void LinearSolver::SetThreadTeam(ThreadTeam* team) {
 }
 
 void LinearSolver::UseFactor(const std::shared_ptr<FactorSnapshot>& factor) {
-  FinishFactorize();
   if (factor == nullptr || factor == current_) return;
+  DiscardFactorize();
   current_ = factor;
   const int threads = team_ != nullptr ? team_->size() : 1;
   if (current_->reduced.threads() != threads) current_->reduced.SetThreads(threads);
@@ -610,13 +610,48 @@ bool LinearSolver::RefactorPays() const {
   return current_ != nullptr && excess_work_ > current_->factor_work;
 }
 
-LinearSolver::Matrix LinearSolver::SymmetricPart(const Matrix& a, Symmetry symmetry) {
+void LinearSolver::SymmetricPart(const Matrix& a, Symmetry symmetry, Matrix* out) {
   // The consistent tangent is not symmetric; its symmetric part is what a Cholesky factor can
   // approximate (the lower triangle alone can be far from positive definite).
   SOFTID_ASSERT(symmetry == Symmetry::kGeneral ||
                 (a - Matrix(a.transpose())).norm() <= 1e-12 * a.norm());
-  if (symmetry == Symmetry::kGeneral) return 0.5 * (a + Matrix(a.transpose()));
-  return a;
+  // Assigning to a matrix of the same size and pattern reuses its storage: a fresh ~10 MB copy
+  // cost ~40 ms of first-touch page faults per factorisation on the dev VM (~14 us per page).
+  *out = a;
+  if (symmetry == Symmetry::kSymmetric) return;
+  // (a + a^T) / 2 in place, through the position of each entry's transpose (the assembly's
+  // pattern is structurally symmetric; computed once per pattern).
+  const bool same_pattern =
+      a.rows() + 1 == static_cast<Eigen::Index>(transpose_outer_.size()) &&
+      a.nonZeros() == static_cast<Eigen::Index>(transpose_inner_.size()) &&
+      std::equal(transpose_outer_.begin(), transpose_outer_.end(), a.outerIndexPtr()) &&
+      std::equal(transpose_inner_.begin(), transpose_inner_.end(), a.innerIndexPtr());
+  if (!same_pattern) {
+    transpose_outer_.assign(a.outerIndexPtr(), a.outerIndexPtr() + a.cols() + 1);
+    transpose_inner_.assign(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros());
+    transpose_position_.assign(a.nonZeros(), -1);
+    const int* outer = a.outerIndexPtr();
+    const int* inner = a.innerIndexPtr();
+    for (int j = 0; j < a.cols(); ++j) {
+      for (int p = outer[j]; p < outer[j + 1]; ++p) {
+        const int i = inner[p];  // entry (i, j); its transpose (j, i) is in column i
+        const int* begin = inner + outer[i];
+        const int* end = inner + outer[i + 1];
+        const int* hit = std::lower_bound(begin, end, j);
+        if (hit != end && *hit == j) transpose_position_[p] = static_cast<int>(hit - inner);
+      }
+    }
+    structurally_symmetric_ = std::find(transpose_position_.begin(), transpose_position_.end(),
+                                        -1) == transpose_position_.end();
+  }
+  if (!structurally_symmetric_ || !a.isCompressed()) {
+    *out = 0.5 * (a + Matrix(a.transpose()));
+    return;
+  }
+  const double* values = a.valuePtr();
+  double* symmetric = out->valuePtr();
+  for (Eigen::Index p = 0; p < a.nonZeros(); ++p)
+    symmetric[p] = 0.5 * (values[p] + values[transpose_position_[p]]);
 }
 
 void LinearSolver::PrepareWorkspace(const Matrix& symmetric) {
@@ -680,7 +715,8 @@ void LinearSolver::Adopt(std::shared_ptr<FactorSnapshot> fresh, const Eigen::Mat
 Status LinearSolver::Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
                                Symmetry symmetry) {
   FinishFactorize();
-  const Matrix symmetric = SymmetricPart(a, symmetry);
+  SymmetricPart(a, symmetry, &factor_input_);
+  const Matrix& symmetric = factor_input_;
   PrepareWorkspace(symmetric);
   auto fresh = std::make_shared<FactorSnapshot>();
   const int attempts = FactorNumerically(symmetric, team_ != nullptr ? team_->size() : 1,
@@ -693,33 +729,47 @@ Status LinearSolver::Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
   return Status::Ok();
 }
 
-// The work of a background factorisation, owned by the solver until FinishFactorize: the matrix
-// (a copy: the caller's changes on) and the outcome, written by the background thread only.
-// Destroying it waits for the job (a solver moved onto or destroyed never leaves it running on
-// freed memory; pending_ is declared before the workspace, so a move assignment joins before it
-// replaces it).
+// A factorisation StartFactorize began, owned by the solver until FinishFactorize: the matrix (a
+// copy: the caller's changes on) and the outcome, written by the background thread only, if it
+// runs in the background (on a team; else FinishFactorize computes it). Destroying it waits for
+// the job (a solver moved onto or destroyed never leaves it running on freed memory; pending_ is
+// declared before the workspace, so a move assignment joins before it replaces it).
 struct LinearSolver::PendingFactorization {
   explicit PendingFactorization(ThreadTeam* team) : team(team) {}
-  ~PendingFactorization() { team->WaitForBackground(); }
+  ~PendingFactorization() {
+    if (team != nullptr) team->WaitForBackground();
+  }
   PendingFactorization(const PendingFactorization&) = delete;
   PendingFactorization& operator=(const PendingFactorization&) = delete;
-  ThreadTeam* team;
+  ThreadTeam* team;  // null: not in the background
   Matrix symmetric;
   Eigen::Matrix3d rotation;
   Eigen::Index matrix_nonzeros = 0;
   std::shared_ptr<FactorSnapshot> fresh = std::make_shared<FactorSnapshot>();
   int attempts = 0;  // negative: failed
+  // For FinishFactorizeWhenDue: the factorisation's work (one attempt) and the solver's work and
+  // calls since it started, in work-model units.
+  double expected_work = 0.0;
+  double overlapped_work = 0.0;
+  int calls = 0;
 };
 
 Status LinearSolver::StartFactorize(const Matrix& a, const Eigen::Matrix3d& rotation,
                                     Symmetry symmetry) {
-  if (team_ == nullptr || team_->size() < 2) return Factorize(a, rotation, symmetry);
   FinishFactorize();
-  pending_ = std::make_unique<PendingFactorization>(team_);
-  pending_->symmetric = SymmetricPart(a, symmetry);
+  const bool background = team_ != nullptr && team_->size() >= 2;
+  pending_ = std::make_unique<PendingFactorization>(background ? team_ : nullptr);
+  // The pending record borrows factor_input_'s storage until FinishFactorize.
+  pending_->symmetric.swap(factor_input_);
+  SymmetricPart(a, symmetry, &pending_->symmetric);
   pending_->rotation = rotation;
   pending_->matrix_nonzeros = a.nonZeros();
   PrepareWorkspace(pending_->symmetric);
+  pending_->expected_work = kFactorFlopWeight * workspace_->flops +
+                            kFactorWorkPerMatrixEntry * static_cast<double>(a.nonZeros());
+  // On one thread FinishFactorize computes it: the factor is adopted at the same point either way,
+  // so a run's Newton iterates do not depend on the number of threads.
+  if (!background) return Status::Ok();
   // The job touches only the pending record and the workspace, both on the heap and left alone
   // by the solver until FinishFactorize joins it.
   PendingFactorization* pending = pending_.get();
@@ -736,10 +786,32 @@ Status LinearSolver::StartFactorize(const Matrix& a, const Eigen::Matrix3d& rota
   return Status::Ok();
 }
 
+void LinearSolver::DiscardFactorize() {
+  if (pending_ == nullptr) return;
+  if (pending_->team != nullptr) pending_->team->WaitForBackground();
+  factor_input_.swap(pending_->symmetric);
+  pending_.reset();
+}
+
+bool LinearSolver::FinishFactorizeWhenDue(int max_calls) {
+  if (pending_ == nullptr) return false;
+  ++pending_->calls;
+  if (pending_->overlapped_work < pending_->expected_work && pending_->calls < max_calls)
+    return false;
+  return FinishFactorize();
+}
+
 bool LinearSolver::FinishFactorize() {
   if (pending_ == nullptr) return false;
-  team_->WaitForBackground();
+  if (pending_->team != nullptr) {
+    pending_->team->WaitForBackground();
+  } else {
+    pending_->attempts =
+        FactorNumerically(pending_->symmetric, team_ != nullptr ? team_->size() : 1,
+                          workspace_.get(), pending_->fresh.get());
+  }
   const std::unique_ptr<PendingFactorization> pending = std::move(pending_);
+  factor_input_.swap(pending->symmetric);
   if (pending->attempts < 0) return false;
   Adopt(std::move(pending->fresh), pending->rotation, pending->attempts, pending->matrix_nonzeros);
   return true;
@@ -768,6 +840,8 @@ void LinearSolver::Precondition(const Eigen::VectorXd& b, const Eigen::Matrix3d&
   x->resize(b.size());
   preconditioner_rotation_ = rotation * current_->reference_rotation.transpose();
   ApplyPreconditioner(b, x);
+  if (pending_ != nullptr)
+    pending_->overlapped_work += kReducedPrecisionSolveWeight * 4.0 * current_->factor_nonzeros;
 }
 
 namespace {
@@ -918,6 +992,7 @@ LinearSolver::Summary LinearSolver::Solve(LinearOperator& a, const Eigen::Vector
   }
   summary.relative_residual = residual;
   summary.converged = residual <= 10.0 * options.relative_tolerance;
+  if (pending_ != nullptr) pending_->overlapped_work += work;
   if (baseline_iterations_ < 0) baseline_iterations_ = summary.iterations;
   if (summary.iterations > baseline_iterations_) {
     excess_work_ += work * (summary.iterations - baseline_iterations_) / summary.iterations;

@@ -52,17 +52,28 @@ class LinearSolver {
   // that is not positive definite; a previous factor is then kept.
   Status Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
                    Symmetry symmetry = Symmetry::kGeneral);
-  // Factorize in the background on a team of two or more (synchronously otherwise): the current
-  // factor keeps preconditioning until FinishFactorize, which the caller calls at a point of its
-  // own choosing, so that the result does not depend on timing. While it runs, the team's
-  // parallel regions run on the calling thread alone. A factorisation of ~10^4 unknowns takes
-  // ~100 ms, several Newton iterations' worth, which the caller's work now overlaps.
-  // Returns Factorize's status when it ran synchronously, else Ok.
+  // Factorize, adopted later: the current factor keeps preconditioning until FinishFactorize,
+  // which the caller calls at a point of its own choosing, so that the result depends neither on
+  // timing nor on the number of threads. On a team of two or more it runs in the background
+  // meanwhile (the team's parallel regions then run on the calling thread alone): a
+  // factorisation of ~10^4 unknowns takes ~100 ms, several Newton iterations' worth, which the
+  // caller's work overlaps. Otherwise FinishFactorize computes it. Returns Ok (a failure shows in
+  // FinishFactorize).
   Status StartFactorize(const Matrix& a, const Eigen::Matrix3d& rotation,
                         Symmetry symmetry = Symmetry::kGeneral);
-  // Waits for a factorisation StartFactorize began and makes it current when it succeeded (a
-  // failed one leaves the previous factor). Returns whether a new factor became current.
+  // Completes a factorisation StartFactorize began (waits for it, or computes it without a team)
+  // and makes it current when it succeeded (a failed one leaves the previous factor). Returns
+  // whether a new factor became current.
   bool FinishFactorize();
+  // FinishFactorize once it is due: when the solves since StartFactorize have done about the
+  // factorisation's work (work model: the point does not depend on timing), or at the max_calls-th
+  // call, whichever comes first. Until then the current factor keeps preconditioning, and the
+  // caller's work overlaps the factorisation instead of waiting for it. Returns whether a new
+  // factor became current.
+  bool FinishFactorizeWhenDue(int max_calls);
+  // Drops a factorisation StartFactorize began (after waiting for it in the background): the
+  // current factor stays.
+  void DiscardFactorize();
   bool FactorizationPending() const { return pending_ != nullptr; }
   bool HasFactor() const;
 
@@ -73,9 +84,9 @@ class LinearSolver {
   struct FactorSnapshot;
   // The current factor; null without one.
   std::shared_ptr<FactorSnapshot> CurrentFactor() const { return current_; }
-  // Makes `factor` current, after joining a background factorisation (which is then discarded);
-  // the refactorisation rule starts over as after a factorisation. Null or the current factor:
-  // nothing changes.
+  // Makes `factor` current, dropping a pending factorisation (DiscardFactorize); the
+  // refactorisation rule starts over as after a factorisation. Null or the current factor: nothing
+  // changes.
   void UseFactor(const std::shared_ptr<FactorSnapshot>& factor);
   // Memory a factor holds [bytes].
   static size_t FactorBytes(const FactorSnapshot& factor);
@@ -119,7 +130,13 @@ class LinearSolver {
 
   struct Factor;
   struct PendingFactorization;
-  static Matrix SymmetricPart(const Matrix& a, Symmetry symmetry);
+  // out = a's symmetric part (a itself when kSymmetric), in out's storage when it fits.
+  void SymmetricPart(const Matrix& a, Symmetry symmetry, Matrix* out);
+  // The factorisations' input matrix, kept to reuse its storage, and per entry of the last
+  // general matrix's pattern the position of its transpose.
+  Matrix factor_input_;
+  std::vector<int> transpose_outer_, transpose_inner_, transpose_position_;
+  bool structurally_symmetric_ = false;
   // Readies workspace_ for a's pattern (a new symbolic analysis when it changed).
   void PrepareWorkspace(const Matrix& symmetric);
   // Numeric factorisation in `workspace` (shifted when indefinite) and its reduced-precision copy

@@ -330,6 +330,9 @@ class Simulator {
   size_t factor_history_bytes_ = 0;
   // The history entry the adjoint pass has made current (its time), NaN after a forward step.
   double backward_factor_time_ = std::numeric_limits<double>::quiet_NaN();
+  // Whether a pending factorisation (LinearSolver::StartFactorize) was begun by the adjoint pass;
+  // one the forward pass left pending is dropped when the adjoint reuses the forward's factors.
+  bool backward_factorization_pending_ = false;
   void RecordFactor();
   void UseForwardFactor(double step_start_time);
   SimulationState state_;

@@ -262,9 +262,15 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
     if (fixed_[i]) rhs.segment<3>(3 * i).setZero();
   }
 
-  // A factor renewed in the background during the previous (later) step takes over here, unless
-  // the forward pass solved this step with another (see factor_history_).
-  solver_.FinishFactorize();
+  // A factor the adjoint renewed during the previous (later) step takes over here, unless the
+  // forward pass solved this step with another (see factor_history_). One the forward pass left
+  // pending at its end is dropped when the forward's own factors take over: computing or waiting
+  // for it would be for nothing.
+  if (!backward_factorization_pending_ && options_.adjoint_reuses_forward_factors)
+    solver_.DiscardFactorize();
+  else
+    solver_.FinishFactorize();
+  backward_factorization_pending_ = false;
   UseForwardFactor(previous.time);
   // The exact Jacobian at the end of the step.
   SetState(previous);
@@ -305,7 +311,7 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
     // The same ski-rental rule as the forward pass: renew the factor once the extra iterations
     // of a stale one have cost more than a factorisation.
     if (solver_.RefactorPays() && !solver_.FactorizationPending())
-      (void)solver_.StartFactorize(jacobian, rotation);
+      backward_factorization_pending_ = solver_.StartFactorize(jacobian, rotation).ok();
   }
   adjoint_guess_ = lambda;
   const bool generalized_alpha = UsesGeneralizedAlpha();

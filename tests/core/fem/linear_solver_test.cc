@@ -265,13 +265,57 @@ TEST(LinearSolver, BackgroundFactorisationIsAdoptedOnlyWhenFinished) {
   background.Precondition(b, identity, &z);
   EXPECT_TRUE(z == z_second);
 
-  // Without a team the factorisation runs at once.
+  // Without a team it is adopted at the same point: FinishFactorize computes it.
   LinearSolver alone;
   ASSERT_TRUE(alone.Factorize(first, identity).ok());
   ASSERT_TRUE(alone.StartFactorize(second, identity).ok());
+  EXPECT_TRUE(alone.FactorizationPending());
+  alone.Precondition(b, identity, &z);
+  EXPECT_LT((z - z_first).norm(), 1e-6 * z_first.norm());
+  EXPECT_TRUE(alone.FinishFactorize());
   EXPECT_FALSE(alone.FactorizationPending());
   alone.Precondition(b, identity, &z);
   EXPECT_LT((z - z_second).norm(), 1e-6 * z_second.norm());
+}
+
+// A background factorisation is adopted when due: at the max_calls-th call when the solver did no
+// work meanwhile, at the first call once its solves have done about the factorisation's work
+// (work model, not time), and never before it is adopted gives the new factor.
+TEST(LinearSolver, BackgroundFactorisationIsAdoptedWhenDue) {
+  const LinearSolver::Matrix first = GridMatrix(12, 0.0);
+  LinearSolver::Matrix second = first;
+  second.diagonal() *= 2.0;
+  const Eigen::VectorXd b = RandomVector(first.rows());
+  const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
+  ThreadTeam team(2);
+  LinearSolver solver, reference_second;
+  solver.SetThreadTeam(&team);
+  reference_second.SetThreadTeam(&team);
+  ASSERT_TRUE(solver.Factorize(first, identity).ok());
+  ASSERT_TRUE(reference_second.Factorize(second, identity).ok());
+  Eigen::VectorXd z_second;
+  reference_second.Precondition(b, identity, &z_second);
+
+  // No work meanwhile: adopted at the third call.
+  ASSERT_TRUE(solver.StartFactorize(second, identity).ok());
+  EXPECT_FALSE(solver.FinishFactorizeWhenDue(3));
+  EXPECT_FALSE(solver.FinishFactorizeWhenDue(3));
+  EXPECT_TRUE(solver.FactorizationPending());
+  EXPECT_TRUE(solver.FinishFactorizeWhenDue(3));
+  EXPECT_FALSE(solver.FactorizationPending());
+  Eigen::VectorXd z;
+  solver.Precondition(b, identity, &z);
+  EXPECT_TRUE(z == z_second);
+
+  // Solves meanwhile worth more than the factorisation: adopted at the first call.
+  ASSERT_TRUE(solver.StartFactorize(first, identity).ok());
+  LinearSolver::Options options;
+  options.relative_tolerance = 1e-30;  // out of reach: every solve runs its iterations
+  options.max_iterations = 200;
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(b.size());
+  solver.Solve(second, b, identity, options, &x);
+  EXPECT_TRUE(solver.FinishFactorizeWhenDue(1000));
+  EXPECT_EQ(solver.num_factorizations(), 3);
 }
 
 TEST(LinearSolver, DirectSolveHandlesAnIndefiniteNonSymmetricTransposedSystem) {
