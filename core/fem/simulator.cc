@@ -676,8 +676,8 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
   const auto solve_step = [&](const LinearSolver::Options& linear_options) {
     if (!matrix_free)
       return solver_.Solve(assembler_.matrix(), rhs_, body_rotation, linear_options, &update_);
-    StepTangentOperator tangent(TangentViews());
-    return solver_.Solve(tangent, rhs_, body_rotation, linear_options, &update_);
+    step_tangent_.Bind(TangentViews());
+    return solver_.Solve(step_tangent_, rhs_, body_rotation, linear_options, &update_);
   };
   const auto finish = [&] {
     if (ExceedsExtent(u_next_)) {

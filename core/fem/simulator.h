@@ -298,6 +298,7 @@ class Simulator {
   double tangent_stiffness_coefficient_ = 1.0;
   double tangent_mass_coefficient_ = 0.0;
   StepTangentOperator::Views TangentViews();
+  StepTangentOperator step_tangent_;  // bound to TangentViews() for each solve
   // The team running the parallel loops (one member per element chunk), shared with solver_;
   // declared before solver_, which must finish its background work on it before it goes.
   std::unique_ptr<ThreadTeam> team_;

@@ -7,8 +7,7 @@
 
 namespace softid::fem {
 
-StepTangentOperator::StepTangentOperator(const Views& views) : views_(views) {
-  const Views& v = views_;
+void StepTangentOperator::Bind(const Views& v) {
   SOFTID_THROW_UNLESS(v.element_nodes && v.stiffness_matrices && v.stiffness_index && v.rotations &&
                           v.mass && v.fixed && v.points && v.point_jacobians && v.point_active &&
                           v.element_chunks && v.shared_elements && v.point_chunks &&
@@ -26,6 +25,7 @@ StepTangentOperator::StepTangentOperator(const Views& views) : views_(views) {
   SOFTID_THROW_UNLESS(static_cast<int>(v.element_chunks->size()) == members &&
                           static_cast<int>(v.point_chunks->size()) == members,
                       "StepTangentOperator: one element and point chunk per team member needed");
+  views_ = v;
   has_fixed_ = std::any_of(v.fixed->begin(), v.fixed->end(), [](char f) { return f != 0; });
 }
 
@@ -68,7 +68,7 @@ void StepTangentOperator::ApplyPoints(const std::vector<int>& points, const doub
 
 void StepTangentOperator::Apply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::VectorXd* y) {
   const Eigen::Index n = size();
-  SOFTID_DEMAND(x.size() == n);
+  SOFTID_DEMAND(n > 0 && x.size() == n);
   const std::vector<char>& fixed = *views_.fixed;
   const Eigen::VectorXd& mass = *views_.mass;
   const double* in = x.data();

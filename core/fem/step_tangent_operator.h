@@ -58,10 +58,16 @@ class StepTangentOperator final : public LinearOperator {
     double assembled_nonzeros = 0.0;
   };
 
+  StepTangentOperator() = default;
   // @throws std::invalid_argument when a view is missing or sizes disagree.
-  explicit StepTangentOperator(const Views& views);
+  explicit StepTangentOperator(const Views& views) { Bind(views); }
+  // Applies the operator `views` describe from now on, keeping the work storage (no allocation
+  // per solve). @throws std::invalid_argument as the constructor.
+  void Bind(const Views& views);
 
-  Eigen::Index size() const override { return 3 * views_.mass->size(); }
+  Eigen::Index size() const override {
+    return views_.mass != nullptr ? 3 * views_.mass->size() : 0;
+  }
   void Apply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::VectorXd* y) override;
   double ApplyWork() const override { return 2.0 * views_.assembled_nonzeros; }
 

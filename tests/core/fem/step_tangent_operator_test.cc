@@ -163,6 +163,16 @@ TEST(StepTangentOperator, RejectsMissingViewsAndMismatchedSizes) {
   const std::vector<std::vector<int>> two_chunks = {{0}, {1, 2}};
   views = cells.Views(two_chunks, none, all, none, nullptr);  // a team of one needs one chunk
   EXPECT_THROW(StepTangentOperator{views}, std::invalid_argument);
+
+  // A rejected binding leaves the operator as it was.
+  StepTangentOperator op;
+  EXPECT_EQ(op.size(), 0);
+  EXPECT_THROW(op.Bind(views), std::invalid_argument);
+  EXPECT_EQ(op.size(), 0);
+  op.Bind(cells.Views(all, none, all, none, nullptr));
+  EXPECT_EQ(op.size(), 48);
+  EXPECT_THROW(op.Bind(views), std::invalid_argument);
+  EXPECT_EQ(op.size(), 48);
 }
 
 }  // namespace
