@@ -610,6 +610,18 @@ bool LinearSolver::RefactorPays() const {
   return current_ != nullptr && excess_work_ > current_->factor_work;
 }
 
+bool LinearSolver::Pattern::Matches(const Matrix& a) const {
+  return a.cols() + 1 == static_cast<Eigen::Index>(outer.size()) &&
+         a.nonZeros() == static_cast<Eigen::Index>(inner.size()) &&
+         std::equal(outer.begin(), outer.end(), a.outerIndexPtr()) &&
+         std::equal(inner.begin(), inner.end(), a.innerIndexPtr());
+}
+
+void LinearSolver::Pattern::Assign(const Matrix& a) {
+  outer.assign(a.outerIndexPtr(), a.outerIndexPtr() + a.cols() + 1);
+  inner.assign(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros());
+}
+
 void LinearSolver::SymmetricPart(const Matrix& a, Symmetry symmetry, Matrix* out) {
   // The consistent tangent is not symmetric; its symmetric part is what a Cholesky factor can
   // approximate (the lower triangle alone can be far from positive definite).
@@ -621,14 +633,8 @@ void LinearSolver::SymmetricPart(const Matrix& a, Symmetry symmetry, Matrix* out
   if (symmetry == Symmetry::kSymmetric) return;
   // (a + a^T) / 2 in place, through the position of each entry's transpose (the assembly's
   // pattern is structurally symmetric; computed once per pattern).
-  const bool same_pattern =
-      a.rows() + 1 == static_cast<Eigen::Index>(transpose_outer_.size()) &&
-      a.nonZeros() == static_cast<Eigen::Index>(transpose_inner_.size()) &&
-      std::equal(transpose_outer_.begin(), transpose_outer_.end(), a.outerIndexPtr()) &&
-      std::equal(transpose_inner_.begin(), transpose_inner_.end(), a.innerIndexPtr());
-  if (!same_pattern) {
-    transpose_outer_.assign(a.outerIndexPtr(), a.outerIndexPtr() + a.cols() + 1);
-    transpose_inner_.assign(a.innerIndexPtr(), a.innerIndexPtr() + a.nonZeros());
+  if (!transposed_pattern_.Matches(a)) {
+    transposed_pattern_.Assign(a);
     transpose_position_.assign(a.nonZeros(), -1);
     const int* outer = a.outerIndexPtr();
     const int* inner = a.innerIndexPtr();
@@ -657,16 +663,8 @@ void LinearSolver::SymmetricPart(const Matrix& a, Symmetry symmetry, Matrix* out
 void LinearSolver::PrepareWorkspace(const Matrix& symmetric) {
   // The assembly pattern is fixed, so the fill-reducing ordering and symbolic analysis (METIS
   // dominates a factorisation at ~10^4 unknowns) are done once and reused.
-  const bool same_pattern =
-      symmetric.rows() + 1 == static_cast<Eigen::Index>(pattern_outer_.size()) &&
-      symmetric.nonZeros() == static_cast<Eigen::Index>(pattern_inner_.size()) &&
-      std::equal(pattern_outer_.begin(), pattern_outer_.end(), symmetric.outerIndexPtr()) &&
-      std::equal(pattern_inner_.begin(), pattern_inner_.end(), symmetric.innerIndexPtr());
-  if (!same_pattern) {
-    pattern_outer_.assign(symmetric.outerIndexPtr(),
-                          symmetric.outerIndexPtr() + symmetric.rows() + 1);
-    pattern_inner_.assign(symmetric.innerIndexPtr(),
-                          symmetric.innerIndexPtr() + symmetric.nonZeros());
+  if (!analysed_pattern_.Matches(symmetric)) {
+    analysed_pattern_.Assign(symmetric);
     workspace_.reset();  // analysed for another pattern (the current factor still preconditions)
   }
   if (workspace_ == nullptr) {

@@ -135,7 +135,7 @@ class LinearSolver {
   // The factorisations' input matrix, kept to reuse its storage, and per entry of the last
   // general matrix's pattern the position of its transpose.
   Matrix factor_input_;
-  std::vector<int> transpose_outer_, transpose_inner_, transpose_position_;
+  std::vector<int> transpose_position_;
   bool structurally_symmetric_ = false;
   // Readies workspace_ for a's pattern (a new symbolic analysis when it changed).
   void PrepareWorkspace(const Matrix& symmetric);
@@ -153,7 +153,14 @@ class LinearSolver {
   // CHOLMOD's factor, analysed for the pattern below; each factorisation refills it.
   std::unique_ptr<Factor> workspace_;
   std::shared_ptr<FactorSnapshot> current_;
-  std::vector<int> pattern_outer_, pattern_inner_;
+  // A sparse matrix's pattern (outer and inner indices), to tell whether another has the same.
+  struct Pattern {
+    std::vector<int> outer, inner;
+    bool Matches(const Matrix& a) const;
+    void Assign(const Matrix& a);
+  };
+  Pattern analysed_pattern_;    // of workspace_'s symbolic analysis
+  Pattern transposed_pattern_;  // of transpose_position_
   Eigen::Matrix3d preconditioner_rotation_ = Eigen::Matrix3d::Identity();
   int num_factorizations_ = 0;
   // Work-model units (see kFactorFlopWeight in linear_solver.cc): memory-bound flops.

@@ -318,6 +318,32 @@ TEST(LinearSolver, BackgroundFactorisationIsAdoptedWhenDue) {
   EXPECT_EQ(solver.num_factorizations(), 3);
 }
 
+// A general matrix is factored as its symmetric part (a + a^T) / 2, formed in place when the
+// pattern is structurally symmetric (as the assembly's is) and by a transposed copy otherwise: the
+// same factor, bitwise, as factoring that part given as symmetric; again after the values change
+// on the same pattern (the cached transpose map), and for a pattern with one-sided entries.
+TEST(LinearSolver, GeneralMatrixIsFactoredAsItsSymmetricPart) {
+  const Eigen::Matrix3d identity = Eigen::Matrix3d::Identity();
+  const auto expect_as_symmetric_part = [&](LinearSolver& solver, const LinearSolver::Matrix& a) {
+    const LinearSolver::Matrix part = 0.5 * (a + LinearSolver::Matrix(a.transpose()));
+    LinearSolver reference;
+    ASSERT_TRUE(reference.Factorize(part, identity, LinearSolver::Symmetry::kSymmetric).ok());
+    ASSERT_TRUE(solver.Factorize(a, identity).ok());
+    const Eigen::VectorXd b = RandomVector(a.rows());
+    Eigen::VectorXd x, x_reference;
+    solver.Precondition(b, identity, &x);
+    reference.Precondition(b, identity, &x_reference);
+    EXPECT_TRUE(x == x_reference);
+  };
+  LinearSolver solver;
+  expect_as_symmetric_part(solver, GridMatrix(6, 0.3));
+  expect_as_symmetric_part(solver, GridMatrix(6, -0.2));  // same pattern, new values
+  LinearSolver::Matrix one_sided = GridMatrix(6, 0.3);
+  one_sided.coeffRef(0, 50) += 0.1;  // no (50, 0) entry
+  one_sided.makeCompressed();
+  expect_as_symmetric_part(solver, one_sided);
+}
+
 TEST(LinearSolver, DirectSolveHandlesAnIndefiniteNonSymmetricTransposedSystem) {
   // Shifted by more than the smallest eigenvalue of the Laplacian: indefinite.
   const LinearSolver::Matrix a = MakeMatrix(200, 0.05, 0.5);
