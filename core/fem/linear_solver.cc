@@ -712,7 +712,7 @@ void LinearSolver::Adopt(std::shared_ptr<FactorSnapshot> fresh, const Eigen::Mat
 
 Status LinearSolver::Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
                                Symmetry symmetry) {
-  FinishFactorize();
+  DiscardFactorize();  // replaced at once: computing or adopting it would be wasted
   SymmetricPart(a, symmetry, &factor_input_);
   const Matrix& symmetric = factor_input_;
   PrepareWorkspace(symmetric);

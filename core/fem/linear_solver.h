@@ -48,8 +48,9 @@ class LinearSolver {
   // factored as it is) or general (its symmetric part (a + a^T) / 2 is formed first, which costs
   // a transposed copy: ~15 % of a factorisation at 13k unknowns).
   enum class Symmetry { kGeneral, kSymmetric };
-  // Factorises `a`'s symmetric part as the reference, taken at body rotation `rotation`. Fails when
-  // that is not positive definite; a previous factor is then kept.
+  // Factorises `a`'s symmetric part as the reference, taken at body rotation `rotation`, dropping
+  // a pending factorisation (DiscardFactorize). Fails when that is not positive definite; a
+  // previous factor is then kept.
   Status Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
                    Symmetry symmetry = Symmetry::kGeneral);
   // Factorize, adopted later: the current factor keeps preconditioning until FinishFactorize,

@@ -748,7 +748,7 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
     summary.linear_iterations += solve.iterations;
     if (dynamic && solve.converged && solver_.RefactorPays() && !solver_.FactorizationPending()) {
       // The reference factor no longer fits (large deformation, contact): renew it, in the
-      // background on a team (this step goes on with the old one; the next step adopts it).
+      // background on a team; the steps go on with the old one until the new one is due.
       summary.refactorized =
           solver_.StartFactorize(step_matrix(), body_rotation, TangentSymmetry(mode)).ok();
     } else if (!solve.converged) {

@@ -54,7 +54,7 @@ struct StepSummary {
   // Non-finite state, a failed linear solve, or a body stretched past
   // SimulationOptions::max_extent_ratio: the run is invalid.
   bool diverged = false;
-  bool refactorized = false;  // the preconditioner was renewed during this step
+  bool refactorized = false;  // a renewal of the preconditioner began during this step
   double max_update = -1.0;   // last Newton update, max norm [m]
 };
 
