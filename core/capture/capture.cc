@@ -168,6 +168,14 @@ Result<CameraRecording> ParseCamera(const JsonReader& reader, const json& value,
   };
   SOFTID_RETURN_IF_ERROR(integer_field("width", &camera.width));
   SOFTID_RETURN_IF_ERROR(integer_field("height", &camera.height));
+  // A decoded frame must fit in memory whatever its compressed size (a 510 KB PNG can hold
+  // 16384 x 16384 zeros, 512 MiB decoded).
+  if (camera.width > 0 && camera.height > 0 &&
+      static_cast<int64_t>(camera.width) * camera.height > kMaxImagePixels) {
+    return reader.Error(JoinPath(path, "width"), value["width"],
+                        fmt::format("{} x {} pixels: at most {} pixels per image are accepted",
+                                    camera.width, camera.height, kMaxImagePixels));
+  }
   SOFTID_RETURN_IF_ERROR(number_field("fx", &camera.fx));
   SOFTID_RETURN_IF_ERROR(number_field("fy", &camera.fy));
   SOFTID_RETURN_IF_ERROR(number_field("cx", &camera.cx));
@@ -200,6 +208,11 @@ Result<CameraRecording> ParseCamera(const JsonReader& reader, const json& value,
   SOFTID_ASSIGN_OR_RETURN(const json* frames, reader.Require(value, path, "frames"));
   SOFTID_RETURN_IF_ERROR(reader.CheckArray(frames_path, *frames));
   if (frames->empty()) return reader.Error(frames_path, *frames, "must list at least one frame");
+  if (frames->size() > static_cast<size_t>(kMaxFramesPerCamera)) {
+    return reader.Error(frames_path,
+                        fmt::format("{} frames: at most {} frames per camera are accepted",
+                                    frames->size(), kMaxFramesPerCamera));
+  }
   for (size_t k = 0; k < frames->size(); ++k) {
     SOFTID_ASSIGN_OR_RETURN(std::string frame,
                             reader.RelativePath(IndexPath(frames_path, k), (*frames)[k]));
@@ -224,6 +237,29 @@ Status CheckInsideFolder(const JsonReader& reader, const std::filesystem::path& 
                          std::string_view path, const std::string& file) {
   if (StaysInside(directory, directory / file)) return Status::Ok();
   return reader.Error(path, json(file), "resolves outside the capture folder (symlink)");
+}
+
+// A mesh softid can simulate: of an object's size, in metres, and solid.
+Status CheckMeshSize(const JsonReader& reader, const std::string& file,
+                     const geometry::TriangleMesh& mesh) {
+  const Eigen::Vector3d size = mesh.Bounds().sizes();
+  const double longest = size.maxCoeff();
+  if (!(longest >= kMinMeshExtent_m && longest <= kMaxMeshExtent_m)) {
+    return reader.Error("mesh", json(file),
+                        fmt::format("longest side {:.6g} m: must lie in [{}, {}] m (capture "
+                                    "meshes are in metres)",
+                                    longest, kMinMeshExtent_m, kMaxMeshExtent_m));
+  }
+  // Scanned meshes with holes still enclose most of their volume; a flat or open sheet does not.
+  constexpr double kMinBoxFraction = 1e-4;
+  const double volume = std::abs(geometry::SignedVolume(mesh));
+  if (!(volume > kMinBoxFraction * size.prod())) {
+    return reader.Error("mesh", json(file),
+                        fmt::format("encloses no volume ({:.3g} m^3 in a {:.3g} x {:.3g} x {:.3g} "
+                                    "m box): softid simulates solid objects",
+                                    volume, size.x(), size.y(), size.z()));
+  }
+  return Status::Ok();
 }
 
 Result<std::string> ReadTextFile(const std::filesystem::path& path) {
@@ -355,6 +391,10 @@ Result<Capture> CaptureFromJson(const json& root, std::string_view source) {
   SOFTID_ASSIGN_OR_RETURN(const json* cameras, reader.Require(root, "", "cameras"));
   SOFTID_RETURN_IF_ERROR(reader.CheckArray("cameras", *cameras));
   if (cameras->empty()) return reader.Error("cameras", *cameras, "must list at least one camera");
+  if (cameras->size() > static_cast<size_t>(kMaxCameras)) {
+    return reader.Error("cameras", fmt::format("{} cameras: at most {} are accepted",
+                                               cameras->size(), kMaxCameras));
+  }
   std::set<std::string> names;
   for (size_t i = 0; i < cameras->size(); ++i) {
     const std::string path = IndexPath("cameras", i);
@@ -389,12 +429,8 @@ Result<Capture> ReadCapture(const std::filesystem::path& directory,
         "{}: not found (not a capture folder, or the capture was not completely written)", source));
   }
   SOFTID_ASSIGN_OR_RETURN(const std::string text, ReadTextFile(json_path));
-  json root;
-  try {
-    root = json::parse(text);
-  } catch (const json::exception& e) {
-    return Status::InvalidArgument(fmt::format("{}: invalid JSON: {}", source, e.what()));
-  }
+  SOFTID_ASSIGN_OR_RETURN(const json root,
+                          softid::json::ParseUntrustedJson(text, source, kCaptureJsonLimits));
   SOFTID_ASSIGN_OR_RETURN(Capture capture, CaptureFromJson(root, source));
   capture.directory = directory;
   const JsonReader reader(source);
@@ -410,6 +446,7 @@ Result<Capture> ReadCapture(const std::filesystem::path& directory,
     if (mesh->vertices.empty() || mesh->triangles.empty()) {
       return reader.Error("mesh", json(capture.mesh_file), "mesh is empty (no triangles)");
     }
+    SOFTID_RETURN_IF_ERROR(CheckMeshSize(reader, capture.mesh_file, *mesh));
   }
 
   // Every frame: inside the folder, a 16-bit single-channel PNG of the camera's size.
@@ -435,7 +472,7 @@ Result<Capture> ReadCapture(const std::filesystem::path& directory,
 }
 
 Result<geometry::TriangleMesh> LoadCaptureMesh(const Capture& capture) {
-  return geometry::ReadTriangleMesh(capture.directory / capture.mesh_file);
+  return geometry::ReadTriangleMesh(capture.directory / capture.mesh_file, capture.directory);
 }
 
 Result<DepthImage> LoadFrame(const Capture& capture, int camera, int frame) {

@@ -26,6 +26,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <cstdint>
 #include <filesystem>
 #include <nlohmann/json_fwd.hpp>
 #include <optional>
@@ -36,6 +37,7 @@
 #include "core/capture/camera.h"
 #include "core/capture/depth_image.h"
 #include "core/common/status.h"
+#include "core/common/untrusted_json.h"
 #include "core/geometry/triangle_mesh.h"
 
 namespace softid::capture {
@@ -44,6 +46,20 @@ namespace softid::capture {
 inline constexpr std::string_view kCaptureFormat = "softid-capture/1";
 // Name of the capture description inside a capture folder.
 inline constexpr std::string_view kCaptureFileName = "capture.json";
+// Bounds that keep a capture's memory in reach of one machine: 4096 x 4096 pixels per image
+// (32 MiB decoded; depth cameras give 0.3-2 Mpixel), 16 cameras, 20,000 frames per camera (over
+// five minutes at 60 fps; softid fits seconds).
+inline constexpr int64_t kMaxImagePixels = 4096LL * 4096LL;
+inline constexpr int kMaxCameras = 16;
+inline constexpr int kMaxFramesPerCamera = 20000;
+// The mesh's longest side must lie in this range [m] (a mesh in millimetres declared as metres
+// is 1000x too large), and it must enclose a volume (not flat).
+inline constexpr double kMinMeshExtent_m = 1e-3;
+inline constexpr double kMaxMeshExtent_m = 100.0;
+// Bounds on capture.json as read from a folder or an upload: 4 MiB holds 60,000 frame names;
+// the format nests 4 levels deep (cameras[i].frames[k]).
+inline constexpr json::UntrustedJsonLimits kCaptureJsonLimits{.max_bytes = 4u << 20,
+                                                              .max_depth = 8};
 
 // One camera's calibration and depth video.
 struct CameraRecording {
@@ -92,10 +108,12 @@ Result<Capture> CaptureFromJson(const nlohmann::json& json,
                                 std::string_view source = kCaptureFileName);
 
 // Reads <directory>/capture.json with CaptureFromJson, then checks the files it references: the
-// mesh loads with geometry::ReadTriangleMesh and is not empty; every frame exists and is a 16-bit
-// single-channel PNG of its camera's size (decoded or header-only, see options); no path leaves
-// the folder through a symlink. NotFound when the directory or capture.json does not exist;
-// InvalidArgument naming capture.json, the field, the value and the problem for anything else.
+// mesh loads with geometry::ReadTriangleMesh (only files inside the folder are opened), is not
+// empty, encloses a volume and has a longest side in [kMinMeshExtent_m, kMaxMeshExtent_m]; every
+// frame exists and is a 16-bit single-channel PNG of its camera's size (decoded or header-only, see
+// options); no path leaves the folder through a symlink. NotFound when the directory or
+// capture.json does not exist; InvalidArgument naming capture.json, the field, the value and the
+// problem for anything else.
 Result<Capture> ReadCapture(const std::filesystem::path& directory,
                             const ReadCaptureOptions& options = {});
 

@@ -10,6 +10,7 @@ const char* ToString(StatusCode code) {
     case StatusCode::kIoError: return "IO_ERROR";
     case StatusCode::kFailedPrecondition: return "FAILED_PRECONDITION";
     case StatusCode::kInternal: return "INTERNAL";
+    case StatusCode::kCancelled: return "CANCELLED";
   }
   return "UNKNOWN";
 }

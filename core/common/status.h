@@ -17,6 +17,7 @@ enum class StatusCode {
   kIoError,          // a read or write that failed for reasons outside the input
   kFailedPrecondition,
   kInternal,
+  kCancelled,  // stopped because the caller asked (a cancel flag was set)
 };
 
 const char* ToString(StatusCode code);
@@ -39,6 +40,9 @@ class [[nodiscard]] Status {
   }
   static Status Internal(std::string message) {
     return {StatusCode::kInternal, std::move(message)};
+  }
+  static Status Cancelled(std::string message) {
+    return {StatusCode::kCancelled, std::move(message)};
   }
 
   bool ok() const { return code_ == StatusCode::kOk; }

@@ -221,6 +221,7 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
   } catch (const std::invalid_argument& e) {
     return Status::InvalidArgument(e.what());
   }
+  context.objective->SetCancelFlag(options.fit.cancel);
   context.rest_bounds = context.mesh.Bounds();
   const double h = context.objective->simulator().hex_mesh().CellSize();
   context.truncation = config.cost.truncation_cells * h;

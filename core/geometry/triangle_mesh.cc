@@ -19,6 +19,7 @@
 #include <utility>
 
 #include "core/common/check.h"
+#include "core/geometry/confined_io_system.h"
 
 namespace softid::geometry {
 namespace {
@@ -83,7 +84,8 @@ Eigen::AlignedBox3d TriangleMesh::Bounds() const {
   return box;
 }
 
-Result<TriangleMesh> ReadTriangleMesh(const std::filesystem::path& path) {
+Result<TriangleMesh> ReadTriangleMesh(const std::filesystem::path& path,
+                                      const std::filesystem::path& confine_to) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) {
     return Status::NotFound(Quoted(path) + ": mesh file does not exist");
@@ -96,8 +98,18 @@ Result<TriangleMesh> ReadTriangleMesh(const std::filesystem::path& path) {
   }
 
   Assimp::Importer importer;
+  // The importer owns and deletes its IO handler.
+  auto* files = new ConfinedIOSystem(confine_to.empty() ? path.parent_path() : confine_to);
+  importer.SetIOHandler(files);
   const aiScene* scene =
       importer.ReadFile(path.string(), aiProcess_Triangulate | aiProcess_PreTransformVertices);
+  if (files->refused_any()) {
+    // One message whatever the file was and whether it exists: no oracle for paths elsewhere.
+    return Status::InvalidArgument(
+        Quoted(path) +
+        ": refers to a file outside its folder (only self-contained meshes, or "
+        "files beside the mesh, are read)");
+  }
   if (scene == nullptr) {
     return Status::InvalidArgument(Quoted(path) +
                                    ": cannot read mesh: " + importer.GetErrorString());

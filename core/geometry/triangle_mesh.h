@@ -22,8 +22,11 @@ struct TriangleMesh {
 // Reads OBJ, PLY (ascii/binary) or STL (ascii/binary) via assimp; merges duplicate vertices (STL
 // has no index) and drops unreferenced vertices and triangles with a repeated vertex index. Errors
 // (Status InvalidArgument/NotFound) name the path and what is wrong: missing file, unreadable, no
-// triangles, non-finite coordinates.
-Result<TriangleMesh> ReadTriangleMesh(const std::filesystem::path& path);
+// triangles, non-finite coordinates. The importer opens only files inside `confine_to` (default:
+// the mesh's own folder): a format that refers to other files (glTF buffers, OBJ material
+// libraries) outside it is refused with one message, whether or not that file exists.
+Result<TriangleMesh> ReadTriangleMesh(const std::filesystem::path& path,
+                                      const std::filesystem::path& confine_to = {});
 // Writes a Wavefront OBJ ("v x y z" with %.9g, "f a b c" 1-based). IoError names the path.
 Status WriteTriangleMeshObj(const std::filesystem::path& path, const TriangleMesh& mesh);
 // Writes a binary little-endian PLY with double vertex coordinates. IoError names the path.

@@ -469,10 +469,12 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   const cost::SurfaceCostOptions cost_options = CostOptionsFor(config);
   result.substeps = config.substeps;
   if (config.substeps == kAutoSubsteps) {
+    SubstepSelectionOptions selection_options;
+    selection_options.cancel = options.cancel;
     SOFTID_ASSIGN_OR_RETURN(
         SubstepSelection selection,
         SelectSubsteps(mesh, capture.fixed_region, CentralStart(config, result.base), simulation,
-                       capture.fps, frames->back().frame));
+                       capture.fps, frames->back().frame, selection_options));
     result.substeps = selection.substeps;
     result.substep_selection = std::move(selection);
   }
@@ -492,6 +494,7 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
       error = Status::InvalidArgument(e.what());
       return;
     }
+    objective->SetCancelFlag(options.cancel);
     for (int s = next_start++; s < static_cast<int>(starts.size()); s = next_start++) {
       if (options.cancel != nullptr && options.cancel->load()) break;
       board.StartBegins();

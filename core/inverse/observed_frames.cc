@@ -19,6 +19,7 @@ Result<std::vector<ObservedFrame>> LoadObservedFrames(const capture::Capture& ca
   }
   std::vector<ObservedFrame> frames;
   frames.reserve(last - first + 1);
+  int64_t total_points = 0;
   for (int k = first; k <= last; ++k) {
     ObservedFrame frame;
     frame.frame = k;
@@ -27,6 +28,13 @@ Result<std::vector<ObservedFrame>> LoadObservedFrames(const capture::Capture& ca
       SOFTID_ASSIGN_OR_RETURN(capture::DepthImage image, capture::LoadFrame(capture, c, k));
       const std::vector<Eigen::Vector3d> points =
           capture::DepthToWorldPoints(image, capture.cameras[c].camera);
+      total_points += static_cast<int64_t>(points.size());
+      if (total_points > kMaxObservedPoints) {
+        return Status::InvalidArgument(
+            "frames: more than " + std::to_string(kMaxObservedPoints) +
+            " observed points up to frame " + std::to_string(k) +
+            " (only the object's pixels should be non-zero): fit fewer frames");
+      }
       frame.points.insert(frame.points.end(), points.begin(), points.end());
     }
     frames.push_back(std::move(frame));

@@ -12,11 +12,16 @@
 namespace softid::inverse {
 namespace {
 
-// Surface vertex positions at every frame 0..last_frame; empty when the run diverges.
+bool Cancelled(const std::atomic<bool>* cancel) {
+  return cancel != nullptr && cancel->load(std::memory_order_relaxed);
+}
+
+// Surface vertex positions at every frame 0..last_frame; empty when the run diverges or is
+// cancelled.
 std::vector<std::vector<Eigen::Vector3d>> SurfaceTrajectory(
     const geometry::TriangleMesh& rest_mesh, const std::optional<Eigen::AlignedBox3d>& fixed_region,
     const fem::PhysicalParameters& parameters, fem::SimulationOptions simulation, double fps,
-    int last_frame, int substeps) {
+    int last_frame, int substeps, const std::atomic<bool>* cancel) {
   simulation.time_step = 1.0 / (fps * substeps);
   fem::Simulator sim(rest_mesh, parameters, simulation, fixed_region);
   std::vector<std::vector<Eigen::Vector3d>> frames;
@@ -24,6 +29,7 @@ std::vector<std::vector<Eigen::Vector3d>> SurfaceTrajectory(
   frames.push_back(sim.SurfacePositions());
   for (int frame = 1; frame <= last_frame; ++frame) {
     for (int s = 0; s < substeps; ++s) {
+      if (Cancelled(cancel)) return {};
       const fem::StepSummary step = sim.Step();
       if (step.diverged || !sim.state().u.allFinite()) return {};
     }
@@ -61,7 +67,8 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
   try {
     int substeps = options.min_substeps;
     auto coarse = SurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps,
-                                    last_frame, substeps);
+                                    last_frame, substeps, options.cancel);
+    if (Cancelled(options.cancel)) return Status::Cancelled("the time-step choice was cancelled");
     while (true) {
       if (substeps >= options.max_substeps) {
         selection.substeps = options.max_substeps;
@@ -69,7 +76,10 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
       }
       const int finer = std::min(2 * substeps, options.max_substeps);
       auto fine = SurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps,
-                                    last_frame, finer);
+                                    last_frame, finer, options.cancel);
+      if (Cancelled(options.cancel)) {
+        return Status::Cancelled("the time-step choice was cancelled");
+      }
       SubstepTrial trial;
       trial.substeps = substeps;
       trial.diverged = coarse.empty() || fine.empty();

@@ -10,6 +10,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <atomic>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <vector>
@@ -32,6 +33,8 @@ struct SubstepSelectionOptions {
   // (0.6 mm here, under a depth camera's noise) takes 8. (With gamma 1/2 the differences are 21,
   // 0.32 and 0.09 mm and 4 substeps give 0.2 %: see SimulationOptions::newmark_gamma.)
   double tolerance_fraction = 2e-3;
+  // Checked every simulation step; when set, selection stops with StatusCode::kCancelled.
+  const std::atomic<bool>* cancel = nullptr;
 };
 
 struct SubstepTrial {

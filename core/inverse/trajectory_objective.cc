@@ -59,6 +59,9 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
   states_.resize(last_step + 1);
   states_[0] = sim.state();
   for (int step = 1; step <= last_step; ++step) {
+    if (cancel_ != nullptr && cancel_->load(std::memory_order_relaxed)) {
+      return Status::Cancelled("the simulation was cancelled");
+    }
     const fem::StepSummary summary = sim.Step();
     if (summary.diverged || !sim.state().u.allFinite()) {
       out.diverged = true;
@@ -114,6 +117,9 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
     adjoint.u += frame_gradient_ / fitted;
   };
   for (int step = last_step; step >= 1; --step) {
+    if (cancel_ != nullptr && cancel_->load(std::memory_order_relaxed)) {
+      return Status::Cancelled("the adjoint pass was cancelled");
+    }
     add_frame_gradient(step);
     SOFTID_RETURN_IF_ERROR(
         sim.BackpropagateStep(states_[step - 1], states_[step], &adjoint, &out.gradient));

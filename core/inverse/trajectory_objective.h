@@ -14,6 +14,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <atomic>
 #include <memory>
 #include <optional>
 #include <vector>
@@ -81,6 +82,11 @@ class TrajectoryObjective {
   void SetActiveFrames(int count);
   int active_frames() const { return active_frames_; }
 
+  // Checked every simulation step of Evaluate and EvaluateResiduals, forward and backward: when
+  // set, they return StatusCode::kCancelled within one step (a cancel takes effect within
+  // seconds even inside a long run). Null (default): never cancelled.
+  void SetCancelFlag(const std::atomic<bool>* cancel) { cancel_ = cancel; }
+
   fem::Simulator& simulator() { return *simulator_; }
   const std::vector<ObservedFrame>& frames() const { return *frames_; }
   int substeps() const { return substeps_; }
@@ -95,6 +101,7 @@ class TrajectoryObjective {
   std::vector<fem::SimulationState> states_;  // per step, reused across evaluations
   Eigen::VectorXd frame_gradient_;
   std::vector<cost::PointMatch> matches_;  // scratch of EvaluateResiduals
+  const std::atomic<bool>* cancel_ = nullptr;
 };
 
 }  // namespace softid::inverse

@@ -435,6 +435,49 @@ TEST(CaptureRejects, BadMesh) {
   ExpectInvalid(dir.ReadEdited([](json& j) { j["mesh"] = "empty.obj"; }), {"mesh = \"empty.obj\""});
 }
 
+// A mesh softid cannot simulate is refused when the capture is read, not when a job fails later:
+// flat (no volume), a thousand kilometres long (units), or smaller than a millimetre.
+TEST(CaptureRejects, MeshOfNoVolumeOrImplausibleSize) {
+  const CaptureDir dir;
+  dir.WriteText("flat.obj", "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nv 0.1 0.1 0\nf 1 2 3\nf 2 4 3\n");
+  ExpectInvalid(dir.ReadEdited([](json& j) { j["mesh"] = "flat.obj"; }),
+                {"mesh = \"flat.obj\"", "encloses no volume"});
+  geometry::TriangleMesh huge = dir.test().mesh;
+  for (Eigen::Vector3d& v : huge.vertices) v *= 1e7;  // 0.2 m -> 2000 km
+  ASSERT_TRUE(geometry::WriteTriangleMeshObj(dir.path() / "huge.obj", huge).ok());
+  ExpectInvalid(dir.ReadEdited([](json& j) { j["mesh"] = "huge.obj"; }),
+                {"mesh = \"huge.obj\"", "longest side", "must lie in [0.001, 100] m"});
+  geometry::TriangleMesh tiny = dir.test().mesh;
+  for (Eigen::Vector3d& v : tiny.vertices) v *= 1e-3;  // 0.2 mm
+  ASSERT_TRUE(geometry::WriteTriangleMeshObj(dir.path() / "tiny.obj", tiny).ok());
+  ExpectInvalid(dir.ReadEdited([](json& j) { j["mesh"] = "tiny.obj"; }), {"longest side"});
+}
+
+// Image sizes, frame and camera counts whose decoding would not fit in memory are refused from
+// capture.json alone, before any frame is read.
+TEST(CaptureRejects, ResourceBounds) {
+  const CaptureDir dir;
+  json j = dir.LoadJson();
+  j["cameras"][0]["width"] = 16384;
+  j["cameras"][0]["height"] = 16384;
+  j["cameras"][0]["cx"] = 8000;
+  j["cameras"][0]["cy"] = 8000;
+  ExpectInvalid(CaptureFromJson(j),
+                {"cameras[0].width = 16384", "16384 x 16384 pixels", "at most 16777216 pixels"});
+  json frames = dir.LoadJson();
+  frames["cameras"][0]["frames"] = json::array();
+  for (int k = 0; k <= kMaxFramesPerCamera; ++k) frames["cameras"][0]["frames"].push_back("f.png");
+  ExpectInvalid(CaptureFromJson(frames),
+                {"cameras[0].frames", "20001 frames: at most 20000 frames per camera"});
+  json cameras = dir.LoadJson();
+  while (cameras["cameras"].size() <= static_cast<size_t>(kMaxCameras)) {
+    json camera = cameras["cameras"][0];
+    camera["name"] = "cam" + std::to_string(cameras["cameras"].size());
+    cameras["cameras"].push_back(camera);
+  }
+  ExpectInvalid(CaptureFromJson(cameras), {"cameras: 17 cameras: at most 16 are accepted"});
+}
+
 // mass_kg must be positive.
 TEST(CaptureRejects, NonPositiveMass) {
   const CaptureDir dir;

@@ -237,3 +237,80 @@ TEST(TriangleMesh, ReadsScannedBunny) {
 
 }  // namespace
 }  // namespace softid::geometry
+
+namespace softid::geometry {
+namespace {
+
+// A glTF 2.0 triangle whose vertex positions are in the external buffer `uri`.
+std::string TriangleGltf(const std::string& uri) {
+  return R"({"asset": {"version": "2.0"},
+    "buffers": [{"uri": ")" +
+         uri + R"(", "byteLength": 36}],
+    "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 36}],
+    "accessors": [{"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+                   "min": [0, 0, 0], "max": [1, 1, 0]}],
+    "meshes": [{"primitives": [{"attributes": {"POSITION": 0}}]}],
+    "nodes": [{"mesh": 0}], "scenes": [{"nodes": [0]}], "scene": 0})";
+}
+
+void WriteTriangleBuffer(const std::filesystem::path& path) {
+  const float xyz[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  std::ofstream out(path, std::ios::binary);
+  out.write(reinterpret_cast<const char*>(xyz), sizeof(xyz));
+}
+
+// A mesh that arrived in an upload must not make the importer read anything outside the upload,
+// nor tell an existing file elsewhere from a missing one.
+TEST(TriangleMeshConfinement, ExternalFilesOutsideTheFolderAreNeverRead) {
+  const std::filesystem::path root = TempPath("root");
+  std::filesystem::remove_all(root);
+  const std::filesystem::path upload = root / "upload";
+  std::filesystem::create_directories(upload / "sub");
+  WriteTriangleBuffer(root / "secret.bin");       // exists, outside
+  WriteTriangleBuffer(upload / "sub" / "b.bin");  // inside
+
+  WriteText(upload / "inside.gltf", TriangleGltf("sub/b.bin"));
+  const Result<TriangleMesh> inside = ReadTriangleMesh(upload / "inside.gltf");
+  ASSERT_TRUE(inside.ok()) << inside.status().ToString();
+  EXPECT_EQ(inside->triangles.size(), 1u);
+
+  WriteText(upload / "existing.gltf", TriangleGltf("../secret.bin"));
+  WriteText(upload / "missing.gltf", TriangleGltf("../no-such-file.bin"));
+  const Status existing = ReadTriangleMesh(upload / "existing.gltf").status();
+  const Status missing = ReadTriangleMesh(upload / "missing.gltf").status();
+  EXPECT_EQ(existing.code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(missing.code(), StatusCode::kInvalidArgument);
+  const auto reason = [](const Status& s) { return s.message().substr(s.message().find(": ")); };
+  EXPECT_EQ(reason(existing), reason(missing));
+  EXPECT_NE(existing.message().find("outside its folder"), std::string::npos) << existing.message();
+
+  // An absolute uri is taken relative to the mesh's folder (assimp joins them): not read either.
+  WriteText(upload / "absolute.gltf", TriangleGltf((root / "secret.bin").string()));
+  EXPECT_FALSE(ReadTriangleMesh(upload / "absolute.gltf").ok());
+  // A symlink out of the folder is refused like a relative path out of it.
+  std::filesystem::create_symlink(root / "secret.bin", upload / "link.bin");
+  WriteText(upload / "link.gltf", TriangleGltf("link.bin"));
+  EXPECT_EQ(reason(ReadTriangleMesh(upload / "link.gltf").status()), reason(existing));
+
+  // A wider confinement (the capture folder above the mesh's) allows files up to it.
+  std::filesystem::create_directories(upload / "meshes");
+  WriteText(upload / "meshes" / "up.gltf", TriangleGltf("../sub/b.bin"));
+  EXPECT_FALSE(ReadTriangleMesh(upload / "meshes" / "up.gltf").ok());
+  EXPECT_TRUE(ReadTriangleMesh(upload / "meshes" / "up.gltf", upload).ok());
+}
+
+// An OBJ's material library outside the folder is not opened either.
+TEST(TriangleMeshConfinement, ObjMaterialLibraryOutsideIsRefused) {
+  const std::filesystem::path root = TempPath("root");
+  std::filesystem::remove_all(root);
+  std::filesystem::create_directories(root / "upload");
+  WriteText(root / "outside.mtl", "newmtl a\nKd 1 0 0\n");
+  WriteText(root / "upload" / "mesh.obj",
+            "mtllib ../outside.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  const Status status = ReadTriangleMesh(root / "upload" / "mesh.obj").status();
+  EXPECT_EQ(status.code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(status.message().find("outside its folder"), std::string::npos) << status.message();
+}
+
+}  // namespace
+}  // namespace softid::geometry

@@ -4,8 +4,11 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
 #include <filesystem>
 #include <memory>
+#include <thread>
 
 #include "core/capture/capture.h"
 #include "core/inverse/observed_frames.h"
@@ -159,6 +162,40 @@ TEST(TrajectoryObjective, EvaluationIsBitwiseRepeatable) {
   EXPECT_EQ(value_only->cost, a->cost);
   EXPECT_EQ(value_only->frame_costs, a->frame_costs);
   EXPECT_GT(a->cost, 0.0);
+}
+
+// A cancel takes effect within a step, forward or backward, even in a long run; the objective is
+// usable afterwards with the same results as before.
+TEST(TrajectoryObjective, CancelStopsALongRunWithinAStep) {
+  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.3);
+  ASSERT_TRUE(small.ok) << small.error;
+  fem::SimulationOptions options;
+  options.cells_along_longest_side = 8;
+  const fem::PhysicalParameters p = small.truth;
+  // 100 steps per frame: a run long enough that the flag arrives while it is under way.
+  TrajectoryObjective objective(small.mesh, std::nullopt, p, options, {}, small.frames,
+                                small.capture.fps, 100);
+  Result<ObjectiveEvaluation> before = objective.Evaluate(p, false);
+  ASSERT_TRUE(before.ok());
+
+  std::atomic<bool> cancel{true};
+  objective.SetCancelFlag(&cancel);
+  Result<ObjectiveEvaluation> at_once = objective.Evaluate(p, true);
+  EXPECT_EQ(at_once.status().code(), StatusCode::kCancelled);
+
+  cancel.store(false);
+  std::thread canceller([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    cancel.store(true);
+  });
+  Result<ObjectiveEvaluation> midway = objective.Evaluate(p, true);
+  canceller.join();
+  EXPECT_EQ(midway.status().code(), StatusCode::kCancelled) << midway.status().ToString();
+
+  cancel.store(false);
+  Result<ObjectiveEvaluation> after = objective.Evaluate(p, false);
+  ASSERT_TRUE(after.ok());
+  EXPECT_EQ(after->cost, before->cost);
 }
 
 }  // namespace

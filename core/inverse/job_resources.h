@@ -1,0 +1,49 @@
+// What a job will need before it runs: the simulation grid and steps its config implies on a
+// given capture, and an estimate of its memory. A service checks this at the door, so a config
+// like {"cells": 300} or {"substeps": 20000} is refused with the field and the limit named
+// instead of exhausting the machine hours later.
+#pragma once
+
+#include <Eigen/Geometry>
+#include <cstdint>
+
+#include "core/common/status.h"
+#include "core/inverse/job_config.h"
+
+namespace softid::inverse {
+
+// The parts of a capture that size a job.
+struct CaptureExtent {
+  Eigen::AlignedBox3d mesh_bounds;  // rest mesh [m], non-empty
+  int num_frames = 0;               // per camera, >= 1
+  int num_cameras = 0;              // >= 1
+};
+
+struct JobResourceEstimate {
+  double cell_size_m = 0.0;   // h [m]
+  int64_t grid_nodes = 0;     // nodes of the grid over the mesh's bounds (>= simulated nodes)
+  int64_t steps_per_run = 0;  // simulation steps of one forward run over the fitted frames
+  int concurrent_starts = 0;  // starts that run at once
+  double memory_bytes = 0.0;  // peak estimate over the concurrent starts [B]
+};
+
+struct JobResourceLimits {
+  // Largest accepted memory estimate of one job [B]; default 4 GiB.
+  double max_memory_bytes = 4.0 * (1ull << 30);
+  // Cores a job gets when its config leaves "threads" at 0; bounds its concurrent starts.
+  int cores = 1;
+
+  Status Validate() const;
+};
+
+// The estimate for `config` on a capture of `extent`, or InvalidArgument naming the field when the
+// config does not fit the capture (frames past its end) or the job exceeds `limits`:
+//   frames.last = 100: the capture has 60 frames (0-59)
+//   cells = 300: the job would need about 41 GiB of memory (grid 301 x 301 x 108 nodes, 960
+//   steps per run); at most 4 GiB is accepted: use fewer cells, substeps or frames
+// "auto" substeps count as their largest candidate (SubstepSelectionOptions::max_substeps).
+Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
+                                                 const CaptureExtent& extent,
+                                                 const JobResourceLimits& limits);
+
+}  // namespace softid::inverse

@@ -1,0 +1,84 @@
+#include "core/inverse/job_resources.h"
+
+#include <gtest/gtest.h>
+
+#include <string>
+
+namespace softid::inverse {
+namespace {
+
+// A 28 x 28 x 10 cm object seen in 61 frames by one camera.
+CaptureExtent TorusSized() {
+  CaptureExtent extent;
+  extent.mesh_bounds =
+      Eigen::AlignedBox3d(Eigen::Vector3d(-0.14, -0.14, 0.0), Eigen::Vector3d(0.14, 0.14, 0.1));
+  extent.num_frames = 61;
+  extent.num_cameras = 1;
+  return extent;
+}
+
+void ExpectRefused(const Result<JobResourceEstimate>& estimate, const std::string& part) {
+  ASSERT_FALSE(estimate.ok());
+  EXPECT_EQ(estimate.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(estimate.status().message().find(part), std::string::npos)
+      << estimate.status().message();
+}
+
+TEST(JobResources, DefaultConfigFitsWithRoom) {
+  JobResourceLimits limits;
+  limits.cores = 2;
+  const Result<JobResourceEstimate> estimate = EstimateJobResources({}, TorusSized(), limits);
+  ASSERT_TRUE(estimate.ok()) << estimate.status().ToString();
+  EXPECT_DOUBLE_EQ(estimate->cell_size_m, 0.28 / 16);
+  EXPECT_EQ(estimate->grid_nodes, 17 * 17 * 7);
+  EXPECT_EQ(estimate->steps_per_run, 60 * 16);  // "auto": its largest candidate
+  EXPECT_EQ(estimate->concurrent_starts, 2);
+  EXPECT_LT(estimate->memory_bytes, 0.25 * limits.max_memory_bytes);
+}
+
+// The configs an attacker or an unlucky user sent: each refused, naming the key.
+TEST(JobResources, OversizedConfigsAreRefusedNamingTheKey) {
+  const JobResourceLimits limits;
+  JobConfig cells;
+  cells.cells = 300;
+  ExpectRefused(EstimateJobResources(cells, TorusSized(), limits), "cells = 300: the job would");
+  cells.cells = 100000;
+  ExpectRefused(EstimateJobResources(cells, TorusSized(), limits), "at most 4 GiB is accepted");
+  JobConfig substeps;
+  substeps.substeps = 20000;
+  ExpectRefused(EstimateJobResources(substeps, TorusSized(), limits), "substeps = 20000");
+  JobConfig cell_size;
+  cell_size.cell_size = 1e-9;
+  ExpectRefused(EstimateJobResources(cell_size, TorusSized(), limits), "cell_size = 1e-09");
+}
+
+TEST(JobResources, FramesMustLieInTheCapture) {
+  const JobResourceLimits limits;
+  JobConfig last;
+  last.frames.last = 61;
+  ExpectRefused(EstimateJobResources(last, TorusSized(), limits),
+                "frames.last = 61: the capture has 61 frames (0-60)");
+  JobConfig first;
+  first.frames.first = 70;
+  ExpectRefused(EstimateJobResources(first, TorusSized(), limits), "frames.first = 70");
+  last.frames.last = 60;
+  EXPECT_TRUE(EstimateJobResources(last, TorusSized(), limits).ok());
+}
+
+// Memory grows with the work: more frames or starts at once never make the estimate smaller.
+TEST(JobResources, EstimateGrowsWithFramesAndConcurrentStarts) {
+  JobResourceLimits limits;
+  limits.cores = 1;
+  CaptureExtent longer = TorusSized();
+  longer.num_frames = 121;
+  const double one = EstimateJobResources({}, TorusSized(), limits)->memory_bytes;
+  // Twice the steps: the stored trajectory doubles, the simulator's own memory does not.
+  EXPECT_GT(EstimateJobResources({}, longer, limits)->memory_bytes, 1.5 * one);
+  limits.cores = 4;
+  EXPECT_DOUBLE_EQ(EstimateJobResources({}, TorusSized(), limits)->memory_bytes, 4 * one);
+  limits.max_memory_bytes = 0;
+  EXPECT_FALSE(EstimateJobResources({}, TorusSized(), limits).ok());
+}
+
+}  // namespace
+}  // namespace softid::inverse
