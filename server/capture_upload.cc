@@ -8,6 +8,8 @@
 
 #include "core/capture/capture.h"
 #include "core/common/json_fields.h"
+#include "core/common/untrusted_json.h"
+#include "server/redact_paths.h"
 #include "server/store/resource_id.h"
 
 namespace softid::server {
@@ -20,15 +22,6 @@ std::string InApiTerms(std::string message) {
   if (message.rfind("manifest", 0) == 0) message.replace(0, 8, "files");
   const size_t size = message.find("].size ");
   if (size != std::string::npos) message.replace(size, 7, "].size_bytes ");
-  return message;
-}
-
-// ReadCapture names files by their staging path; the client knows them relative to its capture.
-std::string WithoutPrefix(std::string message, const fs::path& dir) {
-  const std::string prefix = dir.string() + "/";
-  for (size_t at = message.find(prefix); at != std::string::npos; at = message.find(prefix)) {
-    message.erase(at, prefix.size());
-  }
   return message;
 }
 
@@ -49,15 +42,11 @@ ServiceResult<std::unique_ptr<CaptureUpload>> CaptureUpload::Begin(UploadManifes
                                                                    const fs::path& staging_root,
                                                                    const UploadLimits& limits) {
   // capture.json first: a malformed capture is rejected before any frame is sent.
-  nlohmann::json capture_json = nlohmann::json::parse(manifest.capture_json, nullptr,
-                                                      /*allow_exceptions=*/false);
-  if (capture_json.is_discarded()) {
-    return ServiceStatus(
-        ServiceCode::kInvalidArgument,
-        "capture_json: invalid JSON (" + std::to_string(manifest.capture_json.size()) + " bytes)");
-  }
+  Result<nlohmann::json> capture_json =
+      json::ParseUntrustedJson(manifest.capture_json, "capture_json", capture::kCaptureJsonLimits);
+  if (!capture_json.ok()) return capture_json.status();
   Result<capture::Capture> capture =
-      capture::CaptureFromJson(capture_json, capture::kCaptureFileName);
+      capture::CaptureFromJson(*capture_json, capture::kCaptureFileName);
   if (!capture.ok()) return capture.status();
 
   if (static_cast<int64_t>(manifest.files.size()) > limits.max_files) {
@@ -105,7 +94,7 @@ ServiceResult<std::unique_ptr<CaptureUpload>> CaptureUpload::Begin(UploadManifes
   fs::create_directories(dir, error);
   if (error) {
     return ServiceStatus(ServiceCode::kInternal,
-                         "cannot create staging folder " + dir.string() + ": " + error.message());
+                         "cannot create a staging folder: " + error.message());
   }
   std::unique_ptr<CaptureUpload> upload(new CaptureUpload(std::move(manifest), dir, limits));
   // capture.json is staged at once; empty files are complete without a chunk.
@@ -113,8 +102,7 @@ ServiceResult<std::unique_ptr<CaptureUpload>> CaptureUpload::Begin(UploadManifes
     std::ofstream out(dir / capture::kCaptureFileName, std::ios::binary);
     out << upload->manifest_.capture_json;
     if (!out.flush()) {
-      return ServiceStatus(ServiceCode::kInternal,
-                           "cannot write " + dir.string() + "/capture.json");
+      return ServiceStatus(ServiceCode::kInternal, "cannot stage capture.json");
     }
   }
   for (const store::ManifestEntry& entry : upload->manifest_.files) {
@@ -166,7 +154,7 @@ ServiceStatus CaptureUpload::AddChunk(const std::string& path, int64_t offset_by
     fs::create_directories(target.parent_path(), error);
     file.out.open(target, std::ios::binary | std::ios::trunc);
     if (error || !file.out) {
-      return ServiceStatus(ServiceCode::kInternal, "cannot stage " + target.string());
+      return ServiceStatus(ServiceCode::kInternal, "cannot stage \"" + path + "\"");
     }
   }
   file.out.write(data.data(), size);
@@ -178,8 +166,14 @@ ServiceStatus CaptureUpload::AddChunk(const std::string& path, int64_t offset_by
 }
 
 ServiceStatus CaptureUpload::CompleteFile(const std::string& path, FileState& file) {
-  if (file.declared_size == 0) {
-    std::ofstream touch(staging_dir_ / path, std::ios::binary);  // ReadCapture will reject it
+  if (file.declared_size == 0) {  // ReadCapture will reject it, naming the file
+    const fs::path target = staging_dir_ / path;
+    std::error_code error;
+    fs::create_directories(target.parent_path(), error);
+    std::ofstream touch(target, std::ios::binary);
+    if (error || !touch) {
+      return ServiceStatus(ServiceCode::kInternal, "cannot stage \"" + path + "\"");
+    }
   }
   if (file.out.is_open()) {
     file.out.close();
@@ -208,7 +202,7 @@ ServiceResult<std::vector<store::ManifestEntry>> CaptureUpload::Finish() {
     // NotFound from ReadCapture would mean a staged file vanished: still the upload's fault only
     // if a listed file is missing, which Begin ruled out, so report it as invalid content.
     return ServiceStatus(ServiceCode::kInvalidArgument,
-                         WithoutPrefix(capture.status().message(), staging_dir_));
+                         RedactPath(capture.status().message(), staging_dir_));
   }
   std::vector<store::ManifestEntry> stored;
   stored.push_back({std::string(capture::kCaptureFileName),

@@ -4,6 +4,12 @@
 // while they stream.
 #pragma once
 
+#include <spdlog/logger.h>
+
+#include <filesystem>
+#include <memory>
+#include <string_view>
+
 #include "server/job_service.h"
 #include "softid/v1/softid.grpc.pb.h"
 
@@ -11,8 +17,10 @@ namespace softid::server {
 
 class GrpcReconstructionService final : public v1::Reconstruction::Service {
  public:
-  // `service` must outlive this object.
-  explicit GrpcReconstructionService(JobService* service) : service_(service) {}
+  // `service` must outlive this object. Error texts sent to clients have `data_dir` (the
+  // server's data directory) removed; every refused call is logged with its full reason.
+  GrpcReconstructionService(JobService* service, std::filesystem::path data_dir,
+                            std::shared_ptr<spdlog::logger> logger);
 
   grpc::Status UploadCapture(grpc::ServerContext* context,
                              grpc::ServerReader<v1::UploadCaptureRequest>* reader,
@@ -33,7 +41,12 @@ class GrpcReconstructionService final : public v1::Reconstruction::Service {
                          v1::Result* response) override;
 
  private:
+  // The gRPC status of `status` for `method`, redacted and logged when it is not OK.
+  grpc::Status Reply(std::string_view method, const ServiceStatus& status) const;
+
   JobService* service_;
+  std::filesystem::path data_dir_;
+  std::shared_ptr<spdlog::logger> logger_;
 };
 
 }  // namespace softid::server

@@ -13,6 +13,7 @@
 #include "core/inverse/fit.h"
 #include "core/inverse/job_config.h"
 #include "server/materialize_capture.h"
+#include "server/redact_paths.h"
 
 namespace softid::server {
 namespace {
@@ -76,10 +77,13 @@ nlohmann::json FittedParametersJson(const inverse::JobConfig& config,
   return out;
 }
 
-// Records a failure; the job's error is what a user sees, so it says what went wrong.
+// Records a failure; the job's error is what a user sees, so it says what went wrong, naming
+// files relative to the capture (the server's folders stay in the log).
 JobOutcome Fail(const store::Job& job, const JobRunnerContext& context, const std::string& error) {
   context.logger->warn("job {}: FAILED: {}", job.id, error);
-  if (Status failed = context.jobs->FailJob(job.id, error); !failed.ok()) {
+  const std::string shown =
+      RedactPath(RedactPath(error, context.work_root / job.id), context.work_root, "<work>/");
+  if (Status failed = context.jobs->FailJob(job.id, shown); !failed.ok()) {
     context.logger->error("job {}: cannot record the failure: {}", job.id, failed.message());
   }
   context.events->Notify(job.id);

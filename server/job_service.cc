@@ -4,10 +4,16 @@
 
 #include <fstream>
 
+#include "core/common/untrusted_json.h"
 #include "core/inverse/job_config.h"
+#include "server/capture_extent.h"
+#include "server/store/resource_id.h"
 
 namespace softid::server {
 namespace {
+
+// A job config is a few hundred bytes; a stiffness field may list a few thousand values.
+constexpr json::UntrustedJsonLimits kConfigJsonLimits{.max_bytes = 1u << 20, .max_depth = 16};
 
 // The store reports a request_id reused with other arguments as FailedPrecondition whose message
 // starts with the key (job_store.h: the API layer reports it as ALREADY_EXISTS).
@@ -31,6 +37,7 @@ JobService::JobService(store::JobStore* jobs, const store::BlobStore* blobs, Job
 
 ServiceResult<std::unique_ptr<CaptureUpload>> JobService::BeginUpload(UploadManifest manifest) {
   if (draining()) return ServiceStatus(ServiceCode::kUnavailable, "the server is shutting down");
+  if (Status valid = store::CheckRequestId(manifest.request_id); !valid.ok()) return valid;
   return CaptureUpload::Begin(std::move(manifest), options_.staging_root, options_.upload_limits);
 }
 
@@ -93,14 +100,18 @@ ServiceResult<store::Job> JobService::CreateJob(const std::string& capture_id,
                                                 const std::string& config_json,
                                                 const std::string& request_id) {
   if (draining()) return ServiceStatus(ServiceCode::kUnavailable, "the server is shutting down");
-  const nlohmann::json config = nlohmann::json::parse(config_json.empty() ? "{}" : config_json,
-                                                      nullptr, /*allow_exceptions=*/false);
-  if (config.is_discarded()) {
-    return ServiceStatus(ServiceCode::kInvalidArgument, "config_json: invalid JSON");
-  }
-  if (Result<inverse::JobConfig> parsed = inverse::JobConfigFromJson(config); !parsed.ok()) {
+  if (Status valid = store::CheckRequestId(request_id); !valid.ok()) return valid;
+  Result<nlohmann::json> parsed_json = json::ParseUntrustedJson(
+      config_json.empty() ? "{}" : config_json, "config_json", kConfigJsonLimits);
+  if (!parsed_json.ok()) return parsed_json.status();
+  const nlohmann::json& config = *parsed_json;
+  Result<inverse::JobConfig> parsed = inverse::JobConfigFromJson(config);
+  if (!parsed.ok()) {
     return ServiceStatus(ServiceCode::kInvalidArgument,
                          "config_json: " + parsed.status().message());
+  }
+  if (ServiceStatus fits = CheckJobFitsCapture(*parsed, capture_id, request_id); !fits.ok()) {
+    return fits;
   }
   // The store checks the bound in the transaction that inserts, so concurrent creates cannot
   // overshoot it, and a repeated request_id gets its job back even when the queue is full.
@@ -119,6 +130,29 @@ ServiceResult<store::Job> JobService::CreateJob(const std::string& capture_id,
   events_->Notify(created.id);
   if (options_.on_job_queued) options_.on_job_queued();
   return created;
+}
+
+ServiceStatus JobService::CheckJobFitsCapture(const inverse::JobConfig& config,
+                                              const std::string& capture_id,
+                                              const std::string& request_id) {
+  Result<store::Capture> capture = jobs_->GetCapture(capture_id);
+  if (!capture.ok()) {
+    // A repeated request whose capture was deleted since still gets its job back from the store.
+    if (!request_id.empty() && capture.status().code() == StatusCode::kNotFound) {
+      return ServiceStatus::Ok();
+    }
+    return capture.status();
+  }
+  ServiceResult<inverse::CaptureExtent> extent =
+      ReadCaptureExtent(*capture, *blobs_, options_.scratch_root);
+  if (!extent.ok()) return extent.status();
+  Result<inverse::JobResourceEstimate> estimate =
+      inverse::EstimateJobResources(config, *extent, options_.job_limits);
+  if (!estimate.ok()) {
+    return ServiceStatus(ServiceCode::kInvalidArgument,
+                         "config_json: " + estimate.status().message());
+  }
+  return ServiceStatus::Ok();
 }
 
 ServiceResult<store::Job> JobService::GetJob(const std::string& job_id) {

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "core/inverse/job_resources.h"
 #include "server/capture_upload.h"
 #include "server/job_events.h"
 #include "server/service_status.h"
@@ -37,6 +38,10 @@ struct JobServiceOptions {
   std::chrono::milliseconds watch_poll_interval{1000};
   // Called after a job was queued (wakes an idle worker); may be empty.
   std::function<void()> on_job_queued;
+  // CreateJob reads the capture's size here (scratch, inside the data directory) and refuses a
+  // job whose estimated needs exceed `job_limits` (inverse::EstimateJobResources).
+  std::filesystem::path scratch_root;
+  inverse::JobResourceLimits job_limits;
 };
 
 // What GetResult returns.
@@ -57,7 +62,9 @@ class JobService {
   ServiceResult<std::unique_ptr<CaptureUpload>> BeginUpload(UploadManifest manifest);
   ServiceResult<store::Capture> FinishUpload(CaptureUpload& upload);
 
-  // `config_json` empty means "{}". InvalidArgument "config_json: <field> = <value>: <reason>";
+  // `config_json` empty means "{}". InvalidArgument "config_json: <field> = <value>: <reason>",
+  // also for a config that does not fit the capture (frames past its end) or would exceed the
+  // job limits ("config_json: cells = 300: the job would need about 41 GiB ...");
   // NotFound for an unknown capture; ResourceExhausted when the queue is full; Unavailable while
   // draining; AlreadyExists for a request_id used before with other arguments.
   ServiceResult<store::Job> CreateJob(const std::string& capture_id, const std::string& config_json,
@@ -81,6 +88,9 @@ class JobService {
   bool draining() const { return draining_.load(); }
 
  private:
+  // OK when `config` fits the capture's frames and the job limits (see CreateJob).
+  ServiceStatus CheckJobFitsCapture(const inverse::JobConfig& config, const std::string& capture_id,
+                                    const std::string& request_id);
   // After a failed upload: deletes those of `sha256s` that no capture refers to.
   void RemoveUnreferencedBlobs(const std::vector<std::string>& sha256s);
 

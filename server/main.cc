@@ -3,6 +3,7 @@
 #include <pthread.h>
 #include <signal.h>
 #include <spdlog/spdlog.h>
+#include <sys/stat.h>
 
 #include <CLI/CLI.hpp>
 #include <cstdlib>
@@ -79,6 +80,12 @@ int main(int argc, char** argv) {
       ->envname("SOFTID_MAX_ATTEMPTS")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  double max_job_memory_gib = options.max_job_memory_bytes / (1ull << 30);
+  app.add_option("--max-job-memory-gib", max_job_memory_gib,
+                 "jobs whose estimated memory exceeds this many GiB are refused at CreateJob")
+      ->envname("SOFTID_MAX_JOB_MEMORY_GIB")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--port-file", port_file,
                  "once listening, write the bound port here (for --listen host:0)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
@@ -90,6 +97,9 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? kExitOk : kExitInvalidInput;
   }
   options.data_dir = data_dir;
+  // Files of the data directory (database, blobs) are private to the server's user.
+  ::umask(077);
+  options.max_job_memory_bytes = max_job_memory_gib * (1ull << 30);
   spdlog::set_level(spdlog::level::from_str(log_level));
 
   // Block the shutdown signals in this thread and every thread it starts (gRPC's and the

@@ -8,8 +8,10 @@
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <mutex>
 #include <system_error>
+#include <thread>
 
 #include "server/grpc_reconstruction_service.h"
 #include "server/job_events.h"
@@ -29,6 +31,24 @@ Status ResetFolder(const fs::path& dir) {
   if (!error) fs::create_directories(dir, error);
   if (error) return Status::IoError("cannot prepare " + dir.string() + ": " + error.message());
   return Status::Ok();
+}
+
+// Blobs no capture lists: left by an upload killed between its blob puts and its commit. At
+// start no upload of this process runs; the data directory has one owner (single node).
+void RemoveOrphanBlobs(store::JobStore& jobs, const store::BlobStore& blobs,
+                       const std::shared_ptr<spdlog::logger>& log) {
+  Result<std::vector<std::string>> hashes = blobs.List();
+  if (!hashes.ok()) {
+    log->warn("orphan blob sweep skipped: {}", hashes.status().message());
+    return;
+  }
+  int removed = 0;
+  for (const std::string& sha256 : *hashes) {
+    Result<bool> referenced = jobs.IsBlobReferenced(sha256);
+    if (!referenced.ok() || *referenced) continue;
+    if (blobs.Remove(sha256).ok()) ++removed;
+  }
+  if (removed > 0) log->info("removed {} blob(s) that no capture refers to", removed);
 }
 
 std::string HostName() {
@@ -53,6 +73,10 @@ Status ServerOptions::Validate() const {
   if (max_attempts < 1) {
     return Status::InvalidArgument("max_attempts = " + std::to_string(max_attempts) +
                                    ": must be at least 1");
+  }
+  if (!(max_job_memory_bytes > 0.0)) {
+    return Status::InvalidArgument("max_job_memory = " + std::to_string(max_job_memory_bytes) +
+                                   " bytes: must be positive");
   }
   if (heartbeat_interval.count() <= 0 || lease <= heartbeat_interval) {
     return Status::InvalidArgument("lease = " + std::to_string(lease.count()) +
@@ -92,6 +116,13 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
     return Status::IoError("cannot create data directory " + options.data_dir.string() + ": " +
                            error.message());
   }
+  // The database and uploads are the stations' data: readable by this user only, whatever the
+  // umask (main sets 077 for the files created later).
+  fs::permissions(options.data_dir, fs::perms::owner_all, fs::perm_options::replace, error);
+  if (error) {
+    log->warn("cannot restrict the data directory's permissions: {}", error.message());
+    error.clear();
+  }
   const fs::path staging = options.data_dir / "uploads";
   const fs::path work = options.data_dir / "work";
   SOFTID_RETURN_IF_ERROR(ResetFolder(staging));
@@ -113,6 +144,8 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
               recovered.num_cancelled);
   }
 
+  RemoveOrphanBlobs(*parts->jobs, *parts->blobs, log);
+
   WorkerPoolOptions pool_options;
   pool_options.num_workers = options.num_workers;
   pool_options.lease = options.lease;
@@ -127,15 +160,28 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   service_options.max_queued_jobs = options.max_queued_jobs;
   service_options.upload_limits = options.upload_limits;
   service_options.staging_root = staging;
+  service_options.scratch_root = work;
+  service_options.job_limits.max_memory_bytes = options.max_job_memory_bytes;
+  const int cores = static_cast<int>(std::thread::hardware_concurrency());
+  service_options.job_limits.cores = std::max(1, cores / std::max(1, options.num_workers));
+  if (options.num_workers == 0) {
+    log->warn(
+        "--workers 0: this process runs no jobs; they stay QUEUED until a server with "
+        "workers serves this data directory");
+  }
   WorkerPool* pool = parts->pool.get();
   service_options.on_job_queued = [pool] { pool->Wake(); };
   parts->service = std::make_unique<JobService>(parts->jobs.get(), &*parts->blobs, &parts->events,
                                                 service_options, parts->logger);
-  parts->grpc_service = std::make_unique<GrpcReconstructionService>(parts->service.get());
+  parts->grpc_service = std::make_unique<GrpcReconstructionService>(
+      parts->service.get(), options.data_dir, parts->logger);
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
   grpc::ServerBuilder builder;
+  // Without SO_REUSEPORT: gRPC otherwise opens a second listener per port, which for port 0 gets
+  // a port of its own that nobody is told about, and another process could bind ours.
+  builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
   builder.AddListeningPort(options.listen_address, grpc::InsecureServerCredentials(), &parts->port);
   builder.RegisterService(parts->grpc_service.get());
   parts->grpc_server = builder.BuildAndStart();

@@ -36,6 +36,8 @@ struct ServerOptions {
   // Shutdown gives open RPCs (watches, uploads) this long before cancelling them.
   std::chrono::milliseconds shutdown_grace{3000};
   UploadLimits upload_limits;
+  // CreateJob refuses a job whose estimated memory exceeds this (inverse::JobResourceLimits).
+  double max_job_memory_bytes = 4.0 * (1ull << 30);  // > 0
 
   // InvalidArgument naming the field and value.
   Status Validate() const;

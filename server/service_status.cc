@@ -25,6 +25,7 @@ ServiceStatus::ServiceStatus(const Status& status) : message_(status.message()) 
     case StatusCode::kFailedPrecondition: code_ = ServiceCode::kFailedPrecondition; break;
     case StatusCode::kIoError:
     case StatusCode::kInternal: code_ = ServiceCode::kInternal; break;
+    case StatusCode::kCancelled: code_ = ServiceCode::kCancelled; break;
   }
 }
 

@@ -56,6 +56,13 @@ void WorkerPool::Stop() {
 }
 
 void WorkerPool::RecordCrash(const std::string& job_id, const std::string& error) {
+  // A job whose cancel was asked for ends CANCELLED however its fit stopped.
+  if (Result<bool> requested = jobs_->IsCancelRequested(job_id); requested.ok() && *requested) {
+    if (Status marked = jobs_->MarkCancelled(job_id); marked.ok()) {
+      context_.events->Notify(job_id);
+      return;
+    }
+  }
   if (Status failed = jobs_->FailJob(job_id, error); !failed.ok()) {
     context_.logger->error("job {}: cannot record the failure: {}", job_id, failed.message());
   }

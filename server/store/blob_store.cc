@@ -273,6 +273,22 @@ Status BlobStore::Remove(std::string_view sha256) const {
   return Status::Ok();
 }
 
+Result<std::vector<std::string>> BlobStore::List() const {
+  std::vector<std::string> hashes;
+  std::error_code error;
+  for (const fs::directory_entry& shard : fs::directory_iterator(blobs_dir_, error)) {
+    const std::string prefix = shard.path().filename().string();
+    if (prefix.size() != 2 || !shard.is_directory(error)) continue;  // tmp/ and strays
+    for (const fs::directory_entry& blob : fs::directory_iterator(shard.path(), error)) {
+      const std::string name = blob.path().filename().string();
+      if (Sha256::IsValidHex(name) && name.compare(0, 2, prefix) == 0) hashes.push_back(name);
+    }
+    if (error) break;
+  }
+  if (error) return Status::IoError("blobs: cannot list: " + error.message());
+  return hashes;
+}
+
 Status BlobStore::Verify(std::string_view sha256) const {
   SOFTID_ASSIGN_OR_RETURN(std::ifstream in, OpenBlob(sha256));
   Sha256 hasher;

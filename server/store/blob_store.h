@@ -20,6 +20,7 @@
 #include <istream>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "core/common/status.h"
 #include "server/store/sha256.h"
@@ -102,6 +103,8 @@ class BlobStore {
   // Deletes a blob; absent is fine. The caller makes sure nothing refers to it any more
   // (JobStore::IsBlobReferenced) and that no put of the same bytes is under way.
   Status Remove(std::string_view sha256) const;
+  // The hashes of every stored blob (temporary files excluded), in no particular order.
+  Result<std::vector<std::string>> List() const;
   // Re-hashes a stored blob: IoError naming both hashes if the file no longer matches its name.
   Status Verify(std::string_view sha256) const;
 

@@ -29,6 +29,34 @@ bool IsSafeRelativePath(std::string_view path) {
   return true;
 }
 
+// What a file system holds per name and per path; longer names would fail only when staged.
+constexpr size_t kMaxSegmentBytes = 255;
+constexpr size_t kMaxPathBytes = 1024;
+
+// Why `path` cannot be a file of a capture, or "" when it can.
+std::string PathProblem(std::string_view path) {
+  if (!IsSafeRelativePath(path)) {
+    return "must be a relative '/'-separated path without '.' or '..' segments";
+  }
+  for (const char c : path) {
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
+      return "must not contain control characters (newline, tab, ...)";
+    }
+  }
+  if (path.size() > kMaxPathBytes) {
+    return "must be at most " + std::to_string(kMaxPathBytes) + " bytes long";
+  }
+  size_t start = 0;
+  while (start < path.size()) {
+    const size_t end = std::min(path.find('/', start), path.size());
+    if (end - start > kMaxSegmentBytes) {
+      return "each name in it must be at most " + std::to_string(kMaxSegmentBytes) + " bytes long";
+    }
+    start = end + 1;
+  }
+  return "";
+}
+
 }  // namespace
 
 Status ValidateManifest(const std::vector<ManifestEntry>& manifest) {
@@ -38,9 +66,8 @@ Status ValidateManifest(const std::vector<ManifestEntry>& manifest) {
   std::set<std::string_view> paths;
   for (size_t i = 0; i < manifest.size(); ++i) {
     const ManifestEntry& entry = manifest[i];
-    if (!IsSafeRelativePath(entry.path)) {
-      return json::Invalid(EntryField(i, "path"), entry.path,
-                           "must be a relative '/'-separated path without '.' or '..' segments");
+    if (const std::string problem = PathProblem(entry.path); !problem.empty()) {
+      return json::Invalid(EntryField(i, "path"), entry.path, problem);
     }
     if (!paths.insert(entry.path).second) {
       return json::Invalid(EntryField(i, "path"), entry.path, "appears twice in the manifest");
@@ -51,6 +78,18 @@ Status ValidateManifest(const std::vector<ManifestEntry>& manifest) {
     }
     if (entry.size_bytes < 0) {
       return json::Invalid(EntryField(i, "size"), entry.size_bytes, "must be non-negative");
+    }
+  }
+  // A name cannot be a file and a folder at once ("a" and "a/b").
+  for (size_t i = 0; i < manifest.size(); ++i) {
+    const std::string_view path = manifest[i].path;
+    for (size_t slash = path.find('/'); slash != std::string_view::npos;
+         slash = path.find('/', slash + 1)) {
+      if (paths.contains(path.substr(0, slash))) {
+        return json::Invalid(EntryField(i, "path"), manifest[i].path,
+                             "lies in a folder named like the file \"" +
+                                 std::string(path.substr(0, slash)) + "\" of the manifest");
+      }
     }
   }
   return Status::Ok();

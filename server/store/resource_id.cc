@@ -3,6 +3,8 @@
 #include <cstdint>
 #include <random>
 
+#include "core/common/json_fields.h"
+
 namespace softid::server::store {
 
 std::string NewResourceId(std::string_view prefix) {
@@ -26,6 +28,20 @@ Status CheckResourceId(std::string_view id, std::string_view prefix, std::string
   return Status::InvalidArgument(std::string(what) + " = '" + std::string(id.substr(0, 80)) +
                                  "': must be '" + std::string(prefix) +
                                  "' and 16 lowercase hex digits");
+}
+
+Status CheckRequestId(std::string_view request_id) {
+  if (request_id.size() > kMaxRequestIdLength) {
+    return json::Invalid("request_id", std::string(request_id),
+                         "must be at most " + std::to_string(kMaxRequestIdLength) + " characters");
+  }
+  for (const char c : request_id) {
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) {
+      return json::Invalid("request_id", std::string(request_id),
+                           "must not contain control characters");
+    }
+  }
+  return Status::Ok();
 }
 
 }  // namespace softid::server::store

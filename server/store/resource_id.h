@@ -22,4 +22,11 @@ std::string NewResourceId(std::string_view prefix);
 // input, not as an unknown resource.
 Status CheckResourceId(std::string_view id, std::string_view prefix, std::string_view what);
 
+// Longest idempotency key a client may send (the proto documents it).
+inline constexpr size_t kMaxRequestIdLength = 128;
+
+// InvalidArgument naming "request_id" unless it is at most kMaxRequestIdLength bytes without
+// control characters (an empty request_id means none and is valid).
+Status CheckRequestId(std::string_view request_id);
+
 }  // namespace softid::server::store

@@ -12,7 +12,6 @@ namespace softid::server::store {
 namespace {
 
 // Long enough for a UUID or any reasonable client key, short enough to keep the index small.
-constexpr size_t kMaxRequestIdLength = 256;
 
 constexpr std::string_view kJobColumns =
     "id, request_id, capture_id, config, state, cancel_requested, attempts, error, created_at, "
@@ -93,14 +92,6 @@ Result<ProgressEvent> ReadProgress(const SqliteStatement& row) {
 
 Status CheckJobId(const std::string& job_id) {
   return CheckResourceId(job_id, kJobIdPrefix, "job id");
-}
-
-Status CheckRequestId(const std::string& request_id) {
-  if (request_id.size() > kMaxRequestIdLength) {
-    return json::Invalid("request_id", request_id,
-                         "must be at most " + std::to_string(kMaxRequestIdLength) + " characters");
-  }
-  return Status::Ok();
 }
 
 Status CheckLease(std::chrono::milliseconds lease) {
@@ -519,9 +510,9 @@ Result<std::optional<Job>> SqliteJobStore::ClaimNextJob(const std::string& worke
     SOFTID_ASSIGN_OR_RETURN(Job job, ReadJob(stmt));
     SOFTID_ASSIGN_OR_RETURN(const bool more, stmt.Step());  // runs the statement to completion
     if (more) return Status::Internal("claim updated more than one job");
+    // The worker's id (host and process) stays in the server's log: progress is shown to clients.
     SOFTID_RETURN_IF_ERROR(
-        AppendStateEvent(
-            job, "claimed by " + worker_id + " (attempt " + std::to_string(job.attempts) + ")", now)
+        AppendStateEvent(job, "started (attempt " + std::to_string(job.attempts) + ")", now)
             .status());
     return std::optional<Job>(std::move(job));
   });

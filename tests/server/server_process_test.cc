@@ -18,6 +18,7 @@
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <set>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -55,6 +56,32 @@ std::string ReadFile(const fs::path& path) {
   std::stringstream text;
   text << in.rdbuf();
   return text.str();
+}
+
+// Listening TCP sockets of process `pid`: its socket inodes matched against the kernel's tables.
+int CountListeningSockets(pid_t pid) {
+  std::set<std::string> inodes;
+  for (const auto& fd : fs::directory_iterator("/proc/" + std::to_string(pid) + "/fd")) {
+    std::error_code error;
+    const std::string target = fs::read_symlink(fd.path(), error).string();
+    if (!error && target.rfind("socket:[", 0) == 0) {
+      inodes.insert(target.substr(8, target.size() - 9));
+    }
+  }
+  int listening = 0;
+  for (const char* table : {"/proc/net/tcp", "/proc/net/tcp6"}) {
+    std::ifstream in(table);
+    std::string line;
+    std::getline(in, line);  // header
+    while (std::getline(in, line)) {
+      std::istringstream fields(line);
+      std::string sl, local, remote, state, queues, timer, retransmits, uid, timeout, inode;
+      fields >> sl >> local >> remote >> state >> queues >> timer >> retransmits >> uid >>
+          timeout >> inode;
+      if (state == "0A" && inodes.contains(inode)) ++listening;  // 0A: TCP_LISTEN
+    }
+  }
+  return listening;
 }
 
 // One softid-server process on a free port, its output in a log file. Killed (SIGKILL) on
@@ -152,6 +179,7 @@ class ServerProcess {
   }
 
   void Signal(int signal) { ::kill(pid_, signal); }
+  pid_t pid() const { return pid_; }
 
   // The exit status (or 128 + signal), or nullopt if it still runs after `timeout`.
   std::optional<int> Wait(std::chrono::milliseconds timeout) {
@@ -624,6 +652,47 @@ TEST_F(ServerProcessTest, FailedUploadLeavesNoOrphanedBlobs) {
   const grpc::Status fresh = client.UploadCapture(files, "take-2", &capture);
   ASSERT_TRUE(fresh.ok()) << fresh.error_message();
   EXPECT_EQ(CountBlobs(data_dir()), stored + 1);
+  StopCleanly(*server);
+}
+
+// --listen localhost:0 opens exactly the port it writes; the data directory and its files are
+// private to the server's user; blobs that no capture lists (an upload killed between storing its
+// blobs and committing) are removed at the next start, while a capture's blobs stay.
+TEST_F(ServerProcessTest, OneListenerPrivateFilesAndOrphanBlobsSweptAtStart) {
+  std::string capture_id;
+  {
+    std::unique_ptr<ServerProcess> server = Start({});
+    ASSERT_NE(server, nullptr);
+    EXPECT_EQ(CountListeningSockets(server->pid()), 1);
+    ReconstructionClient client = server->Client();
+    capture_id = Upload(client);
+    ASSERT_FALSE(capture_id.empty());
+    StopCleanly(*server);
+  }
+  EXPECT_EQ(fs::status(data_dir()).permissions() & fs::perms::all, fs::perms::owner_all);
+  EXPECT_EQ(fs::status(data_dir() / "softid.db").permissions() &
+                (fs::perms::group_all | fs::perms::others_all),
+            fs::perms::none);
+  int stored = 0;
+  for (const auto& entry : fs::recursive_directory_iterator(data_dir() / "blobs")) {
+    if (entry.is_regular_file() && entry.path().parent_path().filename() != "tmp") ++stored;
+  }
+  ASSERT_GT(stored, 0);
+  const std::string orphan(64, 'a');
+  fs::create_directories(data_dir() / "blobs" / "aa");
+  std::ofstream(data_dir() / "blobs" / "aa" / orphan) << "left by a killed upload";
+
+  std::unique_ptr<ServerProcess> server = Start({});
+  ASSERT_NE(server, nullptr);
+  EXPECT_FALSE(fs::exists(data_dir() / "blobs" / "aa" / orphan));
+  int kept = 0;
+  for (const auto& entry : fs::recursive_directory_iterator(data_dir() / "blobs")) {
+    if (entry.is_regular_file() && entry.path().parent_path().filename() != "tmp") ++kept;
+  }
+  EXPECT_EQ(kept, stored);
+  ReconstructionClient client = server->Client();
+  v1::Job job;
+  EXPECT_TRUE(Create(client, capture_id, FitConfig(1), "", &job).ok());
   StopCleanly(*server);
 }
 

@@ -1,0 +1,250 @@
+// The job service without a transport: real SQLite store and blob files in a temporary data
+// directory, uploads fed chunk by chunk, jobs created from them. Covers what a client can send
+// wrong: every mistake is INVALID_ARGUMENT naming the field or file, never INTERNAL, and no reply
+// shows where the server keeps its files.
+#include "server/job_service.h"
+
+#include <gtest/gtest.h>
+#include <spdlog/spdlog.h>
+
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include "server/store/blob_store.h"
+#include "server/store/sha256.h"
+#include "server/store/sqlite_job_store.h"
+#include "tests/core/inverse/inverse_test_util.h"
+#include "tests/server/temp_dir.h"
+
+namespace softid::server {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string ReadBytes(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::ostringstream bytes;
+  bytes << in.rdbuf();
+  return bytes.str();
+}
+
+// A capture as a client sends it: capture.json's text plus files by path.
+struct UploadFiles {
+  nlohmann::json capture_json;
+  std::map<std::string, std::string> files;  // path -> bytes
+};
+
+class JobServiceTest : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    spdlog::set_level(spdlog::level::warn);
+    capture_ = new inverse::testing::SmallCapture(
+        inverse::testing::MakeSmallCapture("torus-drop", /*duration=*/0.1, /*cameras=*/1));
+  }
+  static void TearDownTestSuite() {
+    delete capture_;
+    capture_ = nullptr;
+  }
+
+  void SetUp() override {
+    ASSERT_TRUE(capture_->ok) << capture_->error;
+    Result<std::unique_ptr<store::SqliteJobStore>> jobs =
+        store::SqliteJobStore::Open(data_.path() / "softid.db");
+    ASSERT_TRUE(jobs.ok()) << jobs.status().ToString();
+    jobs_ = std::move(*jobs);
+    Result<store::BlobStore> blobs = store::BlobStore::Open(data_.path());
+    ASSERT_TRUE(blobs.ok()) << blobs.status().ToString();
+    blobs_.emplace(std::move(*blobs));
+    fs::create_directories(data_.path() / "uploads");
+    fs::create_directories(data_.path() / "work");
+    JobServiceOptions options;
+    options.staging_root = data_.path() / "uploads";
+    options.scratch_root = data_.path() / "work";
+    options.job_limits.cores = 2;
+    service_ = std::make_unique<JobService>(jobs_.get(), &*blobs_, &events_, options);
+  }
+
+  // The small capture's files as they lie on disk.
+  UploadFiles SmallCaptureFiles() const {
+    UploadFiles out;
+    out.capture_json = nlohmann::json::parse(ReadBytes(capture_->directory / "capture.json"));
+    out.files[out.capture_json["mesh"]] =
+        ReadBytes(capture_->directory / out.capture_json["mesh"].get<std::string>());
+    for (const auto& frame : out.capture_json["cameras"][0]["frames"]) {
+      out.files[frame] = ReadBytes(capture_->directory / frame.get<std::string>());
+    }
+    return out;
+  }
+
+  // Begin, every file in one chunk, Finish and store: the first error on the way, or the capture.
+  ServiceResult<store::Capture> Upload(const UploadFiles& upload,
+                                       const std::string& request_id = "") {
+    UploadManifest manifest;
+    manifest.request_id = request_id;
+    manifest.capture_json = upload.capture_json.dump();
+    for (const auto& [path, bytes] : upload.files) {
+      manifest.files.push_back(
+          {path, store::Sha256::Hex(bytes), static_cast<int64_t>(bytes.size())});
+    }
+    ServiceResult<std::unique_ptr<CaptureUpload>> begun = service_->BeginUpload(manifest);
+    if (!begun.ok()) return begun.status();
+    for (const auto& [path, bytes] : upload.files) {
+      if (bytes.empty()) continue;
+      if (ServiceStatus added = (*begun)->AddChunk(path, 0, bytes); !added.ok()) return added;
+    }
+    return service_->FinishUpload(**begun);
+  }
+
+  // Expects INVALID_ARGUMENT whose message contains `needle` and no server path.
+  void ExpectInvalid(const ServiceStatus& status, const std::string& needle) {
+    EXPECT_EQ(status.code(), ServiceCode::kInvalidArgument) << status.ToString();
+    EXPECT_NE(status.message().find(needle), std::string::npos) << status.message();
+    EXPECT_EQ(status.message().find(data_.path().string()), std::string::npos) << status.message();
+  }
+
+  static inverse::testing::SmallCapture* capture_;
+  store::testing::TempDir data_;
+  std::unique_ptr<store::SqliteJobStore> jobs_;
+  std::optional<store::BlobStore> blobs_;
+  JobEvents events_;
+  std::unique_ptr<JobService> service_;
+};
+
+inverse::testing::SmallCapture* JobServiceTest::capture_ = nullptr;
+
+// 100,000 nested arrays in 200 KB used to overflow the parsing thread's stack and kill the server.
+TEST_F(JobServiceTest, DeeplyNestedJsonIsRefusedNotCrashed) {
+  const std::string deep = std::string(100000, '[') + std::string(100000, ']');
+  Status status;
+  std::thread rpc([&] {
+    ServiceResult<store::Job> job = service_->CreateJob("cap-0123456789abcdef", deep, "");
+    status = job.ok() ? Status::Ok() : Status::InvalidArgument(job.status().message());
+  });
+  rpc.join();
+  EXPECT_NE(status.message().find("config_json: nested deeper than"), std::string::npos)
+      << status.message();
+
+  UploadManifest manifest;
+  manifest.capture_json = "{\"cameras\": " + deep + "}";
+  ExpectInvalid(service_->BeginUpload(manifest).status(), "capture_json: nested deeper than");
+}
+
+TEST_F(JobServiceTest, NanInCaptureJsonNamesTheField) {
+  UploadManifest manifest;
+  std::string text = SmallCaptureFiles().capture_json.dump();
+  const size_t fx = text.find("\"fx\":");
+  ASSERT_NE(fx, std::string::npos);
+  text.insert(fx + 5, "NaN, \"fx_was\":");
+  manifest.capture_json = text;
+  ExpectInvalid(service_->BeginUpload(manifest).status(), "(in cameras[0].fx)");
+}
+
+// Configs that would exhaust memory, or that do not fit the capture, are refused at CreateJob
+// with the field named; an ordinary config is queued.
+TEST_F(JobServiceTest, ResourceBoundsAreCheckedAtCreateJob) {
+  ServiceResult<store::Capture> capture = Upload(SmallCaptureFiles());
+  ASSERT_TRUE(capture.ok()) << capture.status().ToString();
+  const std::string id = capture->id;
+  ExpectInvalid(service_->CreateJob(id, R"({"cells": 300})", "").status(), "cells = 300");
+  ExpectInvalid(service_->CreateJob(id, R"({"cells": 100000})", "").status(), "cells = 100000");
+  ExpectInvalid(service_->CreateJob(id, R"({"substeps": 20000})", "").status(), "substeps = 20000");
+  ExpectInvalid(service_->CreateJob(id, R"({"cell_size": 1e-9})", "").status(),
+                "cell_size = 1e-09");
+  const int frames = capture_->capture.NumFrames();
+  ExpectInvalid(
+      service_->CreateJob(id, nlohmann::json{{"frames", {{"last", frames}}}}.dump(), "").status(),
+      "frames.last = " + std::to_string(frames) + ": the capture has " + std::to_string(frames) +
+          " frames");
+  ExpectInvalid(
+      service_->CreateJob(id, nlohmann::json{{"frames", {{"first", frames + 5}}}}.dump(), "")
+          .status(),
+      "frames.first");
+  const ServiceResult<store::Job> ok = service_->CreateJob(id, R"({"cells": 12})", "");
+  ASSERT_TRUE(ok.ok()) << ok.status().ToString();
+  EXPECT_EQ(ok->state, store::JobState::kQueued);
+}
+
+TEST_F(JobServiceTest, RequestIdIsBounded) {
+  ServiceResult<store::Capture> capture = Upload(SmallCaptureFiles());
+  ASSERT_TRUE(capture.ok()) << capture.status().ToString();
+  ExpectInvalid(service_->CreateJob(capture->id, "{}", std::string(129, 'r')).status(),
+                "request_id");
+  ExpectInvalid(service_->CreateJob(capture->id, "{}", "a\nb").status(), "control characters");
+  EXPECT_TRUE(service_->CreateJob(capture->id, "{}", std::string(128, 'r')).ok());
+  ExpectInvalid(Upload(SmallCaptureFiles(), std::string(200, 'x')).status(), "request_id");
+}
+
+// Mistakes in the file list are the client's: INVALID_ARGUMENT naming the file.
+TEST_F(JobServiceTest, ManifestMistakesAreInvalidArgumentNamingTheFile) {
+  {  // An empty frame in a folder that no other file creates.
+    UploadFiles upload = SmallCaptureFiles();
+    upload.capture_json["cameras"][0]["frames"][0] = "new/empty.png";
+    upload.files["new/empty.png"] = "";
+    ExpectInvalid(Upload(upload).status(), "new/empty.png");
+  }
+  {  // A 304-character file name.
+    UploadFiles upload = SmallCaptureFiles();
+    const std::string name = std::string(300, 'n') + ".png";
+    upload.files[name] = upload.files.begin()->second;
+    upload.capture_json["cameras"][0]["frames"][0] = name;
+    ExpectInvalid(Upload(upload).status(), "at most 255 bytes");
+  }
+  {  // A file and a folder of the same name.
+    UploadFiles upload = SmallCaptureFiles();
+    upload.files["cam0"] = "x";
+    ExpectInvalid(Upload(upload).status(), "lies in a folder named like the file \"cam0\"");
+  }
+  {  // A control character in a name.
+    UploadFiles upload = SmallCaptureFiles();
+    upload.files["cam0/a\nb.png"] = "x";
+    ExpectInvalid(Upload(upload).status(), "control characters");
+  }
+}
+
+// A glTF mesh whose buffer points outside the upload is refused with one message whether the
+// target exists or not, and nothing of that file is read.
+TEST_F(JobServiceTest, MeshReferringOutsideTheUploadIsRefused) {
+  const fs::path outside = data_.path() / "outside.bin";
+  {
+    const float xyz[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+    std::ofstream out(outside, std::ios::binary);
+    out.write(reinterpret_cast<const char*>(xyz), sizeof(xyz));
+  }
+  const auto gltf = [](const std::string& uri) {
+    return nlohmann::json{{"asset", {{"version", "2.0"}}},
+                          {"buffers", {{{"uri", uri}, {"byteLength", 36}}}},
+                          {"bufferViews", {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", 36}}}},
+                          {"accessors",
+                           {{{"bufferView", 0},
+                             {"componentType", 5126},
+                             {"count", 3},
+                             {"type", "VEC3"},
+                             {"min", {0, 0, 0}},
+                             {"max", {1, 1, 0}}}}},
+                          {"meshes", {{{"primitives", {{{"attributes", {{"POSITION", 0}}}}}}}}},
+                          {"nodes", {{{"mesh", 0}}}},
+                          {"scenes", {{{"nodes", {0}}}}},
+                          {"scene", 0}}
+        .dump();
+  };
+  std::string messages[2];
+  const std::string uris[2] = {"../../../../../../../.." + outside.string(),
+                               "../../../../../../../.." + outside.string() + ".missing"};
+  for (int i = 0; i < 2; ++i) {
+    UploadFiles upload = SmallCaptureFiles();
+    upload.files.erase(upload.capture_json["mesh"].get<std::string>());
+    upload.capture_json["mesh"] = "object.gltf";
+    upload.files["object.gltf"] = gltf(uris[i]);
+    const ServiceStatus status = Upload(upload).status();
+    ExpectInvalid(status, "outside its folder");
+    messages[i] = status.message();
+  }
+  EXPECT_EQ(messages[0], messages[1]);
+}
+
+}  // namespace
+}  // namespace softid::server
