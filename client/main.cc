@@ -112,7 +112,10 @@ void PrintJob(const v1::Job& job, const GlobalFlags& flags) {
   std::cout << "\n";
 }
 
-// One live line per event: iteration of max, cost, estimated time left.
+std::string Compact(const nlohmann::json& value);
+
+// One live line for the job: start i of n, iteration of max, cost, current values, time left
+// (the fit's own estimate).
 class ProgressPrinter {
  public:
   explicit ProgressPrinter(bool json) : json_(json) {}
@@ -124,6 +127,13 @@ class ProgressPrinter {
                              {"state", StateName(event.state())},
                              {"elapsed_seconds", event.elapsed_seconds()},
                              {"message", event.message()}};
+      if (event.kind() == v1::JobEvent::ITERATION) {
+        line["start"] = event.start();
+        line["num_starts"] = event.num_starts();
+        if (std::isfinite(event.remaining_seconds())) {
+          line["remaining_seconds"] = event.remaining_seconds();
+        }
+      }
       if (std::isfinite(event.cost())) line["cost"] = event.cost();
       if (!event.parameters_json().empty()) {
         line["parameters"] = nlohmann::json::parse(event.parameters_json(), nullptr, false);
@@ -140,14 +150,25 @@ class ProgressPrinter {
       return;
     }
     const int max = std::max(1, event.max_iterations());
-    const double per_iteration =
-        event.iteration() > 0 ? event.elapsed_seconds() / event.iteration() : 0.0;
-    const double left = per_iteration * std::max(0, max - event.iteration());
-    const int width = 30;
+    const int width = 20;
     const int filled = std::min(width, width * event.iteration() / max);
-    std::printf("\r[%s%s] %d/%d  cost %.4e  %s  ~%.0f s left   ", std::string(filled, '#').c_str(),
-                std::string(width - filled, ' ').c_str(), event.iteration(), max, event.cost(),
-                event.parameters_json().c_str(), left);
+    std::string values;
+    const nlohmann::json parameters =
+        nlohmann::json::parse(event.parameters_json(), nullptr, false);
+    if (parameters.is_object()) {
+      for (const auto& [name, value] : parameters.items()) {
+        values += "  " + name + "=" + Compact(value);
+      }
+    }
+    std::string left = "";
+    if (std::isfinite(event.remaining_seconds())) {
+      left = "  ~" + std::to_string(static_cast<long>(std::lround(event.remaining_seconds()))) +
+             " s left";
+    }
+    std::printf("\r\033[K[%s%s] start %d/%d  it %d/%d  cost %.4e%s%s",
+                std::string(filled, '#').c_str(), std::string(width - filled, ' ').c_str(),
+                event.start() + 1, std::max(1, event.num_starts()), event.iteration(), max,
+                event.cost(), values.c_str(), left.c_str());
     std::fflush(stdout);
     on_line_ = true;
   }

@@ -139,6 +139,7 @@ grpc::Status GrpcReconstructionService::GetResult(grpc::ServerContext* context,
   response->set_job_id(result->job_id);
   response->set_result_json(result->result.dump());
   for (double cost : result->cost_history) response->add_cost_history(cost);
+  for (int frame : result->cost_history_last_frame) response->add_cost_history_last_frame(frame);
   return grpc::Status::OK;
 }
 

@@ -186,6 +186,9 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
       event.gradient_norm = p.gradient_norm;
       event.parameters = FittedParametersJson(*config, p.parameters);
       event.elapsed_s = std::chrono::duration<double>(Stopwatch::now() - started).count();
+      event.start = p.start;
+      event.num_starts = p.num_starts;
+      event.remaining_s = p.remaining_seconds;
       if (p.num_starts > 1) {
         event.message = "start " + std::to_string(p.start + 1) + "/" + std::to_string(p.num_starts);
       }

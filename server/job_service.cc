@@ -190,10 +190,16 @@ ServiceResult<JobResult> JobService::GetResult(const std::string& job_id) {
                          "job " + job_id + " is " + store::ToString(job->state) +
                              ": a result exists once it SUCCEEDED");
   }
-  JobResult out{job_id, *job->result, {}};
+  JobResult out{job_id, *job->result, {}, {}};
   if (auto it = job->result->find("cost_history"); it != job->result->end() && it->is_array()) {
     for (const nlohmann::json& cost : *it) {
       if (cost.is_number()) out.cost_history.push_back(cost.get<double>());
+    }
+  }
+  if (auto it = job->result->find("cost_history_last_frame");
+      it != job->result->end() && it->is_array()) {
+    for (const nlohmann::json& frame : *it) {
+      if (frame.is_number_integer()) out.cost_history_last_frame.push_back(frame.get<int>());
     }
   }
   return out;

@@ -47,8 +47,9 @@ struct JobServiceOptions {
 // What GetResult returns.
 struct JobResult {
   std::string job_id;
-  nlohmann::json result;             // result.json
-  std::vector<double> cost_history;  // result["cost_history"]
+  nlohmann::json result;                     // result.json
+  std::vector<double> cost_history;          // result["cost_history"]
+  std::vector<int> cost_history_last_frame;  // result["cost_history_last_frame"]
 };
 
 class JobService {

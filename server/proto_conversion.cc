@@ -76,13 +76,20 @@ void ToProto(const store::ProgressEvent& event, const store::Job& job, v1::JobEv
   out->set_elapsed_seconds(event.elapsed_s);
   out->set_message(event.message);
   SetTimestamp(event.created_at, out->mutable_create_time());
-  // The job config's default when the key is absent (job_config.h).
+  // The job config's defaults when the keys are absent (job_config.h).
   int max_iterations = 50;
   if (auto it = job.config.find("max_iterations");
       it != job.config.end() && it->is_number_integer()) {
     max_iterations = it->get<int>();
   }
+  if (auto it = job.config.find("refine_iterations");
+      it != job.config.end() && it->is_number_integer()) {
+    max_iterations += it->get<int>();
+  }
   out->set_max_iterations(max_iterations);
+  out->set_start(event.start);
+  out->set_num_starts(event.num_starts);
+  out->set_remaining_seconds(event.remaining_s);
 }
 
 UploadManifest FromProto(const v1::CaptureManifest& manifest) {

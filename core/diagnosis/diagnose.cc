@@ -443,7 +443,7 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
         }
       }
       tested->cost_history.push_back(fit->Best().initial_cost);
-      for (double c : fit->Best().cost_history) tested->cost_history.push_back(c);
+      for (double c : fit->Best().CostHistoryOverEveryFrame()) tested->cost_history.push_back(c);
     };
     auto cancelled = [&] { return options.fit.cancel != nullptr && options.fit.cancel->load(); };
 
@@ -668,7 +668,7 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
       return out;
     };
     std::vector<double> base_history = {base.Best().initial_cost};
-    for (double c : base.Best().cost_history) base_history.push_back(c);
+    for (double c : base.Best().CostHistoryOverEveryFrame()) base_history.push_back(c);
     series.push_back(history("base fit", base_history));
     for (const TestedCandidate& t : report.tested) {
       if (!t.cost_history.empty())

@@ -151,9 +151,9 @@ class ProgressBoard {
 // Where a start's iterations are: its stage of the continuation over the horizon.
 struct StageInfo {
   int stage = 0, num_stages = 1;
-  int last_frame = 0;           // last capture frame fitted in the stage
-  int iterations_before = 0;    // completed in earlier stages
-  bool records_history = true;  // the last stage (every frame) fills cost_history
+  int last_frame = 0;         // last capture frame fitted in the stage
+  int iterations_before = 0;  // completed in earlier stages
+  bool first = true;          // the first stage solved: it reports the start's iteration 0
 };
 
 class IterationReporter : public ceres::IterationCallback {
@@ -173,9 +173,12 @@ class IterationReporter : public ceres::IterationCallback {
 
   ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
     const double cost = summary.cost * scale_;
-    // Iteration 0 is the stage's starting point: reported once, for the first stage.
-    if (summary.iteration > 0 || stage_.stage == 0) {
-      if (stage_.records_history && summary.iteration > 0) stats_->cost_history.push_back(cost);
+    // Iteration 0 is the stage's starting point: reported once, for the first stage solved.
+    if (summary.iteration > 0 || stage_.first) {
+      if (summary.iteration > 0) {
+        stats_->cost_history.push_back(cost);
+        stats_->cost_history_last_frame.push_back(stage_.last_frame);
+      }
       board_->Report(start_, stage_.iterations_before + summary.iteration, cost,
                      summary.gradient_max_norm, space_->ToParameters(x_, *base_), stage_.stage,
                      stage_.num_stages, stage_.last_frame, stats_->steps,
@@ -290,7 +293,7 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
     auto* function = new CeresObjective(&objective, &space, &base, &config, scale, result);
     ceres::GradientProblem problem(function);  // takes ownership
     StageInfo info{static_cast<int>(stage), static_cast<int>(stages.size()),
-                   frames[stages[stage] - 1].frame, used_iterations, last};
+                   frames[stages[stage] - 1].frame, used_iterations, result->stages.empty()};
     IterationReporter reporter(index, x.data(), &space, &base, scale, &board, options.cancel, info,
                                result);
     ceres::GradientProblemSolver::Options solver;
@@ -330,6 +333,8 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
     refine.cancel = options.cancel;
     const int stage_count = static_cast<int>(stages.size());
     refine.on_iteration = [&](int iteration, double cost, double gradient_norm) {
+      result->cost_history.push_back(cost);
+      result->cost_history_last_frame.push_back(frames.back().frame);
       board.Report(index, used_iterations + iteration, cost, gradient_norm,
                    space.ToParameters(x.data(), base), stage_count, stage_count + 1,
                    frames.back().frame, result->steps, result->unconverged_steps);
@@ -391,6 +396,21 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
   }
   result->seconds = SecondsSince(begin);
 }
+
+}  // namespace
+
+std::vector<double> StartResult::CostHistoryOverEveryFrame() const {
+  std::vector<double> out;
+  if (cost_history_last_frame.empty()) return out;
+  const int last =
+      *std::max_element(cost_history_last_frame.begin(), cost_history_last_frame.end());
+  for (size_t i = 0; i < cost_history.size(); ++i) {
+    if (cost_history_last_frame[i] == last) out.push_back(cost_history[i]);
+  }
+  return out;
+}
+
+namespace {
 
 nlohmann::json CostJson(double initial, double final) {
   return {{"initial", initial}, {"final", final}};
@@ -599,6 +619,7 @@ nlohmann::json ToJson(const FitResult& result) {
   out["starts"] = nlohmann::json::array();
   for (const StartResult& start : result.starts) out["starts"].push_back(start_json(start));
   out["cost_history"] = best.cost_history;
+  out["cost_history_last_frame"] = best.cost_history_last_frame;
   nlohmann::json fixed = fem::ToJson(result.base);
   for (const std::string& name : result.fitted)
     fixed.erase(name == "ground_plane" ? std::string("ground") : name);

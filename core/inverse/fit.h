@@ -14,7 +14,9 @@
 //                "stages": [{"last_frame": 14, "iterations": 5, "cost": {..}, ..}, ..],
 //                "refinement": null | {"method": "levenberg_marquardt", "iterations": ..,
 //                                      "cost": {..}, "converged": .., ..}}, ...],
-//    "cost_history": [..],           // best start: cost after each iteration
+//    "cost_history": [..],           // best start: cost after each of its iterations [m^2]
+//    "cost_history_last_frame": [..],  // the last frame that cost is over (continuation stages
+//                                      // fit a prefix of the frames; see StartResult)
 //    "fixed": {..},                  // every parameter the fit did not change, public JSON
 //    "time_step": {"substeps": 4, "selection": {..}},  // selection: when chosen ("auto")
 //    "timing": {"total_seconds": .., "evaluations": .., "ms_per_forward_adjoint_step": .., ..}}
@@ -42,10 +44,12 @@ namespace softid::inverse {
 struct FitProgress {
   int start = 0;  // index of the start reporting
   int num_starts = 1;
-  int iteration = 0;           // completed iterations of this start (L-BFGS, then refinement)
-  int max_iterations = 0;      // max_iterations + refine_iterations of the config
-  double cost = 0.0;           // [m^2]
-  double gradient_norm = 0.0;  // max norm, optimiser variables
+  // Completed iterations of this start (L-BFGS over every stage, then refinement): each start
+  // reports 0 (its starting point) and then every iteration 1, 2, ... once.
+  int iteration = 0;
+  int max_iterations = 0;              // max_iterations + refine_iterations of the config
+  double cost = 0.0;                   // [m^2]
+  double gradient_norm = 0.0;          // max norm, optimiser variables
   fem::PhysicalParameters parameters;  // current values
   double elapsed_seconds = 0.0;        // since the fit began
   double remaining_seconds = 0.0;      // estimate for the whole fit
@@ -92,7 +96,16 @@ struct StartResult {
   bool converged = false;
   std::string termination;  // Ceres' message, or why the start failed
   bool failed = false;      // the start could not be evaluated at all (e.g. diverged at the start)
-  std::vector<double> cost_history;  // after each iteration of the last stage (every frame) [m^2]
+  // The cost after each iteration of this start, in order: every continuation stage's, then the
+  // refinement's; one entry per ITERATION progress report after the start's iteration 0, so its
+  // size is iterations + refinement->iterations [m^2]. An entry is over the capture frames up to
+  // cost_history_last_frame (a continuation stage fits a prefix, so entries of different stages
+  // are not comparable).
+  std::vector<double> cost_history;
+  std::vector<int> cost_history_last_frame;
+  // The entries of cost_history over every fitted frame (the last stage's and the
+  // refinement's), which compare with initial_cost and final_cost.
+  std::vector<double> CostHistoryOverEveryFrame() const;
   std::vector<HorizonStageResult> stages;      // the last one fits every frame
   std::optional<RefinementResult> refinement;  // when JobConfig::refine_iterations > 0
   int evaluations = 0, failed_evaluations = 0;

@@ -47,7 +47,13 @@ struct ProgressEvent {
   // For kState, the job's state after the event (assigned by the store). Unused for kIteration.
   std::optional<JobState> state = std::nullopt;
   std::string message = "";  // a state change's reason (an error, "lease expired"); free text
-  Timestamp created_at{};    // assigned by the store
+  // For kIteration: which of the job's random starts reported it (0-based; each start numbers
+  // its iterations from 0) and how many there are. 0 and 1 for kState.
+  int start = 0;
+  int num_starts = 1;
+  // For kIteration: the fit's estimate of the time left for the whole job, s; NaN when unknown.
+  double remaining_s = std::nan("");
+  Timestamp created_at{};  // assigned by the store
 };
 
 }  // namespace softid::server::store

@@ -19,7 +19,7 @@ constexpr std::string_view kJobColumns =
 
 constexpr std::string_view kProgressColumns =
     "seq, attempt, event, iteration, cost, gradient_norm, parameters, elapsed_s, state, message, "
-    "created_at";
+    "created_at, start, num_starts, remaining_s";
 
 // Never throws: strings that are not valid UTF-8 are stored with U+FFFD in place of the bad bytes
 // rather than failing the call (SQLite's json_valid would reject invalid text anyway).
@@ -87,6 +87,9 @@ Result<ProgressEvent> ReadProgress(const SqliteStatement& row) {
   }
   event.message = row.ColumnText(9);
   event.created_at = FromUnixMicros(row.ColumnInt64(10));
+  event.start = static_cast<int>(row.ColumnInt64(11));
+  event.num_starts = static_cast<int>(row.ColumnInt64(12));
+  event.remaining_s = row.ColumnDouble(13);
   return event;
 }
 
@@ -545,6 +548,12 @@ Result<int64_t> SqliteJobStore::AppendProgress(const std::string& job_id,
     return Status::InvalidArgument("iteration = " + std::to_string(event.iteration) +
                                    ": must not be negative");
   }
+  if (event.kind == ProgressKind::kIteration &&
+      (event.num_starts < 1 || event.start < 0 || event.start >= event.num_starts)) {
+    return Status::InvalidArgument("start = " + std::to_string(event.start) + " of " +
+                                   std::to_string(event.num_starts) +
+                                   ": must lie in [0, num_starts)");
+  }
   if (!std::isfinite(event.elapsed_s) || event.elapsed_s < 0) {
     return Status::InvalidArgument("elapsed_s = " + std::to_string(event.elapsed_s) +
                                    ": must be finite and non-negative");
@@ -558,15 +567,17 @@ Result<int64_t> SqliteJobStore::AppendProgress(const std::string& job_id,
     }
     SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
         INSERT INTO progress (job_id, seq, attempt, event, iteration, cost, gradient_norm,
-                              parameters, elapsed_s, message, created_at)
+                              parameters, elapsed_s, message, created_at, start, num_starts,
+                              remaining_s)
         VALUES (?1, (SELECT COALESCE(MAX(seq), 0) + 1 FROM progress WHERE job_id = ?1),
-                ?2, 'iteration', ?3, ?4, ?5, ?6, ?7, ?8, ?9)
+                ?2, 'iteration', ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12)
         RETURNING seq)sql"));
     std::optional<std::string> parameters;
     if (!event.parameters.is_null()) parameters = DumpJson(event.parameters);
     SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, job.attempts, event.iteration, event.cost,
                                      event.gradient_norm, parameters, event.elapsed_s,
-                                     event.message, ToUnixMicros(now)));
+                                     event.message, ToUnixMicros(now), event.start,
+                                     event.num_starts, event.remaining_s));
     SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
     if (!has_row) return Status::Internal("INSERT ... RETURNING seq returned no row");
     const int64_t seq = stmt.ColumnInt64(0);

@@ -76,6 +76,13 @@ CREATE TABLE checkpoints (
 ALTER TABLE jobs ADD COLUMN released_attempts INTEGER NOT NULL DEFAULT 0
   CHECK (released_attempts >= 0);
 )sql",
+    // 2 -> 3: which of a job's random starts an iteration belongs to, and the fit's estimate of
+    // the time left (watch displays).
+    R"sql(
+ALTER TABLE progress ADD COLUMN start INTEGER NOT NULL DEFAULT 0 CHECK (start >= 0);
+ALTER TABLE progress ADD COLUMN num_starts INTEGER NOT NULL DEFAULT 1 CHECK (num_starts >= 1);
+ALTER TABLE progress ADD COLUMN remaining_s REAL;
+)sql",
 };
 
 Result<int64_t> ReadPragma(SqliteDatabase& db, std::string_view pragma) {

@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -164,6 +165,62 @@ TEST_F(GrpcServerTest, JobRunsFromUploadToResult) {
   client::ServingStatus serving = client::ServingStatus::kUnknown;
   ASSERT_TRUE(client_->Health("", &serving).ok());
   EXPECT_EQ(serving, client::ServingStatus::kServing);
+}
+
+// The progress contract (softid.proto, WatchJob): every start sends iteration 0 and each of its
+// iterations once, across continuation stages and the refinement; the result's cost history has
+// one entry per iteration of the best start, each with the last frame its cost is over.
+TEST_F(GrpcServerTest, ProgressEventsAndCostHistoryFollowTheContract) {
+  StartServer(/*num_workers=*/1);
+  const v1::Capture capture = Upload();
+  const std::string config =
+      nlohmann::json{{"fit", {"youngs_modulus"}},
+                     {"initial", {{"youngs_modulus", {{"min", 2e4}, {"max", 2e5}}}}},
+                     {"max_iterations", 4},
+                     {"refine_iterations", 1},
+                     {"starts", 2},
+                     {"threads", 2},
+                     {"cells", 8},
+                     {"substeps", 2},
+                     {"fixed", {{"ground", {{"normal", {0, 0, 1}}, {"offset", 0}}}}}}
+          .dump();
+  const v1::Job job = CreateJob(capture.id(), config);
+  std::vector<v1::JobEvent> events;
+  const grpc::Status watched =
+      client_->WatchJob(job.id(), 0, [&](const v1::JobEvent& e) { events.push_back(e); });
+  ASSERT_TRUE(watched.ok()) << watched.error_message();
+  ASSERT_EQ(events.back().state(), v1::SUCCEEDED) << events.back().message();
+  v1::Result result;
+  ASSERT_TRUE(client_->GetResult(job.id(), &result).ok());
+  const nlohmann::json json = nlohmann::json::parse(result.result_json());
+
+  std::map<int, std::vector<int>> iterations_by_start;
+  for (const v1::JobEvent& event : events) {
+    if (event.kind() != v1::JobEvent::ITERATION) continue;
+    EXPECT_EQ(event.num_starts(), 2);
+    EXPECT_EQ(event.max_iterations(), 5);
+    EXPECT_GE(event.remaining_seconds(), 0.0);
+    iterations_by_start[event.start()].push_back(event.iteration());
+  }
+  ASSERT_EQ(iterations_by_start.size(), 2u);
+  for (const auto& [start, iterations] : iterations_by_start) {
+    const nlohmann::json& start_json = json["starts"][start];
+    int ran = start_json["iterations"].get<int>();
+    if (!start_json["refinement"].is_null())
+      ran += start_json["refinement"]["iterations"].get<int>();
+    ASSERT_EQ(iterations.size(), static_cast<size_t>(ran + 1)) << "start " << start;
+    for (int i = 0; i <= ran; ++i) EXPECT_EQ(iterations[i], i) << "start " << start;
+  }
+  const int best = json["best_start"].get<int>();
+  const size_t best_iterations = iterations_by_start[best].size() - 1;
+  ASSERT_EQ(static_cast<size_t>(result.cost_history_size()), best_iterations);
+  ASSERT_EQ(static_cast<size_t>(result.cost_history_last_frame_size()), best_iterations);
+  EXPECT_EQ(json["cost_history"].size(), best_iterations);
+  ASSERT_GT(best_iterations, 0u);
+  EXPECT_EQ(result.cost_history_last_frame(result.cost_history_last_frame_size() - 1),
+            capture_->capture.NumFrames() - 1);
+  EXPECT_DOUBLE_EQ(result.cost_history(result.cost_history_size() - 1),
+                   json["cost"]["final"].get<double>());
 }
 
 // A config the core rejects is INVALID_ARGUMENT naming the field and value.

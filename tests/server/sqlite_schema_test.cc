@@ -94,8 +94,8 @@ TEST(SqliteSchema, RefusesNewerSchema) {
   EXPECT_EQ(*ReadSchemaVersion(*db), kSqliteSchemaVersion + 1);
 }
 
-// A version 1 database (before released_attempts) is migrated in place: its jobs are kept and
-// read with no released attempts.
+// A version 1 database (before released_attempts and the progress' start columns) is migrated in
+// place: its jobs are kept and read with no released attempts.
 TEST(SqliteSchema, MigratesVersion1Jobs) {
   TempDir dir;
   const auto path = dir.path() / "jobs.db";
@@ -103,8 +103,11 @@ TEST(SqliteSchema, MigratesVersion1Jobs) {
     Result<SqliteDatabase> db = SqliteDatabase::Open(path);
     ASSERT_TRUE(db.ok());
     ASSERT_TRUE(MigrateSqliteSchema(*db).ok());
-    // Back to the version 1 layout: version 2 only added this column.
+    // Back to the version 1 layout: versions 2 and 3 only added these columns.
     ASSERT_TRUE(db->Exec("ALTER TABLE jobs DROP COLUMN released_attempts").ok());
+    for (const char* column : {"start", "num_starts", "remaining_s"}) {
+      ASSERT_TRUE(db->Exec(std::string("ALTER TABLE progress DROP COLUMN ") + column).ok());
+    }
     ASSERT_TRUE(db->Exec("PRAGMA user_version = 1").ok());
     ASSERT_TRUE(
         db->Exec("INSERT INTO captures VALUES ('cap-0123456789abcdef', NULL, '[]', 0)").ok());
