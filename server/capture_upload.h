@@ -6,6 +6,7 @@
 // failed or was cut off leaves nothing behind.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
@@ -29,6 +30,11 @@ struct UploadLimits {
   // About 6000 full-size frames: minutes of video from several cameras.
   int64_t max_total_bytes = int64_t{4} << 30;
   int max_files = 100000;
+  // Uploads in progress at once; more are answered RESOURCE_EXHAUSTED (each holds an RPC thread
+  // and a staging folder).
+  int max_concurrent = 16;
+  // An upload stream that sends nothing for this long is cancelled and its staged files removed.
+  std::chrono::milliseconds idle_timeout{60000};
 };
 
 // What the first message of an upload declares.
@@ -62,6 +68,8 @@ class CaptureUpload {
   ServiceResult<std::vector<store::ManifestEntry>> Finish();
 
   const std::string& request_id() const { return manifest_.request_id; }
+  // Keeps `slot` (a count of uploads in progress, say) until the upload is destroyed.
+  void HoldSlot(std::shared_ptr<void> slot) { slot_ = std::move(slot); }
   // Where the validated files lie: <dir>/<manifest path>.
   const std::filesystem::path& staging_dir() const { return staging_dir_; }
 
@@ -82,6 +90,7 @@ class CaptureUpload {
   std::filesystem::path staging_dir_;
   UploadLimits limits_;
   std::map<std::string, FileState> files_;
+  std::shared_ptr<void> slot_;
 };
 
 }  // namespace softid::server

@@ -1,6 +1,10 @@
 #include "server/grpc_reconstruction_service.h"
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <atomic>
 
 #include "server/grpc_status.h"
 #include "server/proto_conversion.h"
@@ -10,10 +14,22 @@ namespace softid::server {
 
 GrpcReconstructionService::GrpcReconstructionService(JobService* service,
                                                      std::filesystem::path data_dir,
+                                                     std::chrono::milliseconds upload_idle_timeout,
                                                      std::shared_ptr<spdlog::logger> logger)
     : service_(service),
       data_dir_(std::move(data_dir)),
-      logger_(logger ? std::move(logger) : spdlog::default_logger()) {}
+      logger_(logger ? std::move(logger) : spdlog::default_logger()),
+      upload_watchdog_(upload_idle_timeout,
+                       std::clamp(upload_idle_timeout / 4, std::chrono::milliseconds(10),
+                                  std::chrono::milliseconds(1000))) {}
+
+grpc::Status GrpcReconstructionService::IdledOut() const {
+  const auto seconds = std::chrono::duration<double>(upload_watchdog_.idle_timeout()).count();
+  return Reply("UploadCapture",
+               {ServiceCode::kCancelled, fmt::format("the upload sent nothing for {:g} s and was "
+                                                     "cancelled; nothing of it was kept",
+                                                     seconds)});
+}
 
 grpc::Status GrpcReconstructionService::Reply(std::string_view method,
                                               const ServiceStatus& status) const {
@@ -31,8 +47,14 @@ grpc::Status GrpcReconstructionService::Reply(std::string_view method,
 grpc::Status GrpcReconstructionService::UploadCapture(
     grpc::ServerContext* context, grpc::ServerReader<v1::UploadCaptureRequest>* reader,
     v1::Capture* response) {
+  std::atomic<bool> idled_out{false};
+  const std::unique_ptr<IdleStreamWatchdog::Watch> watch = upload_watchdog_.Start([&] {
+    idled_out.store(true);
+    context->TryCancel();
+  });
   v1::UploadCaptureRequest request;
   if (!reader->Read(&request)) {
+    if (idled_out.load()) return IdledOut();
     return Reply("UploadCapture",
                  {ServiceCode::kInvalidArgument, "manifest: the upload stream was empty"});
   }
@@ -44,6 +66,7 @@ grpc::Status GrpcReconstructionService::UploadCapture(
       service_->BeginUpload(FromProto(request.manifest()));
   if (!upload.ok()) return Reply("UploadCapture", upload.status());
   while (reader->Read(&request)) {
+    watch->Touch();
     if (!request.has_chunk()) {
       return Reply("UploadCapture", {ServiceCode::kInvalidArgument,
                                      "manifest: sent twice; later messages carry chunks"});
@@ -54,6 +77,7 @@ grpc::Status GrpcReconstructionService::UploadCapture(
   }
   // A client that died mid-stream looks like an early end: FinishUpload reports the file that
   // came up short, and nothing is stored either way.
+  if (idled_out.load()) return IdledOut();
   if (context->IsCancelled()) {
     return Reply("UploadCapture", {ServiceCode::kCancelled, "the upload was cancelled"});
   }

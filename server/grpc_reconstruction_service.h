@@ -6,10 +6,12 @@
 
 #include <spdlog/logger.h>
 
+#include <chrono>
 #include <filesystem>
 #include <memory>
 #include <string_view>
 
+#include "server/idle_stream_watchdog.h"
 #include "server/job_service.h"
 #include "softid/v1/softid.grpc.pb.h"
 
@@ -19,7 +21,9 @@ class GrpcReconstructionService final : public v1::Reconstruction::Service {
  public:
   // `service` must outlive this object. Error texts sent to clients have `data_dir` (the
   // server's data directory) removed; every refused call is logged with its full reason.
+  // Upload streams idle for longer than `upload_idle_timeout` are cancelled.
   GrpcReconstructionService(JobService* service, std::filesystem::path data_dir,
+                            std::chrono::milliseconds upload_idle_timeout,
                             std::shared_ptr<spdlog::logger> logger);
 
   grpc::Status UploadCapture(grpc::ServerContext* context,
@@ -43,10 +47,13 @@ class GrpcReconstructionService final : public v1::Reconstruction::Service {
  private:
   // The gRPC status of `status` for `method`, redacted and logged when it is not OK.
   grpc::Status Reply(std::string_view method, const ServiceStatus& status) const;
+  // The reply to an upload the watchdog cancelled.
+  grpc::Status IdledOut() const;
 
   JobService* service_;
   std::filesystem::path data_dir_;
   std::shared_ptr<spdlog::logger> logger_;
+  IdleStreamWatchdog upload_watchdog_;
 };
 
 }  // namespace softid::server

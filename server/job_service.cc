@@ -38,7 +38,18 @@ JobService::JobService(store::JobStore* jobs, const store::BlobStore* blobs, Job
 ServiceResult<std::unique_ptr<CaptureUpload>> JobService::BeginUpload(UploadManifest manifest) {
   if (draining()) return ServiceStatus(ServiceCode::kUnavailable, "the server is shutting down");
   if (Status valid = store::CheckRequestId(manifest.request_id); !valid.ok()) return valid;
-  return CaptureUpload::Begin(std::move(manifest), options_.staging_root, options_.upload_limits);
+  const int limit = options_.upload_limits.max_concurrent;
+  if (uploads_in_progress_.fetch_add(1) >= limit) {
+    uploads_in_progress_.fetch_sub(1);
+    return ServiceStatus(ServiceCode::kResourceExhausted,
+                         "uploads: " + std::to_string(limit) +
+                             " are in progress, the most accepted at once; retry later");
+  }
+  std::shared_ptr<void> slot(nullptr, [this](void*) { uploads_in_progress_.fetch_sub(1); });
+  ServiceResult<std::unique_ptr<CaptureUpload>> upload =
+      CaptureUpload::Begin(std::move(manifest), options_.staging_root, options_.upload_limits);
+  if (upload.ok()) (*upload)->HoldSlot(std::move(slot));
+  return upload;
 }
 
 ServiceResult<store::Capture> JobService::FinishUpload(CaptureUpload& upload) {

@@ -60,6 +60,8 @@ class JobService {
 
   // Uploads: Begin checks the manifest; the caller feeds chunks to the returned upload, then
   // FinishUpload validates the whole capture and stores it (blobs first, then the row).
+  // ResourceExhausted while upload_limits.max_concurrent uploads are in progress (an upload
+  // counts until its object is destroyed).
   ServiceResult<std::unique_ptr<CaptureUpload>> BeginUpload(UploadManifest manifest);
   ServiceResult<store::Capture> FinishUpload(CaptureUpload& upload);
 
@@ -101,6 +103,7 @@ class JobService {
   JobServiceOptions options_;
   std::shared_ptr<spdlog::logger> logger_;
   std::atomic<bool> draining_{false};
+  std::atomic<int> uploads_in_progress_{0};
   // Shared from an upload's first blob put to its commit; exclusive while a failed upload removes
   // its blobs (RemoveUnreferencedBlobs).
   std::shared_mutex blob_puts_;

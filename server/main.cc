@@ -86,6 +86,17 @@ int main(int argc, char** argv) {
       ->envname("SOFTID_MAX_JOB_MEMORY_GIB")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  app.add_option("--max-uploads", options.upload_limits.max_concurrent,
+                 "uploads in progress at once; more are answered RESOURCE_EXHAUSTED")
+      ->envname("SOFTID_MAX_UPLOADS")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  double upload_idle_timeout_s = options.upload_limits.idle_timeout.count() / 1000.0;
+  app.add_option("--upload-idle-timeout", upload_idle_timeout_s,
+                 "seconds an upload may send nothing before it is cancelled")
+      ->envname("SOFTID_UPLOAD_IDLE_TIMEOUT")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--port-file", port_file,
                  "once listening, write the bound port here (for --listen host:0)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
@@ -100,6 +111,8 @@ int main(int argc, char** argv) {
   // Files of the data directory (database, blobs) are private to the server's user.
   ::umask(077);
   options.max_job_memory_bytes = max_job_memory_gib * (1ull << 30);
+  options.upload_limits.idle_timeout =
+      std::chrono::milliseconds(static_cast<int64_t>(upload_idle_timeout_s * 1000.0));
   spdlog::set_level(spdlog::level::from_str(log_level));
 
   // Block the shutdown signals in this thread and every thread it starts (gRPC's and the

@@ -2,6 +2,7 @@
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
 #include <grpcpp/health_check_service_interface.h>
+#include <grpcpp/resource_quota.h>
 #include <grpcpp/security/server_credentials.h>
 #include <grpcpp/server.h>
 #include <grpcpp/server_builder.h>
@@ -73,6 +74,19 @@ Status ServerOptions::Validate() const {
   if (max_attempts < 1) {
     return Status::InvalidArgument("max_attempts = " + std::to_string(max_attempts) +
                                    ": must be at least 1");
+  }
+  if (max_rpc_threads < 4) {
+    return Status::InvalidArgument("max_rpc_threads = " + std::to_string(max_rpc_threads) +
+                                   ": must be at least 4");
+  }
+  if (upload_limits.max_concurrent < 1) {
+    return Status::InvalidArgument("max_uploads = " + std::to_string(upload_limits.max_concurrent) +
+                                   ": must be at least 1");
+  }
+  if (upload_limits.idle_timeout.count() <= 0) {
+    return Status::InvalidArgument(
+        "upload_idle_timeout = " + std::to_string(upload_limits.idle_timeout.count()) +
+        " ms: must be positive");
   }
   if (!(max_job_memory_bytes > 0.0)) {
     return Status::InvalidArgument("max_job_memory = " + std::to_string(max_job_memory_bytes) +
@@ -174,7 +188,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   parts->service = std::make_unique<JobService>(parts->jobs.get(), &*parts->blobs, &parts->events,
                                                 service_options, parts->logger);
   parts->grpc_service = std::make_unique<GrpcReconstructionService>(
-      parts->service.get(), options.data_dir, parts->logger);
+      parts->service.get(), options.data_dir, options.upload_limits.idle_timeout, parts->logger);
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
@@ -182,6 +196,9 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   // Without SO_REUSEPORT: gRPC otherwise opens a second listener per port, which for port 0 gets
   // a port of its own that nobody is told about, and another process could bind ours.
   builder.AddChannelArgument(GRPC_ARG_ALLOW_REUSEPORT, 0);
+  grpc::ResourceQuota quota("softid-server");
+  quota.SetMaxThreads(options.max_rpc_threads);
+  builder.SetResourceQuota(quota);
   builder.AddListeningPort(options.listen_address, grpc::InsecureServerCredentials(), &parts->port);
   builder.RegisterService(parts->grpc_service.get());
   parts->grpc_server = builder.BuildAndStart();

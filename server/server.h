@@ -36,6 +36,9 @@ struct ServerOptions {
   // Shutdown gives open RPCs (watches, uploads) this long before cancelling them.
   std::chrono::milliseconds shutdown_grace{3000};
   UploadLimits upload_limits;
+  // Threads gRPC may run RPCs on; an RPC beyond them is answered RESOURCE_EXHAUSTED. Uploads and
+  // watches hold one each while they stream.
+  int max_rpc_threads = 256;  // >= 4
   // CreateJob refuses a job whose estimated memory exceeds this (inverse::JobResourceLimits).
   double max_job_memory_bytes = 4.0 * (1ull << 30);  // > 0
 

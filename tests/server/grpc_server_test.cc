@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <functional>
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -54,7 +55,7 @@ class GrpcServerTest : public ::testing::Test {
   void SetUp() override { ASSERT_TRUE(capture_->ok) << capture_->error; }
 
   // Starts (or restarts) the server on data_.
-  void StartServer(int num_workers) {
+  void StartServer(int num_workers, const std::function<void(ServerOptions&)>& adjust = {}) {
     ServerOptions options;
     options.listen_address = "localhost:0";
     options.data_dir = data_.path();
@@ -63,6 +64,7 @@ class GrpcServerTest : public ::testing::Test {
     options.heartbeat_interval = std::chrono::milliseconds(200);
     options.idle_poll_interval = std::chrono::milliseconds(100);
     options.shutdown_grace = std::chrono::milliseconds(500);
+    if (adjust) adjust(options);
     Result<std::unique_ptr<Server>> server = Server::Start(options);
     ASSERT_TRUE(server.ok()) << server.status().ToString();
     server_ = std::move(*server);
@@ -221,6 +223,50 @@ TEST_F(GrpcServerTest, ProgressEventsAndCostHistoryFollowTheContract) {
             capture_->capture.NumFrames() - 1);
   EXPECT_DOUBLE_EQ(result.cost_history(result.cost_history_size() - 1),
                    json["cost"]["final"].get<double>());
+}
+
+// An upload stream that stops sending is cancelled after the idle timeout and leaves nothing
+// staged; uploads beyond the concurrent limit are refused while the others run.
+TEST_F(GrpcServerTest, IdleUploadsAreCancelledAndConcurrentUploadsBounded) {
+  StartServer(/*num_workers=*/0, [](ServerOptions& options) {
+    options.upload_limits.idle_timeout = std::chrono::milliseconds(300);
+    options.upload_limits.max_concurrent = 2;
+  });
+  const client::CaptureFiles files = CaptureFiles();
+  auto stub = v1::Reconstruction::NewStub(grpc::CreateChannel(
+      "localhost:" + std::to_string(server_->port()), grpc::InsecureChannelCredentials()));
+  v1::UploadCaptureRequest manifest;
+  manifest.mutable_manifest()->set_capture_json(files.capture_json);
+  for (const v1::CaptureFile& file : files.files) *manifest.mutable_manifest()->add_files() = file;
+
+  struct Stream {
+    grpc::ClientContext context;
+    v1::Capture reply;
+    std::unique_ptr<grpc::ClientWriter<v1::UploadCaptureRequest>> writer;
+  };
+  std::vector<std::unique_ptr<Stream>> streams;
+  for (int i = 0; i < 3; ++i) {
+    auto stream = std::make_unique<Stream>();
+    stream->writer = stub->UploadCapture(&stream->context, &stream->reply);
+    ASSERT_TRUE(stream->writer->Write(manifest));
+    streams.push_back(std::move(stream));
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));  // begun in this order
+  }
+  // The third found two uploads in progress.
+  const grpc::Status third = streams[2]->writer->Finish();
+  EXPECT_EQ(third.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << third.error_message();
+  // The first two send nothing more: cancelled by the server, nothing staged.
+  for (int i = 0; i < 2; ++i) {
+    const grpc::Status status = streams[i]->writer->Finish();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::CANCELLED) << status.error_message();
+  }
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(5);
+  while (!fs::is_empty(data_.path() / "uploads") && std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  }
+  EXPECT_TRUE(fs::is_empty(data_.path() / "uploads"));
+  // The slots are free again: a complete upload goes through.
+  EXPECT_FALSE(Upload().id().empty());
 }
 
 // A config the core rejects is INVALID_ARGUMENT naming the field and value.
