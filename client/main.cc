@@ -18,6 +18,7 @@
 #include <string>
 
 #include "client/capture_files.h"
+#include "client/channel_credentials.h"
 #include "client/reconstruction_client.h"
 
 namespace {
@@ -36,6 +37,7 @@ struct GlobalFlags {
   bool json = false;
   double timeout_s = 10.0;
   double retry_for_s = 30.0;
+  softid::client::TlsClientOptions tls;
 };
 
 int ExitCodeOf(const grpc::Status& status) {
@@ -260,13 +262,20 @@ bool PrintAgainstTruth(const nlohmann::json& result, const std::string& truth_fi
   return true;
 }
 
-ReconstructionClient MakeClient(const GlobalFlags& flags) {
+// The client for `flags`, or nullopt after printing why the TLS files cannot be used.
+std::optional<ReconstructionClient> MakeClient(const GlobalFlags& flags) {
   softid::client::ClientOptions options;
   options.call_timeout =
       std::chrono::milliseconds(static_cast<int64_t>(std::max(0.001, flags.timeout_s) * 1000));
   options.retry_budget = std::chrono::milliseconds(static_cast<int64_t>(flags.retry_for_s * 1000));
-  return ReconstructionClient(grpc::CreateChannel(flags.server, grpc::InsecureChannelCredentials()),
-                              options);
+  std::string error;
+  std::shared_ptr<grpc::ChannelCredentials> credentials =
+      softid::client::MakeChannelCredentials(flags.tls, &error);
+  if (!credentials) {
+    std::fprintf(stderr, "softid: %s\n", error.c_str());
+    return std::nullopt;
+  }
+  return ReconstructionClient(grpc::CreateChannel(flags.server, credentials), options);
 }
 
 int WatchUntilDone(ReconstructionClient& client, const std::string& job_id,
@@ -300,6 +309,15 @@ int main(int argc, char** argv) {
                  "keep retrying this long while the server is unavailable, seconds")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  app.add_flag("--tls", flags.tls.enabled, "connect over TLS (system root certificates)")
+      ->envname("SOFTID_TLS");
+  app.add_option("--tls-ca", flags.tls.ca_file,
+                 "CA bundle (PEM) the server's certificate must chain to; implies --tls")
+      ->envname("SOFTID_TLS_CA");
+  app.add_option("--tls-cert", flags.tls.cert_file, "client certificate (PEM) for mutual TLS")
+      ->envname("SOFTID_TLS_CERT");
+  app.add_option("--tls-key", flags.tls.key_file, "the client certificate's private key (PEM)")
+      ->envname("SOFTID_TLS_KEY");
 
   std::string capture_dir, config_file, request_id, job_id, out_file, truth_file, state;
   bool wait = false;
@@ -328,7 +346,9 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? kExitOk : kExitInvalidInput;
   }
-  ReconstructionClient client = MakeClient(flags);
+  std::optional<ReconstructionClient> made = MakeClient(flags);
+  if (!made) return kExitInvalidInput;
+  ReconstructionClient& client = *made;
 
   if (submit->parsed()) {
     softid::client::CaptureFiles files;

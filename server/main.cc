@@ -97,6 +97,17 @@ int main(int argc, char** argv) {
       ->envname("SOFTID_UPLOAD_IDLE_TIMEOUT")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  std::string tls_cert, tls_key, tls_client_ca;
+  app.add_option("--tls-cert", tls_cert, "server certificate chain (PEM): serve over TLS")
+      ->envname("SOFTID_TLS_CERT");
+  app.add_option("--tls-key", tls_key, "the certificate's private key (PEM)")
+      ->envname("SOFTID_TLS_KEY");
+  app.add_option("--tls-client-ca", tls_client_ca,
+                 "require client certificates signed by this CA (PEM): mutual TLS")
+      ->envname("SOFTID_TLS_CLIENT_CA");
+  app.add_flag("--allow-insecure", options.allow_insecure,
+               "serve without TLS on a non-loopback address (only behind a trusted network)")
+      ->envname("SOFTID_ALLOW_INSECURE");
   app.add_option("--port-file", port_file,
                  "once listening, write the bound port here (for --listen host:0)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
@@ -108,6 +119,7 @@ int main(int argc, char** argv) {
     return app.exit(e) == 0 ? kExitOk : kExitInvalidInput;
   }
   options.data_dir = data_dir;
+  options.tls = {tls_cert, tls_key, tls_client_ca};
   // Files of the data directory (database, blobs) are private to the server's user.
   ::umask(077);
   options.max_job_memory_bytes = max_job_memory_gib * (1ull << 30);

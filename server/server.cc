@@ -75,6 +75,13 @@ Status ServerOptions::Validate() const {
     return Status::InvalidArgument("max_attempts = " + std::to_string(max_attempts) +
                                    ": must be at least 1");
   }
+  SOFTID_RETURN_IF_ERROR(tls.Validate());
+  if (!tls.enabled() && !allow_insecure && !IsLoopbackAddress(listen_address)) {
+    return Status::InvalidArgument(
+        "listen = " + listen_address +
+        ": not a loopback address, and TLS is off: give --tls-cert and --tls-key, or "
+        "--allow-insecure to serve in plain text anyway (only behind a trusted network)");
+  }
   if (max_rpc_threads < 4) {
     return Status::InvalidArgument("max_rpc_threads = " + std::to_string(max_rpc_threads) +
                                    ": must be at least 4");
@@ -199,7 +206,9 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   grpc::ResourceQuota quota("softid-server");
   quota.SetMaxThreads(options.max_rpc_threads);
   builder.SetResourceQuota(quota);
-  builder.AddListeningPort(options.listen_address, grpc::InsecureServerCredentials(), &parts->port);
+  SOFTID_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> credentials,
+                          MakeServerCredentials(options.tls));
+  builder.AddListeningPort(options.listen_address, credentials, &parts->port);
   builder.RegisterService(parts->grpc_service.get());
   parts->grpc_server = builder.BuildAndStart();
   if (parts->grpc_server == nullptr || parts->port == 0) {

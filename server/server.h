@@ -17,6 +17,7 @@
 
 #include "core/common/status.h"
 #include "server/capture_upload.h"
+#include "server/transport_security.h"
 
 namespace softid::server {
 
@@ -39,6 +40,10 @@ struct ServerOptions {
   // Threads gRPC may run RPCs on; an RPC beyond them is answered RESOURCE_EXHAUSTED. Uploads and
   // watches hold one each while they stream.
   int max_rpc_threads = 256;  // >= 4
+  // TLS for the port (transport_security.h). Without it the server listens only on a loopback
+  // address unless allow_insecure is set.
+  TlsOptions tls;
+  bool allow_insecure = false;
   // CreateJob refuses a job whose estimated memory exceeds this (inverse::JobResourceLimits).
   double max_job_memory_bytes = 4.0 * (1ull << 30);  // > 0
 
