@@ -38,6 +38,7 @@ struct GlobalFlags {
   double timeout_s = 10.0;
   double retry_for_s = 30.0;
   softid::client::TlsClientOptions tls;
+  std::string token;
 };
 
 int ExitCodeOf(const grpc::Status& status) {
@@ -268,6 +269,7 @@ std::optional<ReconstructionClient> MakeClient(const GlobalFlags& flags) {
   options.call_timeout =
       std::chrono::milliseconds(static_cast<int64_t>(std::max(0.001, flags.timeout_s) * 1000));
   options.retry_budget = std::chrono::milliseconds(static_cast<int64_t>(flags.retry_for_s * 1000));
+  options.token = flags.token;
   std::string error;
   std::shared_ptr<grpc::ChannelCredentials> credentials =
       softid::client::MakeChannelCredentials(flags.tls, &error);
@@ -309,6 +311,8 @@ int main(int argc, char** argv) {
                  "keep retrying this long while the server is unavailable, seconds")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  app.add_option("--token", flags.token, "this station's API token (env SOFTID_TOKEN)")
+      ->envname("SOFTID_TOKEN");
   app.add_flag("--tls", flags.tls.enabled, "connect over TLS (system root certificates)")
       ->envname("SOFTID_TLS");
   app.add_option("--tls-ca", flags.tls.ca_file,

@@ -76,6 +76,7 @@ grpc::Status ReconstructionClient::WithRetry(
   while (true) {
     grpc::ClientContext context;
     SetDeadline(&context, timeout);
+    if (!options_.token.empty()) context.AddMetadata("authorization", "Bearer " + options_.token);
     grpc::Status status = call(&context);
     if (status.error_code() != grpc::StatusCode::UNAVAILABLE || Clock::now() + backoff > give_up) {
       return status;

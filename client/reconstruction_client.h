@@ -31,6 +31,9 @@ struct ClientOptions {
   std::chrono::milliseconds max_backoff{5000};
   // Chunk size of uploads; the server accepts at most 1 MiB.
   int64_t chunk_bytes = int64_t{1} << 20;
+  // The station's API token, sent as "authorization: Bearer <token>" on every call; empty:
+  // none (servers without authentication).
+  std::string token;
 };
 
 // Health of the server as grpc.health.v1 reports it.

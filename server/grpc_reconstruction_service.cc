@@ -13,15 +13,26 @@
 namespace softid::server {
 
 GrpcReconstructionService::GrpcReconstructionService(JobService* service,
+                                                     const Authenticator* authenticator,
                                                      std::filesystem::path data_dir,
                                                      std::chrono::milliseconds upload_idle_timeout,
                                                      std::shared_ptr<spdlog::logger> logger)
     : service_(service),
+      authenticator_(authenticator),
       data_dir_(std::move(data_dir)),
       logger_(logger ? std::move(logger) : spdlog::default_logger()),
       upload_watchdog_(upload_idle_timeout,
                        std::clamp(upload_idle_timeout / 4, std::chrono::milliseconds(10),
                                   std::chrono::milliseconds(1000))) {}
+
+ServiceResult<Caller> GrpcReconstructionService::Authenticate(
+    const grpc::ServerContext* context) const {
+  const auto& metadata = context->client_metadata();
+  const auto it = metadata.find("authorization");
+  std::optional<std::string_view> value;
+  if (it != metadata.end()) value = std::string_view(it->second.data(), it->second.size());
+  return authenticator_->Authenticate(value);
+}
 
 grpc::Status GrpcReconstructionService::IdledOut() const {
   const auto seconds = std::chrono::duration<double>(upload_watchdog_.idle_timeout()).count();
@@ -47,6 +58,8 @@ grpc::Status GrpcReconstructionService::Reply(std::string_view method,
 grpc::Status GrpcReconstructionService::UploadCapture(
     grpc::ServerContext* context, grpc::ServerReader<v1::UploadCaptureRequest>* reader,
     v1::Capture* response) {
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("UploadCapture", caller.status());
   std::atomic<bool> idled_out{false};
   const std::unique_ptr<IdleStreamWatchdog::Watch> watch = upload_watchdog_.Start([&] {
     idled_out.store(true);
@@ -63,7 +76,7 @@ grpc::Status GrpcReconstructionService::UploadCapture(
                                    "manifest: the first message must carry the manifest"});
   }
   ServiceResult<std::unique_ptr<CaptureUpload>> upload =
-      service_->BeginUpload(FromProto(request.manifest()));
+      service_->BeginUpload(*caller, FromProto(request.manifest()));
   if (!upload.ok()) return Reply("UploadCapture", upload.status());
   while (reader->Read(&request)) {
     watch->Touch();
@@ -81,7 +94,7 @@ grpc::Status GrpcReconstructionService::UploadCapture(
   if (context->IsCancelled()) {
     return Reply("UploadCapture", {ServiceCode::kCancelled, "the upload was cancelled"});
   }
-  ServiceResult<store::Capture> capture = service_->FinishUpload(**upload);
+  ServiceResult<store::Capture> capture = service_->FinishUpload(*caller, **upload);
   if (!capture.ok()) return Reply("UploadCapture", capture.status());
   ToProto(*capture, response);
   return grpc::Status::OK;
@@ -90,8 +103,10 @@ grpc::Status GrpcReconstructionService::UploadCapture(
 grpc::Status GrpcReconstructionService::CreateJob(grpc::ServerContext* context,
                                                   const v1::CreateJobRequest* request,
                                                   v1::Job* response) {
-  ServiceResult<store::Job> job =
-      service_->CreateJob(request->capture_id(), request->config_json(), request->request_id());
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("CreateJob", caller.status());
+  ServiceResult<store::Job> job = service_->CreateJob(
+      *caller, request->capture_id(), request->config_json(), request->request_id());
   if (!job.ok()) return Reply("CreateJob", job.status());
   ToProto(*job, response);
   return grpc::Status::OK;
@@ -100,7 +115,9 @@ grpc::Status GrpcReconstructionService::CreateJob(grpc::ServerContext* context,
 grpc::Status GrpcReconstructionService::GetJob(grpc::ServerContext* context,
                                                const v1::GetJobRequest* request,
                                                v1::Job* response) {
-  ServiceResult<store::Job> job = service_->GetJob(request->job_id());
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("GetJob", caller.status());
+  ServiceResult<store::Job> job = service_->GetJob(*caller, request->job_id());
   if (!job.ok()) return Reply("GetJob", job.status());
   ToProto(*job, response);
   return grpc::Status::OK;
@@ -109,13 +126,15 @@ grpc::Status GrpcReconstructionService::GetJob(grpc::ServerContext* context,
 grpc::Status GrpcReconstructionService::ListJobs(grpc::ServerContext* context,
                                                  const v1::ListJobsRequest* request,
                                                  v1::ListJobsResponse* response) {
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("ListJobs", caller.status());
   ServiceResult<std::optional<store::JobState>> state = StateFilterFromProto(request->state());
   if (!state.ok()) return Reply("ListJobs", state.status());
   store::ListJobsRequest list;
   list.state = *state;
   list.page_size = request->page_size();
   list.page_token = request->page_token();
-  ServiceResult<store::JobPage> page = service_->ListJobs(list);
+  ServiceResult<store::JobPage> page = service_->ListJobs(*caller, list);
   if (!page.ok()) return Reply("ListJobs", page.status());
   for (const store::Job& job : page->jobs) ToProto(job, response->add_jobs());
   response->set_next_page_token(page->next_page_token);
@@ -125,7 +144,9 @@ grpc::Status GrpcReconstructionService::ListJobs(grpc::ServerContext* context,
 grpc::Status GrpcReconstructionService::CancelJob(grpc::ServerContext* context,
                                                   const v1::CancelJobRequest* request,
                                                   v1::Job* response) {
-  ServiceResult<store::Job> job = service_->CancelJob(request->job_id());
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("CancelJob", caller.status());
+  ServiceResult<store::Job> job = service_->CancelJob(*caller, request->job_id());
   if (!job.ok()) return Reply("CancelJob", job.status());
   ToProto(*job, response);
   return grpc::Status::OK;
@@ -134,19 +155,23 @@ grpc::Status GrpcReconstructionService::CancelJob(grpc::ServerContext* context,
 grpc::Status GrpcReconstructionService::DeleteJob(grpc::ServerContext* context,
                                                   const v1::DeleteJobRequest* request,
                                                   v1::DeleteJobResponse* response) {
-  return Reply("DeleteJob", service_->DeleteJob(request->job_id()));
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("DeleteJob", caller.status());
+  return Reply("DeleteJob", service_->DeleteJob(*caller, request->job_id()));
 }
 
 grpc::Status GrpcReconstructionService::WatchJob(grpc::ServerContext* context,
                                                  const v1::WatchJobRequest* request,
                                                  grpc::ServerWriter<v1::JobEvent>* writer) {
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("WatchJob", caller.status());
   if (request->from_iteration() < 0) {
     return Reply("WatchJob", {ServiceCode::kInvalidArgument,
                               "from_iteration = " + std::to_string(request->from_iteration()) +
                                   ": must not be negative"});
   }
   return Reply("WatchJob", service_->WatchJob(
-                               request->job_id(), request->from_iteration(),
+                               *caller, request->job_id(), request->from_iteration(),
                                [&](const store::ProgressEvent& event, const store::Job& job) {
                                  v1::JobEvent message;
                                  ToProto(event, job, &message);
@@ -158,7 +183,10 @@ grpc::Status GrpcReconstructionService::WatchJob(grpc::ServerContext* context,
 grpc::Status GrpcReconstructionService::GetResult(grpc::ServerContext* context,
                                                   const v1::GetResultRequest* request,
                                                   v1::Result* response) {
-  ServiceResult<JobResult> result = service_->GetResult(request->job_id());
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("GetResult", caller.status());
+
+  ServiceResult<JobResult> result = service_->GetResult(*caller, request->job_id());
   if (!result.ok()) return Reply("GetResult", result.status());
   response->set_job_id(result->job_id);
   response->set_result_json(result->result.dump());

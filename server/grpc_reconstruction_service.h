@@ -11,6 +11,7 @@
 #include <memory>
 #include <string_view>
 
+#include "server/api_tokens.h"
 #include "server/idle_stream_watchdog.h"
 #include "server/job_service.h"
 #include "softid/v1/softid.grpc.pb.h"
@@ -22,7 +23,10 @@ class GrpcReconstructionService final : public v1::Reconstruction::Service {
   // `service` must outlive this object. Error texts sent to clients have `data_dir` (the
   // server's data directory) removed; every refused call is logged with its full reason.
   // Upload streams idle for longer than `upload_idle_timeout` are cancelled.
-  GrpcReconstructionService(JobService* service, std::filesystem::path data_dir,
+  // Every call is authenticated by `authenticator` (from its "authorization" metadata) before
+  // it reaches the service.
+  GrpcReconstructionService(JobService* service, const Authenticator* authenticator,
+                            std::filesystem::path data_dir,
                             std::chrono::milliseconds upload_idle_timeout,
                             std::shared_ptr<spdlog::logger> logger);
 
@@ -50,7 +54,11 @@ class GrpcReconstructionService final : public v1::Reconstruction::Service {
   // The reply to an upload the watchdog cancelled.
   grpc::Status IdledOut() const;
 
+  // The caller of this call, from its "authorization" metadata.
+  ServiceResult<Caller> Authenticate(const grpc::ServerContext* context) const;
+
   JobService* service_;
+  const Authenticator* authenticator_;
   std::filesystem::path data_dir_;
   std::shared_ptr<spdlog::logger> logger_;
   IdleStreamWatchdog upload_watchdog_;

@@ -13,6 +13,7 @@ grpc::Status ToGrpcStatus(const ServiceStatus& status) {
     case ServiceCode::kResourceExhausted: code = grpc::StatusCode::RESOURCE_EXHAUSTED; break;
     case ServiceCode::kUnavailable: code = grpc::StatusCode::UNAVAILABLE; break;
     case ServiceCode::kCancelled: code = grpc::StatusCode::CANCELLED; break;
+    case ServiceCode::kUnauthenticated: code = grpc::StatusCode::UNAUTHENTICATED; break;
     case ServiceCode::kInternal: code = grpc::StatusCode::INTERNAL; break;
   }
   return grpc::Status(code, status.message());

@@ -35,7 +35,8 @@ JobService::JobService(store::JobStore* jobs, const store::BlobStore* blobs, Job
       options_(std::move(options)),
       logger_(logger ? std::move(logger) : spdlog::default_logger()) {}
 
-ServiceResult<std::unique_ptr<CaptureUpload>> JobService::BeginUpload(UploadManifest manifest) {
+ServiceResult<std::unique_ptr<CaptureUpload>> JobService::BeginUpload(const Caller& caller,
+                                                                      UploadManifest manifest) {
   if (draining()) return ServiceStatus(ServiceCode::kUnavailable, "the server is shutting down");
   if (Status valid = store::CheckRequestId(manifest.request_id); !valid.ok()) return valid;
   const int limit = options_.upload_limits.max_concurrent;
@@ -52,7 +53,8 @@ ServiceResult<std::unique_ptr<CaptureUpload>> JobService::BeginUpload(UploadMani
   return upload;
 }
 
-ServiceResult<store::Capture> JobService::FinishUpload(CaptureUpload& upload) {
+ServiceResult<store::Capture> JobService::FinishUpload(const Caller& caller,
+                                                       CaptureUpload& upload) {
   ServiceResult<std::vector<store::ManifestEntry>> manifest = upload.Finish();
   if (!manifest.ok()) return manifest.status();
   // Blobs before the row: a committed capture never points at a missing blob. Blobs this upload
@@ -72,7 +74,8 @@ ServiceResult<store::Capture> JobService::FinishUpload(CaptureUpload& upload) {
       if (!put.ok()) return put.status();
       if (!existed) added.push_back(entry.sha256);
     }
-    Result<store::Capture> created = jobs_->CreateCapture(*manifest, upload.request_id());
+    Result<store::Capture> created =
+        jobs_->CreateCapture(*manifest, upload.request_id(), caller.station);
     if (!created.ok()) return FromStoreCreate(created.status());
     return *created;
   }();
@@ -107,7 +110,7 @@ void JobService::RemoveUnreferencedBlobs(const std::vector<std::string>& sha256s
   logger_->info("failed upload: removed {} of its {} new blob(s)", removed, sha256s.size());
 }
 
-ServiceResult<store::Job> JobService::CreateJob(const std::string& capture_id,
+ServiceResult<store::Job> JobService::CreateJob(const Caller& caller, const std::string& capture_id,
                                                 const std::string& config_json,
                                                 const std::string& request_id) {
   if (draining()) return ServiceStatus(ServiceCode::kUnavailable, "the server is shutting down");
@@ -121,13 +124,14 @@ ServiceResult<store::Job> JobService::CreateJob(const std::string& capture_id,
     return ServiceStatus(ServiceCode::kInvalidArgument,
                          "config_json: " + parsed.status().message());
   }
-  if (ServiceStatus fits = CheckJobFitsCapture(*parsed, capture_id, request_id); !fits.ok()) {
+  if (ServiceStatus fits = CheckJobFitsCapture(caller, *parsed, capture_id, request_id);
+      !fits.ok()) {
     return fits;
   }
   // The store checks the bound in the transaction that inserts, so concurrent creates cannot
   // overshoot it, and a repeated request_id gets its job back even when the queue is full.
-  Result<std::optional<store::Job>> job =
-      jobs_->CreateJobBounded(capture_id, config, request_id, options_.max_queued_jobs);
+  Result<std::optional<store::Job>> job = jobs_->CreateJobBounded(
+      capture_id, config, request_id, options_.max_queued_jobs, caller.station);
   if (!job.ok()) return FromStoreCreate(job.status());
   if (!job->has_value()) {
     return ServiceStatus(
@@ -143,7 +147,8 @@ ServiceResult<store::Job> JobService::CreateJob(const std::string& capture_id,
   return created;
 }
 
-ServiceStatus JobService::CheckJobFitsCapture(const inverse::JobConfig& config,
+ServiceStatus JobService::CheckJobFitsCapture(const Caller& caller,
+                                              const inverse::JobConfig& config,
                                               const std::string& capture_id,
                                               const std::string& request_id) {
   Result<store::Capture> capture = jobs_->GetCapture(capture_id);
@@ -153,6 +158,9 @@ ServiceStatus JobService::CheckJobFitsCapture(const inverse::JobConfig& config,
       return ServiceStatus::Ok();
     }
     return capture.status();
+  }
+  if (!caller.Sees(capture->owner)) {
+    return ServiceStatus(ServiceCode::kNotFound, "capture " + capture_id + " not found");
   }
   ServiceResult<inverse::CaptureExtent> extent =
       ReadCaptureExtent(*capture, *blobs_, options_.scratch_root);
@@ -166,19 +174,31 @@ ServiceStatus JobService::CheckJobFitsCapture(const inverse::JobConfig& config,
   return ServiceStatus::Ok();
 }
 
-ServiceResult<store::Job> JobService::GetJob(const std::string& job_id) {
+ServiceResult<store::Job> JobService::VisibleJob(const Caller& caller, const std::string& job_id) {
   Result<store::Job> job = jobs_->GetJob(job_id);
   if (!job.ok()) return job.status();
+  if (!caller.Sees(job->owner)) {
+    return ServiceStatus(ServiceCode::kNotFound, "job " + job_id + " not found");
+  }
   return *job;
 }
 
-ServiceResult<store::JobPage> JobService::ListJobs(const store::ListJobsRequest& request) {
+ServiceResult<store::Job> JobService::GetJob(const Caller& caller, const std::string& job_id) {
+  return VisibleJob(caller, job_id);
+}
+
+ServiceResult<store::JobPage> JobService::ListJobs(const Caller& caller,
+                                                   store::ListJobsRequest request) {
+  if (!caller.admin) request.owner = caller.station;
   Result<store::JobPage> page = jobs_->ListJobs(request);
   if (!page.ok()) return page.status();
   return *page;
 }
 
-ServiceResult<store::Job> JobService::CancelJob(const std::string& job_id) {
+ServiceResult<store::Job> JobService::CancelJob(const Caller& caller, const std::string& job_id) {
+  if (ServiceResult<store::Job> visible = VisibleJob(caller, job_id); !visible.ok()) {
+    return visible.status();
+  }
   Result<store::Job> job = jobs_->RequestCancel(job_id);
   if (!job.ok()) return job.status();
   events_->Notify(job_id);
@@ -186,15 +206,18 @@ ServiceResult<store::Job> JobService::CancelJob(const std::string& job_id) {
   return *job;
 }
 
-ServiceStatus JobService::DeleteJob(const std::string& job_id) {
+ServiceStatus JobService::DeleteJob(const Caller& caller, const std::string& job_id) {
+  if (ServiceResult<store::Job> visible = VisibleJob(caller, job_id); !visible.ok()) {
+    return visible.status();
+  }
   if (Status deleted = jobs_->DeleteJob(job_id); !deleted.ok()) return deleted;
   events_->Notify(job_id);
   logger_->info("job {}: deleted", job_id);
   return ServiceStatus::Ok();
 }
 
-ServiceResult<JobResult> JobService::GetResult(const std::string& job_id) {
-  Result<store::Job> job = jobs_->GetJob(job_id);
+ServiceResult<JobResult> JobService::GetResult(const Caller& caller, const std::string& job_id) {
+  ServiceResult<store::Job> job = VisibleJob(caller, job_id);
   if (!job.ok()) return job.status();
   if (job->state != store::JobState::kSucceeded || !job->result.has_value()) {
     return ServiceStatus(ServiceCode::kFailedPrecondition,
@@ -216,8 +239,12 @@ ServiceResult<JobResult> JobService::GetResult(const std::string& job_id) {
   return out;
 }
 
-ServiceStatus JobService::WatchJob(const std::string& job_id, int from_iteration,
-                                   const EventSink& send, const std::function<bool()>& stop) {
+ServiceStatus JobService::WatchJob(const Caller& caller, const std::string& job_id,
+                                   int from_iteration, const EventSink& send,
+                                   const std::function<bool()>& stop) {
+  if (ServiceResult<store::Job> visible = VisibleJob(caller, job_id); !visible.ok()) {
+    return visible.status();
+  }
   int64_t last_seq = 0;
   uint64_t version = events_->Version(job_id);
   while (true) {

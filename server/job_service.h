@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "core/inverse/job_resources.h"
+#include "server/caller.h"
 #include "server/capture_upload.h"
 #include "server/job_events.h"
 #include "server/service_status.h"
@@ -62,29 +63,34 @@ class JobService {
   // FinishUpload validates the whole capture and stores it (blobs first, then the row).
   // ResourceExhausted while upload_limits.max_concurrent uploads are in progress (an upload
   // counts until its object is destroyed).
-  ServiceResult<std::unique_ptr<CaptureUpload>> BeginUpload(UploadManifest manifest);
-  ServiceResult<store::Capture> FinishUpload(CaptureUpload& upload);
+  // Every call acts for `caller` (caller.h): what it creates is owned by caller.station, and a
+  // capture or job another station owns is NotFound to it, like one that does not exist.
+  ServiceResult<std::unique_ptr<CaptureUpload>> BeginUpload(const Caller& caller,
+                                                            UploadManifest manifest);
+  ServiceResult<store::Capture> FinishUpload(const Caller& caller, CaptureUpload& upload);
 
   // `config_json` empty means "{}". InvalidArgument "config_json: <field> = <value>: <reason>",
   // also for a config that does not fit the capture (frames past its end) or would exceed the
   // job limits ("config_json: cells = 300: the job would need about 41 GiB ...");
   // NotFound for an unknown capture; ResourceExhausted when the queue is full; Unavailable while
   // draining; AlreadyExists for a request_id used before with other arguments.
-  ServiceResult<store::Job> CreateJob(const std::string& capture_id, const std::string& config_json,
+  ServiceResult<store::Job> CreateJob(const Caller& caller, const std::string& capture_id,
+                                      const std::string& config_json,
                                       const std::string& request_id);
-  ServiceResult<store::Job> GetJob(const std::string& job_id);
-  ServiceResult<store::JobPage> ListJobs(const store::ListJobsRequest& request);
-  ServiceResult<store::Job> CancelJob(const std::string& job_id);
-  ServiceStatus DeleteJob(const std::string& job_id);
+  ServiceResult<store::Job> GetJob(const Caller& caller, const std::string& job_id);
+  // A station lists its own jobs only (request.owner is set to it); admins list every job.
+  ServiceResult<store::JobPage> ListJobs(const Caller& caller, store::ListJobsRequest request);
+  ServiceResult<store::Job> CancelJob(const Caller& caller, const std::string& job_id);
+  ServiceStatus DeleteJob(const Caller& caller, const std::string& job_id);
   // FailedPrecondition naming the state unless the job SUCCEEDED.
-  ServiceResult<JobResult> GetResult(const std::string& job_id);
+  ServiceResult<JobResult> GetResult(const Caller& caller, const std::string& job_id);
 
   // Calls `send` for every event of the job's history with iteration >= from_iteration, then for
   // every new one, until the job is terminal and its last event was sent (OK), `send` returns
   // false or `stop` returns true (Cancelled), or the service is draining (Unavailable).
   using EventSink = std::function<bool(const store::ProgressEvent& event, const store::Job& job)>;
-  ServiceStatus WatchJob(const std::string& job_id, int from_iteration, const EventSink& send,
-                         const std::function<bool()>& stop);
+  ServiceStatus WatchJob(const Caller& caller, const std::string& job_id, int from_iteration,
+                         const EventSink& send, const std::function<bool()>& stop);
 
   // Refuse new jobs and end watches (shutdown).
   void StartDraining();
@@ -92,8 +98,10 @@ class JobService {
 
  private:
   // OK when `config` fits the capture's frames and the job limits (see CreateJob).
-  ServiceStatus CheckJobFitsCapture(const inverse::JobConfig& config, const std::string& capture_id,
-                                    const std::string& request_id);
+  // The job if `caller` may see it; NotFound (as for a missing job) otherwise.
+  ServiceResult<store::Job> VisibleJob(const Caller& caller, const std::string& job_id);
+  ServiceStatus CheckJobFitsCapture(const Caller& caller, const inverse::JobConfig& config,
+                                    const std::string& capture_id, const std::string& request_id);
   // After a failed upload: deletes those of `sha256s` that no capture refers to.
   void RemoveUnreferencedBlobs(const std::vector<std::string>& sha256s);
 

@@ -6,6 +6,7 @@
 #include <sys/stat.h>
 
 #include <CLI/CLI.hpp>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -13,6 +14,7 @@
 
 #include "core/common/cpu_support.h"
 #include "server/server.h"
+#include "server/tokens_command.h"
 
 namespace {
 
@@ -64,8 +66,7 @@ int main(int argc, char** argv) {
       ->envname("SOFTID_LISTEN")
       ->capture_default_str();
   app.add_option("--data", data_dir, "data directory (database and uploaded files)")
-      ->envname("SOFTID_DATA")
-      ->required();
+      ->envname("SOFTID_DATA");
   app.add_option("--workers", options.num_workers, "jobs run in parallel (default: cores)")
       ->envname("SOFTID_WORKERS")
       ->check(CLI::NonNegativeNumber)
@@ -108,6 +109,15 @@ int main(int argc, char** argv) {
   app.add_flag("--allow-insecure", options.allow_insecure,
                "serve without TLS on a non-loopback address (only behind a trusted network)")
       ->envname("SOFTID_ALLOW_INSECURE");
+  std::string auth = "auto";
+  app.add_option("--auth", auth,
+                 "require per-station API tokens: token, none, or auto (token unless the listen "
+                 "address is loopback)")
+      ->envname("SOFTID_AUTH")
+      ->check(CLI::IsMember({"auto", "token", "none"}))
+      ->capture_default_str();
+  softid::server::TokensCommand tokens;
+  softid::server::AddTokensCommand(app, &tokens);
   app.add_option("--port-file", port_file,
                  "once listening, write the bound port here (for --listen host:0)");
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
@@ -118,7 +128,16 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? kExitOk : kExitInvalidInput;
   }
+  if (tokens.command->parsed()) return softid::server::RunTokensCommand(tokens, data_dir);
+  if (data_dir.empty()) {
+    std::fprintf(stderr, "softid-server: --data is required (or SOFTID_DATA)\n");
+    return kExitInvalidInput;
+  }
   options.data_dir = data_dir;
+  if (auth != "auto") {
+    options.auth =
+        auth == "token" ? softid::server::AuthMode::kToken : softid::server::AuthMode::kNone;
+  }
   options.tls = {tls_cert, tls_key, tls_client_ca};
   // Files of the data directory (database, blobs) are private to the server's user.
   ::umask(077);

@@ -116,6 +116,7 @@ struct Server::Parts {
   JobEvents events;
   std::unique_ptr<WorkerPool> pool;
   std::unique_ptr<JobService> service;
+  std::unique_ptr<Authenticator> authenticator;
   std::unique_ptr<GrpcReconstructionService> grpc_service;
   std::unique_ptr<grpc::Server> grpc_server;
   int port = 0;
@@ -194,8 +195,21 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   service_options.on_job_queued = [pool] { pool->Wake(); };
   parts->service = std::make_unique<JobService>(parts->jobs.get(), &*parts->blobs, &parts->events,
                                                 service_options, parts->logger);
+  const AuthMode auth = options.auth.value_or(
+      IsLoopbackAddress(options.listen_address) ? AuthMode::kNone : AuthMode::kToken);
+  parts->authenticator = std::make_unique<Authenticator>(parts->jobs.get(), auth);
+  if (auth == AuthMode::kToken) {
+    Result<std::vector<store::ApiToken>> tokens = parts->jobs->ListTokens();
+    if (tokens.ok() && tokens->empty()) {
+      log->warn(
+          "API tokens are required but none exists: create one with `softid-server tokens "
+          "create --data {} --station NAME`",
+          options.data_dir.string());
+    }
+  }
   parts->grpc_service = std::make_unique<GrpcReconstructionService>(
-      parts->service.get(), options.data_dir, options.upload_limits.idle_timeout, parts->logger);
+      parts->service.get(), parts->authenticator.get(), options.data_dir,
+      options.upload_limits.idle_timeout, parts->logger);
 
   grpc::EnableDefaultHealthCheckService(true);
   grpc::reflection::InitProtoReflectionServerBuilderPlugin();
@@ -219,9 +233,10 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   parts->grpc_server->GetHealthCheckService()->SetServingStatus(
       v1::Reconstruction::service_full_name(), true);
   parts->pool->Start();
-  log->info("softid-server listening on {} (port {}), data {}, {} worker(s), max {} queued",
-            options.listen_address, parts->port, options.data_dir.string(), options.num_workers,
-            options.max_queued_jobs);
+  log->info(
+      "softid-server listening on {} (port {}, {}, auth {}), data {}, {} worker(s), max {} queued",
+      options.listen_address, parts->port, options.tls.enabled() ? "TLS" : "plain text",
+      ToString(auth), options.data_dir.string(), options.num_workers, options.max_queued_jobs);
   return std::unique_ptr<Server>(new Server(std::move(parts)));
 }
 

@@ -13,9 +13,11 @@
 #include <chrono>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "core/common/status.h"
+#include "server/api_tokens.h"
 #include "server/capture_upload.h"
 #include "server/transport_security.h"
 
@@ -44,6 +46,9 @@ struct ServerOptions {
   // address unless allow_insecure is set.
   TlsOptions tls;
   bool allow_insecure = false;
+  // Whether calls need a per-station API token (api_tokens.h). nullopt ("auto"): tokens on any
+  // address but loopback, none on loopback.
+  std::optional<AuthMode> auth;
   // CreateJob refuses a job whose estimated memory exceeds this (inverse::JobResourceLimits).
   double max_job_memory_bytes = 4.0 * (1ull << 30);  // > 0
 

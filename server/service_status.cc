@@ -12,6 +12,7 @@ const char* ToString(ServiceCode code) {
     case ServiceCode::kResourceExhausted: return "RESOURCE_EXHAUSTED";
     case ServiceCode::kUnavailable: return "UNAVAILABLE";
     case ServiceCode::kCancelled: return "CANCELLED";
+    case ServiceCode::kUnauthenticated: return "UNAUTHENTICATED";
     case ServiceCode::kInternal: return "INTERNAL";
   }
   return "UNKNOWN";

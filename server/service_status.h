@@ -20,6 +20,7 @@ enum class ServiceCode {
   kResourceExhausted,   // queue full
   kUnavailable,         // the server is draining
   kCancelled,           // the caller went away
+  kUnauthenticated,     // no valid API token
   kInternal,            // I/O or store failure: not the caller's fault
 };
 

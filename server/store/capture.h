@@ -26,6 +26,7 @@ struct Capture {
   std::string request_id;  // the client's idempotency key; empty when none was given
   std::vector<ManifestEntry> manifest;
   Timestamp created_at{};
+  std::string owner;  // the station that uploaded it; empty without authentication
 
   bool operator==(const Capture&) const = default;
 };

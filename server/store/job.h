@@ -57,6 +57,7 @@ struct Job {
   // While RUNNING: the worker must renew its lease before this time, or the job counts as lost.
   std::optional<Timestamp> lease_expires_at;
   std::optional<nlohmann::json> result;  // set when SUCCEEDED
+  std::string owner;  // the station that created it; empty without authentication
 
   bool operator==(const Job&) const = default;
 };

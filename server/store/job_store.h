@@ -33,7 +33,8 @@ struct ListJobsRequest {
   static constexpr int kDefaultPageSize = 50;
   static constexpr int kMaxPageSize = 1000;
 
-  std::optional<JobState> state = std::nullopt;  // only jobs in this state; all when empty
+  std::optional<JobState> state = std::nullopt;     // only jobs in this state; all when empty
+  std::optional<std::string> owner = std::nullopt;  // only this station's jobs; all when empty
   // 0 means kDefaultPageSize; larger than kMaxPageSize is lowered to it (AIP-158); negative is
   // InvalidArgument.
   int page_size = 0;
@@ -73,8 +74,11 @@ class JobStore {
 
   // Records an uploaded capture whose blobs are already stored (BlobStore::Put returned).
   // InvalidArgument for an invalid manifest (see ValidateManifest).
+  // `owner` is the uploading station (empty without authentication). A request_id is unique
+  // across stations: reusing another station's is FailedPrecondition like other arguments.
   virtual Result<Capture> CreateCapture(const std::vector<ManifestEntry>& manifest,
-                                        const std::string& request_id) = 0;
+                                        const std::string& request_id,
+                                        const std::string& owner = "") = 0;
   virtual Result<Capture> GetCapture(const std::string& capture_id) = 0;
 
   // --- Jobs: API side -------------------------------------------------------------------------
@@ -82,7 +86,7 @@ class JobStore {
   // A new QUEUED job. NotFound naming the capture if it does not exist; InvalidArgument unless
   // `config` is a JSON object.
   virtual Result<Job> CreateJob(const std::string& capture_id, const nlohmann::json& config,
-                                const std::string& request_id) = 0;
+                                const std::string& request_id, const std::string& owner = "") = 0;
   // CreateJob with a bound on the queue, checked in the same transaction as the insert so that
   // concurrent creates cannot overshoot it: nullopt (and nothing created) when `max_queued`
   // (>= 1) jobs are QUEUED already. A repeated request_id returns its job even then, and an
@@ -90,7 +94,8 @@ class JobStore {
   virtual Result<std::optional<Job>> CreateJobBounded(const std::string& capture_id,
                                                       const nlohmann::json& config,
                                                       const std::string& request_id,
-                                                      int64_t max_queued) = 0;
+                                                      int64_t max_queued,
+                                                      const std::string& owner = "") = 0;
   virtual Result<Job> GetJob(const std::string& job_id) = 0;
   virtual Result<JobPage> ListJobs(const ListJobsRequest& request) = 0;
   // Jobs in `state`, or all jobs; used to bound the queue before CreateJob.

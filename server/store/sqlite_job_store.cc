@@ -6,6 +6,7 @@
 #include "core/common/json_fields.h"
 #include "server/store/page_token.h"
 #include "server/store/resource_id.h"
+#include "server/store/sha256.h"
 #include "server/store/sqlite_schema.h"
 
 namespace softid::server::store {
@@ -15,7 +16,7 @@ namespace {
 
 constexpr std::string_view kJobColumns =
     "id, request_id, capture_id, config, state, cancel_requested, attempts, error, created_at, "
-    "started_at, finished_at, lease_owner, lease_expires_at, result, released_attempts";
+    "started_at, finished_at, lease_owner, lease_expires_at, result, released_attempts, owner";
 
 constexpr std::string_view kProgressColumns =
     "seq, attempt, event, iteration, cost, gradient_norm, parameters, elapsed_s, state, message, "
@@ -65,6 +66,7 @@ Result<Job> ReadJob(const SqliteStatement& row) {
     SOFTID_ASSIGN_OR_RETURN(job.result, ParseStoredJson(row.ColumnText(13), "jobs.result"));
   }
   job.released_attempts = static_cast<int>(row.ColumnInt64(14));
+  job.owner = row.ColumnText(15);
   return job;
 }
 
@@ -198,7 +200,7 @@ Result<std::optional<Capture>> SqliteJobStore::FindCaptureByRequestId(
     const std::string& request_id) {
   SOFTID_ASSIGN_OR_RETURN(
       SqliteStatement stmt,
-      db_.Prepare("SELECT id, manifest, created_at FROM captures WHERE request_id = ?1"));
+      db_.Prepare("SELECT id, manifest, created_at, owner FROM captures WHERE request_id = ?1"));
   SOFTID_RETURN_IF_ERROR(stmt.Bind(request_id));
   SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
   if (!found) return std::optional<Capture>();
@@ -209,6 +211,7 @@ Result<std::optional<Capture>> SqliteJobStore::FindCaptureByRequestId(
                           ParseStoredJson(stmt.ColumnText(1), "captures.manifest"));
   SOFTID_ASSIGN_OR_RETURN(capture.manifest, ManifestFromJson(manifest));
   capture.created_at = FromUnixMicros(stmt.ColumnInt64(2));
+  capture.owner = stmt.ColumnText(3);
   return std::optional<Capture>(std::move(capture));
 }
 
@@ -249,13 +252,18 @@ Result<int64_t> SqliteJobStore::AppendStateEvent(const Job& job, const std::stri
 // --- Captures ------------------------------------------------------------------------------------
 
 Result<Capture> SqliteJobStore::CreateCapture(const std::vector<ManifestEntry>& manifest,
-                                              const std::string& request_id) {
+                                              const std::string& request_id,
+                                              const std::string& owner) {
   SOFTID_RETURN_IF_ERROR(ValidateManifest(manifest));
   SOFTID_RETURN_IF_ERROR(CheckRequestId(request_id));
   return Write([&]() -> Result<Capture> {
     if (!request_id.empty()) {
       SOFTID_ASSIGN_OR_RETURN(std::optional<Capture> existing, FindCaptureByRequestId(request_id));
       if (existing.has_value()) {
+        if (existing->owner != owner) {
+          return Status::FailedPrecondition("request_id '" + request_id +
+                                            "' is used by another station; choose another");
+        }
         if (existing->manifest != manifest) {
           return Status::FailedPrecondition("request_id '" + request_id +
                                             "' was already used to create capture " + existing->id +
@@ -269,13 +277,14 @@ Result<Capture> SqliteJobStore::CreateCapture(const std::vector<ManifestEntry>& 
     capture.request_id = request_id;
     capture.manifest = manifest;
     capture.created_at = Now();
+    capture.owner = owner;
     SOFTID_ASSIGN_OR_RETURN(
         SqliteStatement stmt,
-        db_.Prepare("INSERT INTO captures (id, request_id, manifest, created_at) "
-                    "VALUES (?1, ?2, ?3, ?4)"));
+        db_.Prepare("INSERT INTO captures (id, request_id, manifest, created_at, owner) "
+                    "VALUES (?1, ?2, ?3, ?4, ?5)"));
     SOFTID_RETURN_IF_ERROR(stmt.Bind(capture.id, NullIfEmpty(request_id),
                                      DumpJson(ManifestToJson(manifest)),
-                                     ToUnixMicros(capture.created_at)));
+                                     ToUnixMicros(capture.created_at), owner));
     SOFTID_RETURN_IF_ERROR(stmt.Run());
     return capture;
   });
@@ -286,7 +295,7 @@ Result<Capture> SqliteJobStore::GetCapture(const std::string& capture_id) {
   return Read([&]() -> Result<Capture> {
     SOFTID_ASSIGN_OR_RETURN(
         SqliteStatement stmt,
-        db_.Prepare("SELECT request_id, manifest, created_at FROM captures WHERE id = ?1"));
+        db_.Prepare("SELECT request_id, manifest, created_at, owner FROM captures WHERE id = ?1"));
     SOFTID_RETURN_IF_ERROR(stmt.Bind(capture_id));
     SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
     if (!found) return Status::NotFound("capture " + capture_id + " not found");
@@ -297,6 +306,7 @@ Result<Capture> SqliteJobStore::GetCapture(const std::string& capture_id) {
                             ParseStoredJson(stmt.ColumnText(1), "captures.manifest"));
     SOFTID_ASSIGN_OR_RETURN(capture.manifest, ManifestFromJson(manifest));
     capture.created_at = FromUnixMicros(stmt.ColumnInt64(2));
+    capture.owner = stmt.ColumnText(3);
     return capture;
   });
 }
@@ -304,27 +314,29 @@ Result<Capture> SqliteJobStore::GetCapture(const std::string& capture_id) {
 // --- Jobs: API side ------------------------------------------------------------------------------
 
 Result<Job> SqliteJobStore::CreateJob(const std::string& capture_id, const nlohmann::json& config,
-                                      const std::string& request_id) {
+                                      const std::string& request_id, const std::string& owner) {
   SOFTID_ASSIGN_OR_RETURN(std::optional<Job> job,
-                          CreateJobIfRoom(capture_id, config, request_id, std::nullopt));
+                          CreateJobIfRoom(capture_id, config, request_id, std::nullopt, owner));
   return *std::move(job);
 }
 
 Result<std::optional<Job>> SqliteJobStore::CreateJobBounded(const std::string& capture_id,
                                                             const nlohmann::json& config,
                                                             const std::string& request_id,
-                                                            int64_t max_queued) {
+                                                            int64_t max_queued,
+                                                            const std::string& owner) {
   if (max_queued < 1) {
     return Status::InvalidArgument("max_queued = " + std::to_string(max_queued) +
                                    ": must be at least 1");
   }
-  return CreateJobIfRoom(capture_id, config, request_id, max_queued);
+  return CreateJobIfRoom(capture_id, config, request_id, max_queued, owner);
 }
 
 Result<std::optional<Job>> SqliteJobStore::CreateJobIfRoom(const std::string& capture_id,
                                                            const nlohmann::json& config,
                                                            const std::string& request_id,
-                                                           std::optional<int64_t> max_queued) {
+                                                           std::optional<int64_t> max_queued,
+                                                           const std::string& owner) {
   SOFTID_RETURN_IF_ERROR(CheckResourceId(capture_id, kCaptureIdPrefix, "capture id"));
   if (!config.is_object()) return json::Invalid("config", config, "must be a JSON object");
   SOFTID_RETURN_IF_ERROR(CheckRequestId(request_id));
@@ -332,6 +344,10 @@ Result<std::optional<Job>> SqliteJobStore::CreateJobIfRoom(const std::string& ca
     if (!request_id.empty()) {
       SOFTID_ASSIGN_OR_RETURN(std::optional<Job> existing, FindJobByRequestId(request_id));
       if (existing.has_value()) {
+        if (existing->owner != owner) {
+          return Status::FailedPrecondition("request_id '" + request_id +
+                                            "' is used by another station; choose another");
+        }
         if (existing->capture_id != capture_id || existing->config != config) {
           return Status::FailedPrecondition(
               "request_id '" + request_id + "' was already used to create job " + existing->id +
@@ -362,11 +378,12 @@ Result<std::optional<Job>> SqliteJobStore::CreateJobIfRoom(const std::string& ca
     job.config = config;
     job.state = JobState::kQueued;
     job.created_at = Now();
+    job.owner = owner;
     SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
-        INSERT INTO jobs (id, request_id, capture_id, config, state, created_at)
-        VALUES (?1, ?2, ?3, ?4, 'QUEUED', ?5))sql"));
+        INSERT INTO jobs (id, request_id, capture_id, config, state, created_at, owner)
+        VALUES (?1, ?2, ?3, ?4, 'QUEUED', ?5, ?6))sql"));
     SOFTID_RETURN_IF_ERROR(stmt.Bind(job.id, NullIfEmpty(request_id), capture_id, DumpJson(config),
-                                     ToUnixMicros(job.created_at)));
+                                     ToUnixMicros(job.created_at), owner));
     SOFTID_RETURN_IF_ERROR(stmt.Run());
     SOFTID_RETURN_IF_ERROR(AppendStateEvent(job, "created", job.created_at).status());
     return std::optional<Job>(std::move(job));
@@ -385,8 +402,9 @@ Result<JobPage> SqliteJobStore::ListJobs(const ListJobsRequest& request) {
   }
   int page_size = request.page_size == 0 ? ListJobsRequest::kDefaultPageSize : request.page_size;
   page_size = std::min(page_size, ListJobsRequest::kMaxPageSize);
-  const std::string filter =
+  std::string filter =
       request.state.has_value() ? std::string("state=") + ToString(*request.state) : "";
+  if (request.owner.has_value()) filter += "&owner=" + *request.owner;
   std::optional<PageCursor> after;
   if (!request.page_token.empty()) {
     SOFTID_ASSIGN_OR_RETURN(after, DecodePageToken(request.page_token, filter));
@@ -396,8 +414,10 @@ Result<JobPage> SqliteJobStore::ListJobs(const ListJobsRequest& request) {
   // matching index: jobs_by_state with a filter, jobs_by_creation without.
   std::string sql = "SELECT " + std::string(kJobColumns) + " FROM jobs WHERE 1";
   if (request.state.has_value()) sql += " AND state = ?1";
+  if (request.owner.has_value()) sql += " AND owner = ?4";
   if (after.has_value()) sql += " AND (created_at, id) > (?2, ?3)";
-  sql += " ORDER BY created_at, id LIMIT ?4";
+  // The limit is the highest parameter, so the unused filters' slots below it can be bound.
+  sql += " ORDER BY created_at, id LIMIT ?5";
 
   return Read([&]() -> Result<JobPage> {
     SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(sql));
@@ -411,7 +431,8 @@ Result<JobPage> SqliteJobStore::ListJobs(const ListJobsRequest& request) {
     }
     // One row more than the page tells whether another page follows, so the last page never
     // hands out a token that leads to an empty page.
-    SOFTID_RETURN_IF_ERROR(stmt.Bind(state_text, after_created, after_id, page_size + 1));
+    SOFTID_RETURN_IF_ERROR(
+        stmt.Bind(state_text, after_created, after_id, request.owner, page_size + 1));
     JobPage page;
     while (true) {
       SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
@@ -822,6 +843,97 @@ Result<RecoverySummary> SqliteJobStore::RecoverAfterCrash(int max_attempts, Reco
       SOFTID_RETURN_IF_ERROR(AppendStateEvent(job, message, now).status());
     }
     return summary;
+  });
+}
+
+// --- Tokens --------------------------------------------------------------------------------------
+
+namespace {
+
+constexpr std::string_view kTokenColumns =
+    "id, station, admin, secret_sha256, created_at, expires_at, revoked_at";
+
+ApiToken ReadToken(const SqliteStatement& row) {
+  ApiToken token;
+  token.id = row.ColumnText(0);
+  token.station = row.ColumnText(1);
+  token.admin = row.ColumnInt64(2) != 0;
+  token.secret_sha256 = row.ColumnText(3);
+  token.created_at = FromUnixMicros(row.ColumnInt64(4));
+  token.expires_at = OptionalTimestamp(row.ColumnOptionalInt64(5));
+  token.revoked_at = OptionalTimestamp(row.ColumnOptionalInt64(6));
+  return token;
+}
+
+}  // namespace
+
+Result<ApiToken> SqliteJobStore::CreateToken(const std::string& station, bool admin,
+                                             std::optional<Timestamp> expires_at,
+                                             const std::string& secret_sha256) {
+  SOFTID_RETURN_IF_ERROR(ValidateStationName(station));
+  if (!Sha256::IsValidHex(secret_sha256)) {
+    return json::Invalid("secret_sha256", secret_sha256, "must be 64 lowercase hex digits");
+  }
+  return Write([&]() -> Result<ApiToken> {
+    ApiToken token;
+    token.id = NewResourceId(kTokenIdPrefix);
+    token.station = station;
+    token.admin = admin;
+    token.secret_sha256 = secret_sha256;
+    token.created_at = Now();
+    token.expires_at = expires_at;
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                            db_.Prepare("INSERT INTO tokens (" + std::string(kTokenColumns) +
+                                        ") VALUES (?1, ?2, ?3, ?4, ?5, ?6, NULL)"));
+    std::optional<int64_t> expires;
+    if (expires_at.has_value()) expires = ToUnixMicros(*expires_at);
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(token.id, station, int64_t{admin ? 1 : 0}, secret_sha256,
+                                     ToUnixMicros(token.created_at), expires));
+    SOFTID_RETURN_IF_ERROR(stmt.Run());
+    return token;
+  });
+}
+
+Result<std::optional<ApiToken>> SqliteJobStore::FindToken(const std::string& secret_sha256) {
+  return Read([&]() -> Result<std::optional<ApiToken>> {
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                            db_.Prepare("SELECT " + std::string(kTokenColumns) +
+                                        " FROM tokens WHERE secret_sha256 = ?1"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(secret_sha256));
+    SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
+    if (!found) return std::optional<ApiToken>();
+    return std::optional<ApiToken>(ReadToken(stmt));
+  });
+}
+
+Result<std::vector<ApiToken>> SqliteJobStore::ListTokens() {
+  return Read([&]() -> Result<std::vector<ApiToken>> {
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                            db_.Prepare("SELECT " + std::string(kTokenColumns) +
+                                        " FROM tokens ORDER BY created_at, id"));
+    std::vector<ApiToken> tokens;
+    while (true) {
+      SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+      if (!has_row) break;
+      tokens.push_back(ReadToken(stmt));
+    }
+    return tokens;
+  });
+}
+
+Status SqliteJobStore::RevokeToken(const std::string& token_id) {
+  SOFTID_RETURN_IF_ERROR(CheckResourceId(token_id, kTokenIdPrefix, "token id"));
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(
+        SqliteStatement stmt,
+        db_.Prepare("UPDATE tokens SET revoked_at = COALESCE(revoked_at, ?2) WHERE id = ?1 "
+                    "RETURNING id"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(token_id, ToUnixMicros(Now())));
+    SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
+    if (!found) return Status::NotFound("token " + token_id + " not found");
+    SOFTID_ASSIGN_OR_RETURN(const bool more, stmt.Step());
+    (void)more;
+    return Status::Ok();
   });
 }
 

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "core/common/status.h"
+#include "server/store/api_token.h"
 #include "server/store/job_store.h"
 #include "server/store/sqlite_database.h"
 #include "server/store/timestamp.h"
@@ -35,7 +36,7 @@ struct SqliteJobStoreOptions {
   std::shared_ptr<spdlog::logger> logger;
 };
 
-class SqliteJobStore final : public JobStore {
+class SqliteJobStore final : public JobStore, public TokenStore {
  public:
   // Opens or creates the database at `path` and migrates its schema (see MigrateSqliteSchema:
   // FailedPrecondition for a newer schema). Does not recover jobs left RUNNING: the caller decides
@@ -48,15 +49,16 @@ class SqliteJobStore final : public JobStore {
   SqliteJobStore& operator=(const SqliteJobStore&) = delete;
 
   Result<Capture> CreateCapture(const std::vector<ManifestEntry>& manifest,
-                                const std::string& request_id) override;
+                                const std::string& request_id,
+                                const std::string& owner = "") override;
   Result<Capture> GetCapture(const std::string& capture_id) override;
 
   Result<Job> CreateJob(const std::string& capture_id, const nlohmann::json& config,
-                        const std::string& request_id) override;
+                        const std::string& request_id, const std::string& owner = "") override;
   Result<std::optional<Job>> CreateJobBounded(const std::string& capture_id,
                                               const nlohmann::json& config,
-                                              const std::string& request_id,
-                                              int64_t max_queued) override;
+                                              const std::string& request_id, int64_t max_queued,
+                                              const std::string& owner = "") override;
   Result<Job> GetJob(const std::string& job_id) override;
   Result<JobPage> ListJobs(const ListJobsRequest& request) override;
   Result<int64_t> CountJobs(std::optional<JobState> state) override;
@@ -83,6 +85,14 @@ class SqliteJobStore final : public JobStore {
   Result<bool> IsBlobReferenced(const std::string& sha256) override;
   Status Close() override;
 
+  // TokenStore
+  Result<ApiToken> CreateToken(const std::string& station, bool admin,
+                               std::optional<Timestamp> expires_at,
+                               const std::string& secret_sha256) override;
+  Result<std::optional<ApiToken>> FindToken(const std::string& secret_sha256) override;
+  Result<std::vector<ApiToken>> ListTokens() override;
+  Status RevokeToken(const std::string& token_id) override;
+
   // SQLite only: a consistent copy of the database at `destination` (VACUUM INTO), taken while the
   // store stays in use. `destination` must not exist.
   Status Backup(const std::filesystem::path& destination);
@@ -104,7 +114,8 @@ class SqliteJobStore final : public JobStore {
   Result<std::optional<Job>> CreateJobIfRoom(const std::string& capture_id,
                                              const nlohmann::json& config,
                                              const std::string& request_id,
-                                             std::optional<int64_t> max_queued);
+                                             std::optional<int64_t> max_queued,
+                                             const std::string& owner);
 
   // Helpers for use inside Write/Read.
   Result<Job> LoadJob(const std::string& job_id);

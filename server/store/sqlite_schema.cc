@@ -83,6 +83,22 @@ ALTER TABLE progress ADD COLUMN start INTEGER NOT NULL DEFAULT 0 CHECK (start >=
 ALTER TABLE progress ADD COLUMN num_starts INTEGER NOT NULL DEFAULT 1 CHECK (num_starts >= 1);
 ALTER TABLE progress ADD COLUMN remaining_s REAL;
 )sql",
+    // 3 -> 4: per-station API tokens (only their secrets' hashes) and the station owning each
+    // capture and job ('' for those created without authentication).
+    R"sql(
+ALTER TABLE captures ADD COLUMN owner TEXT NOT NULL DEFAULT '';
+ALTER TABLE jobs ADD COLUMN owner TEXT NOT NULL DEFAULT '';
+CREATE INDEX jobs_by_owner ON jobs (owner, created_at, id);
+CREATE TABLE tokens (
+  id             TEXT PRIMARY KEY NOT NULL,
+  station        TEXT NOT NULL,
+  admin          INTEGER NOT NULL DEFAULT 0 CHECK (admin IN (0, 1)),
+  secret_sha256  TEXT NOT NULL UNIQUE,
+  created_at     INTEGER NOT NULL,
+  expires_at     INTEGER,
+  revoked_at     INTEGER
+) STRICT;
+)sql",
 };
 
 Result<int64_t> ReadPragma(SqliteDatabase& db, std::string_view pragma) {

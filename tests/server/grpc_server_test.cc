@@ -17,7 +17,9 @@
 
 #include "client/capture_files.h"
 #include "client/reconstruction_client.h"
+#include "server/api_tokens.h"
 #include "server/server.h"
+#include "server/store/sqlite_job_store.h"
 #include "tests/core/inverse/inverse_test_util.h"
 #include "tests/server/temp_dir.h"
 
@@ -267,6 +269,94 @@ TEST_F(GrpcServerTest, IdleUploadsAreCancelledAndConcurrentUploadsBounded) {
   EXPECT_TRUE(fs::is_empty(data_.path() / "uploads"));
   // The slots are free again: a complete upload goes through.
   EXPECT_FALSE(Upload().id().empty());
+}
+
+// With tokens on, 16 stations upload and create jobs at once, each through its own token; each
+// lists and reads only its own job, another's is NOT_FOUND, a call without a token or with a
+// revoked one is UNAUTHENTICATED, and an admin token sees all.
+TEST_F(GrpcServerTest, SixteenStationsWithTokensSeeOnlyTheirOwnJobs) {
+  constexpr int kStations = 16;
+  std::vector<std::string> secrets;
+  std::string admin_secret, revoked_secret;
+  {
+    Result<std::unique_ptr<store::SqliteJobStore>> tokens =
+        store::SqliteJobStore::Open(data_.path() / "softid.db");
+    ASSERT_TRUE(tokens.ok()) << tokens.status().ToString();
+    for (int i = 0; i < kStations; ++i) {
+      Result<IssuedToken> issued =
+          IssueToken(**tokens, "station-" + std::to_string(i), false, std::nullopt);
+      ASSERT_TRUE(issued.ok()) << issued.status().ToString();
+      secrets.push_back(issued->secret);
+    }
+    admin_secret = IssueToken(**tokens, "ops", true, std::nullopt)->secret;
+    Result<IssuedToken> revoked = IssueToken(**tokens, "old", false, std::nullopt);
+    ASSERT_TRUE(revoked.ok());
+    revoked_secret = revoked->secret;
+    ASSERT_TRUE((*tokens)->RevokeToken(revoked->token.id).ok());
+    ASSERT_TRUE((*tokens)->Close().ok());
+  }
+  StartServer(/*num_workers=*/0, [](ServerOptions& options) { options.auth = AuthMode::kToken; });
+  const auto client_for = [&](const std::string& token) {
+    client::ClientOptions options;
+    options.retry_budget = std::chrono::milliseconds(0);
+    options.token = token;
+    return std::make_unique<ReconstructionClient>(
+        grpc::CreateChannel("localhost:" + std::to_string(server_->port()),
+                            grpc::InsecureChannelCredentials()),
+        options);
+  };
+
+  std::vector<std::string> job_ids(kStations);
+  std::vector<std::string> errors(kStations);
+  {
+    const client::CaptureFiles files = CaptureFiles();
+    std::vector<std::thread> stations;
+    for (int i = 0; i < kStations; ++i) {
+      stations.emplace_back([&, i] {
+        std::unique_ptr<ReconstructionClient> client = client_for(secrets[i]);
+        v1::Capture capture;
+        grpc::Status status = client->UploadCapture(files, "", &capture);
+        if (!status.ok()) {
+          errors[i] = "upload: " + status.error_message();
+          return;
+        }
+        v1::CreateJobRequest request;
+        request.set_capture_id(capture.id());
+        request.set_config_json(FitConfig(1));
+        v1::Job job;
+        status = client->CreateJob(request, &job);
+        if (!status.ok()) {
+          errors[i] = "create: " + status.error_message();
+          return;
+        }
+        job_ids[i] = job.id();
+      });
+    }
+    for (std::thread& station : stations) station.join();
+  }
+  for (int i = 0; i < kStations; ++i) ASSERT_EQ(errors[i], "") << "station " << i;
+
+  for (int i = 0; i < kStations; ++i) {
+    std::unique_ptr<ReconstructionClient> client = client_for(secrets[i]);
+    v1::ListJobsResponse page;
+    ASSERT_TRUE(client->ListJobs(v1::ListJobsRequest(), &page).ok());
+    ASSERT_EQ(page.jobs_size(), 1) << "station " << i;
+    EXPECT_EQ(page.jobs(0).id(), job_ids[i]);
+    v1::Job other;
+    EXPECT_EQ(client->GetJob(job_ids[(i + 1) % kStations], &other).error_code(),
+              grpc::StatusCode::NOT_FOUND);
+  }
+  v1::ListJobsResponse all;
+  ASSERT_TRUE(client_for(admin_secret)->ListJobs(v1::ListJobsRequest(), &all).ok());
+  EXPECT_EQ(all.jobs_size(), kStations);
+  v1::ListJobsResponse none;
+  EXPECT_EQ(client_for("")->ListJobs(v1::ListJobsRequest(), &none).error_code(),
+            grpc::StatusCode::UNAUTHENTICATED);
+  EXPECT_EQ(client_for(revoked_secret)->ListJobs(v1::ListJobsRequest(), &none).error_code(),
+            grpc::StatusCode::UNAUTHENTICATED);
+  // Health stays open for load balancers and probes.
+  client::ServingStatus serving = client::ServingStatus::kUnknown;
+  EXPECT_TRUE(client_for("")->Health("", &serving).ok());
 }
 
 // A config the core rejects is INVALID_ARGUMENT naming the field and value.

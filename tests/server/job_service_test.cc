@@ -83,6 +83,10 @@ class JobServiceTest : public ::testing::Test {
   // Begin, every file in one chunk, Finish and store: the first error on the way, or the capture.
   ServiceResult<store::Capture> Upload(const UploadFiles& upload,
                                        const std::string& request_id = "") {
+    return UploadAs(caller_, upload, request_id);
+  }
+  ServiceResult<store::Capture> UploadAs(const Caller& caller, const UploadFiles& upload,
+                                         const std::string& request_id = "") {
     UploadManifest manifest;
     manifest.request_id = request_id;
     manifest.capture_json = upload.capture_json.dump();
@@ -90,13 +94,13 @@ class JobServiceTest : public ::testing::Test {
       manifest.files.push_back(
           {path, store::Sha256::Hex(bytes), static_cast<int64_t>(bytes.size())});
     }
-    ServiceResult<std::unique_ptr<CaptureUpload>> begun = service_->BeginUpload(manifest);
+    ServiceResult<std::unique_ptr<CaptureUpload>> begun = service_->BeginUpload(caller, manifest);
     if (!begun.ok()) return begun.status();
     for (const auto& [path, bytes] : upload.files) {
       if (bytes.empty()) continue;
       if (ServiceStatus added = (*begun)->AddChunk(path, 0, bytes); !added.ok()) return added;
     }
-    return service_->FinishUpload(**begun);
+    return service_->FinishUpload(caller, **begun);
   }
 
   // Expects INVALID_ARGUMENT whose message contains `needle` and no server path.
@@ -107,6 +111,7 @@ class JobServiceTest : public ::testing::Test {
   }
 
   static inverse::testing::SmallCapture* capture_;
+  const Caller caller_ = Caller::Operator();
   store::testing::TempDir data_;
   std::unique_ptr<store::SqliteJobStore> jobs_;
   std::optional<store::BlobStore> blobs_;
@@ -121,7 +126,7 @@ TEST_F(JobServiceTest, DeeplyNestedJsonIsRefusedNotCrashed) {
   const std::string deep = std::string(100000, '[') + std::string(100000, ']');
   Status status;
   std::thread rpc([&] {
-    ServiceResult<store::Job> job = service_->CreateJob("cap-0123456789abcdef", deep, "");
+    ServiceResult<store::Job> job = service_->CreateJob(caller_, "cap-0123456789abcdef", deep, "");
     status = job.ok() ? Status::Ok() : Status::InvalidArgument(job.status().message());
   });
   rpc.join();
@@ -130,7 +135,8 @@ TEST_F(JobServiceTest, DeeplyNestedJsonIsRefusedNotCrashed) {
 
   UploadManifest manifest;
   manifest.capture_json = "{\"cameras\": " + deep + "}";
-  ExpectInvalid(service_->BeginUpload(manifest).status(), "capture_json: nested deeper than");
+  ExpectInvalid(service_->BeginUpload(caller_, manifest).status(),
+                "capture_json: nested deeper than");
 }
 
 TEST_F(JobServiceTest, NanInCaptureJsonNamesTheField) {
@@ -140,7 +146,7 @@ TEST_F(JobServiceTest, NanInCaptureJsonNamesTheField) {
   ASSERT_NE(fx, std::string::npos);
   text.insert(fx + 5, "NaN, \"fx_was\":");
   manifest.capture_json = text;
-  ExpectInvalid(service_->BeginUpload(manifest).status(), "(in cameras[0].fx)");
+  ExpectInvalid(service_->BeginUpload(caller_, manifest).status(), "(in cameras[0].fx)");
 }
 
 // Configs that would exhaust memory, or that do not fit the capture, are refused at CreateJob
@@ -149,21 +155,25 @@ TEST_F(JobServiceTest, ResourceBoundsAreCheckedAtCreateJob) {
   ServiceResult<store::Capture> capture = Upload(SmallCaptureFiles());
   ASSERT_TRUE(capture.ok()) << capture.status().ToString();
   const std::string id = capture->id;
-  ExpectInvalid(service_->CreateJob(id, R"({"cells": 300})", "").status(), "cells = 300");
-  ExpectInvalid(service_->CreateJob(id, R"({"cells": 100000})", "").status(), "cells = 100000");
-  ExpectInvalid(service_->CreateJob(id, R"({"substeps": 20000})", "").status(), "substeps = 20000");
-  ExpectInvalid(service_->CreateJob(id, R"({"cell_size": 1e-9})", "").status(),
+  ExpectInvalid(service_->CreateJob(caller_, id, R"({"cells": 300})", "").status(), "cells = 300");
+  ExpectInvalid(service_->CreateJob(caller_, id, R"({"cells": 100000})", "").status(),
+                "cells = 100000");
+  ExpectInvalid(service_->CreateJob(caller_, id, R"({"substeps": 20000})", "").status(),
+                "substeps = 20000");
+  ExpectInvalid(service_->CreateJob(caller_, id, R"({"cell_size": 1e-9})", "").status(),
                 "cell_size = 1e-09");
   const int frames = capture_->capture.NumFrames();
   ExpectInvalid(
-      service_->CreateJob(id, nlohmann::json{{"frames", {{"last", frames}}}}.dump(), "").status(),
+      service_->CreateJob(caller_, id, nlohmann::json{{"frames", {{"last", frames}}}}.dump(), "")
+          .status(),
       "frames.last = " + std::to_string(frames) + ": the capture has " + std::to_string(frames) +
           " frames");
   ExpectInvalid(
-      service_->CreateJob(id, nlohmann::json{{"frames", {{"first", frames + 5}}}}.dump(), "")
+      service_
+          ->CreateJob(caller_, id, nlohmann::json{{"frames", {{"first", frames + 5}}}}.dump(), "")
           .status(),
       "frames.first");
-  const ServiceResult<store::Job> ok = service_->CreateJob(id, R"({"cells": 12})", "");
+  const ServiceResult<store::Job> ok = service_->CreateJob(caller_, id, R"({"cells": 12})", "");
   ASSERT_TRUE(ok.ok()) << ok.status().ToString();
   EXPECT_EQ(ok->state, store::JobState::kQueued);
 }
@@ -171,10 +181,11 @@ TEST_F(JobServiceTest, ResourceBoundsAreCheckedAtCreateJob) {
 TEST_F(JobServiceTest, RequestIdIsBounded) {
   ServiceResult<store::Capture> capture = Upload(SmallCaptureFiles());
   ASSERT_TRUE(capture.ok()) << capture.status().ToString();
-  ExpectInvalid(service_->CreateJob(capture->id, "{}", std::string(129, 'r')).status(),
+  ExpectInvalid(service_->CreateJob(caller_, capture->id, "{}", std::string(129, 'r')).status(),
                 "request_id");
-  ExpectInvalid(service_->CreateJob(capture->id, "{}", "a\nb").status(), "control characters");
-  EXPECT_TRUE(service_->CreateJob(capture->id, "{}", std::string(128, 'r')).ok());
+  ExpectInvalid(service_->CreateJob(caller_, capture->id, "{}", "a\nb").status(),
+                "control characters");
+  EXPECT_TRUE(service_->CreateJob(caller_, capture->id, "{}", std::string(128, 'r')).ok());
   ExpectInvalid(Upload(SmallCaptureFiles(), std::string(200, 'x')).status(), "request_id");
 }
 
@@ -244,6 +255,56 @@ TEST_F(JobServiceTest, MeshReferringOutsideTheUploadIsRefused) {
     messages[i] = status.message();
   }
   EXPECT_EQ(messages[0], messages[1]);
+}
+
+// A station sees, watches, cancels and deletes only its own captures and jobs; another station's
+// answer NOT_FOUND like missing ones; an admin sees everything.
+TEST_F(JobServiceTest, StationsSeeOnlyTheirOwnCapturesAndJobs) {
+  const Caller a{"lab-a", false}, b{"lab-b", false}, admin{"ops", true};
+  ServiceResult<store::Capture> capture = UploadAs(a, SmallCaptureFiles(), "a-upload");
+  ASSERT_TRUE(capture.ok()) << capture.status().ToString();
+  EXPECT_EQ(capture->owner, "lab-a");
+  ServiceResult<store::Job> job = service_->CreateJob(a, capture->id, R"({"cells": 8})", "a-job");
+  ASSERT_TRUE(job.ok()) << job.status().ToString();
+  EXPECT_EQ(job->owner, "lab-a");
+
+  const auto not_found = [](const ServiceStatus& status) {
+    return status.code() == ServiceCode::kNotFound;
+  };
+  EXPECT_TRUE(not_found(service_->GetJob(b, job->id).status()));
+  EXPECT_TRUE(not_found(service_->CancelJob(b, job->id).status()));
+  EXPECT_TRUE(not_found(service_->DeleteJob(b, job->id)));
+  EXPECT_TRUE(not_found(service_->GetResult(b, job->id).status()));
+  EXPECT_TRUE(not_found(
+      service_->WatchJob(b, job->id, 0, [](const auto&, const auto&) { return true; }, {})));
+  EXPECT_TRUE(not_found(service_->CreateJob(b, capture->id, "{}", "").status()));
+  // The message is the one a missing job gets: nothing tells B the job exists.
+  EXPECT_EQ(service_->GetJob(b, job->id).status().message(), "job " + job->id + " not found");
+  EXPECT_EQ(service_->GetJob(b, "job-0123456789abcdef").status().message(),
+            "job job-0123456789abcdef not found");
+
+  ServiceResult<store::JobPage> b_jobs = service_->ListJobs(b, {});
+  ASSERT_TRUE(b_jobs.ok());
+  EXPECT_TRUE(b_jobs->jobs.empty());
+  ServiceResult<store::JobPage> a_jobs = service_->ListJobs(a, {});
+  ASSERT_TRUE(a_jobs.ok());
+  ASSERT_EQ(a_jobs->jobs.size(), 1u);
+  EXPECT_EQ(a_jobs->jobs[0].id, job->id);
+
+  ServiceResult<store::Capture> b_capture = UploadAs(b, SmallCaptureFiles());
+  ASSERT_TRUE(b_capture.ok());
+  // B reusing A's request id gets neither A's job nor its id.
+  const ServiceStatus reused =
+      service_->CreateJob(b, b_capture->id, R"({"cells": 8})", "a-job").status();
+  EXPECT_EQ(reused.code(), ServiceCode::kAlreadyExists);
+  EXPECT_EQ(reused.message().find(job->id), std::string::npos) << reused.message();
+  ASSERT_TRUE(service_->CreateJob(b, b_capture->id, R"({"cells": 8})", "").ok());
+  ServiceResult<store::JobPage> all = service_->ListJobs(admin, {});
+  ASSERT_TRUE(all.ok());
+  EXPECT_EQ(all->jobs.size(), 2u);
+  EXPECT_TRUE(service_->GetJob(admin, job->id).ok());
+  EXPECT_TRUE(service_->CancelJob(a, job->id).ok());
+  EXPECT_TRUE(service_->DeleteJob(a, job->id).ok());
 }
 
 }  // namespace

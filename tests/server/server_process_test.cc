@@ -92,25 +92,27 @@ class ServerProcess {
     int workers = 1;
     int max_queued = 100;
     int max_attempts = 3;
+    std::vector<std::string> extra;  // further flags
   };
 
   ServerProcess(const fs::path& data_dir, const fs::path& log_file, const Flags& flags)
       : port_file_(data_dir.string() + ".port"), log_file_(log_file) {
     std::error_code ignored;
     fs::remove(port_file_, ignored);
-    const std::vector<std::string> args = {SOFTID_SERVER_BINARY,
-                                           "--listen",
-                                           "localhost:0",
-                                           "--port-file",
-                                           port_file_.string(),
-                                           "--data",
-                                           data_dir.string(),
-                                           "--workers",
-                                           std::to_string(flags.workers),
-                                           "--max-queued",
-                                           std::to_string(flags.max_queued),
-                                           "--max-attempts",
-                                           std::to_string(flags.max_attempts)};
+    std::vector<std::string> args = {SOFTID_SERVER_BINARY,
+                                     "--listen",
+                                     "localhost:0",
+                                     "--port-file",
+                                     port_file_.string(),
+                                     "--data",
+                                     data_dir.string(),
+                                     "--workers",
+                                     std::to_string(flags.workers),
+                                     "--max-queued",
+                                     std::to_string(flags.max_queued),
+                                     "--max-attempts",
+                                     std::to_string(flags.max_attempts)};
+    args.insert(args.end(), flags.extra.begin(), flags.extra.end());
     std::vector<char*> argv;
     for (const std::string& arg : args) argv.push_back(const_cast<char*>(arg.c_str()));
     argv.push_back(nullptr);
@@ -163,8 +165,9 @@ class ServerProcess {
     return false;
   }
 
-  ReconstructionClient Client() const {
+  ReconstructionClient Client(const std::string& token = "") const {
     client::ClientOptions options;
+    options.token = token;
     options.retry_budget = std::chrono::milliseconds(0);
     options.call_timeout = std::chrono::milliseconds(10000);
     // A job that never ends fails the test instead of hanging it.
@@ -693,6 +696,58 @@ TEST_F(ServerProcessTest, OneListenerPrivateFilesAndOrphanBlobsSweptAtStart) {
   ReconstructionClient client = server->Client();
   v1::Job job;
   EXPECT_TRUE(Create(client, capture_id, FitConfig(1), "", &job).ok());
+  StopCleanly(*server);
+}
+
+// Standard output and exit status of `softid-server <args>` (the tokens subcommand).
+std::pair<std::string, int> RunServerCommand(const std::string& args) {
+  const std::string command = std::string(SOFTID_SERVER_BINARY) + " " + args + " 2>/dev/null";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (pipe == nullptr) return {"", -1};
+  std::string out;
+  char buffer[512];
+  while (std::fgets(buffer, sizeof buffer, pipe) != nullptr) out += buffer;
+  const int status = ::pclose(pipe);
+  return {out, WIFEXITED(status) ? WEXITSTATUS(status) : -1};
+}
+
+// The operator's token commands on a running server's data directory: a created token works at
+// once, list shows it (never its secret), and a revoked one is refused on the next call.
+TEST_F(ServerProcessTest, TokensCreatedAndRevokedFromTheCommandLine) {
+  fs::create_directories(data_dir());
+  const auto [secret_line, created] =
+      RunServerCommand("tokens create --data " + data_dir().string() + " --station lab-7");
+  ASSERT_EQ(created, 0);
+  const std::string secret = secret_line.substr(0, secret_line.find('\n'));
+  ASSERT_EQ(secret.rfind("softid_", 0), 0u) << secret_line;
+  EXPECT_EQ(
+      RunServerCommand("tokens create --data " + data_dir().string() + " --station 'a b'").second,
+      2);
+
+  ServerProcess::Flags flags;
+  flags.extra = {"--auth", "token"};
+  std::unique_ptr<ServerProcess> server = Start(flags);
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient station = server->Client(secret);
+  const std::string capture_id = Upload(station);
+  ASSERT_FALSE(capture_id.empty());
+  v1::ListJobsResponse page;
+  EXPECT_EQ(server->Client().ListJobs(v1::ListJobsRequest(), &page).error_code(),
+            grpc::StatusCode::UNAUTHENTICATED);
+
+  const auto [listed, list_status] =
+      RunServerCommand("tokens list --json --data " + data_dir().string());
+  ASSERT_EQ(list_status, 0);
+  const nlohmann::json tokens = nlohmann::json::parse(listed);
+  ASSERT_EQ(tokens.size(), 1u);
+  EXPECT_EQ(tokens[0]["station"], "lab-7");
+  EXPECT_EQ(listed.find(secret), std::string::npos);
+  ASSERT_EQ(RunServerCommand("tokens revoke --data " + data_dir().string() + " " +
+                             tokens[0]["id"].get<std::string>())
+                .second,
+            0);
+  EXPECT_EQ(station.ListJobs(v1::ListJobsRequest(), &page).error_code(),
+            grpc::StatusCode::UNAUTHENTICATED);
   StopCleanly(*server);
 }
 

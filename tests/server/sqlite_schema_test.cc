@@ -37,10 +37,13 @@ TEST(SqliteSchema, CreatesVersionedStrictSchema) {
     names.insert(tables->ColumnText(0));
     EXPECT_EQ(tables->ColumnInt64(1), 1) << tables->ColumnText(0) << " is not STRICT";
   }
-  EXPECT_EQ(names, (std::set<std::string>{"captures", "checkpoints", "jobs", "progress"}));
+  EXPECT_EQ(names,
+            (std::set<std::string>{"captures", "checkpoints", "jobs", "progress", "tokens"}));
 
   // STRICT and CHECK constraints hold: a bad state and a non-integer are refused.
-  EXPECT_TRUE(db->Exec("INSERT INTO captures VALUES ('cap-1', NULL, '[]', 0)").ok());
+  EXPECT_TRUE(db->Exec("INSERT INTO captures (id, request_id, manifest, created_at) VALUES "
+                       "('cap-1', NULL, '[]', 0)")
+                  .ok());
   const Status bad_state = db->Exec(
       "INSERT INTO jobs (id, capture_id, config, state, created_at) "
       "VALUES ('job-1', 'cap-1', '{}', 'PAUSED', 0)");
@@ -103,11 +106,15 @@ TEST(SqliteSchema, MigratesVersion1Jobs) {
     Result<SqliteDatabase> db = SqliteDatabase::Open(path);
     ASSERT_TRUE(db.ok());
     ASSERT_TRUE(MigrateSqliteSchema(*db).ok());
-    // Back to the version 1 layout: versions 2 and 3 only added these columns.
+    // Back to the version 1 layout: versions 2 to 4 only added these columns and tables.
     ASSERT_TRUE(db->Exec("ALTER TABLE jobs DROP COLUMN released_attempts").ok());
     for (const char* column : {"start", "num_starts", "remaining_s"}) {
       ASSERT_TRUE(db->Exec(std::string("ALTER TABLE progress DROP COLUMN ") + column).ok());
     }
+    ASSERT_TRUE(db->Exec("DROP INDEX jobs_by_owner").ok());
+    ASSERT_TRUE(db->Exec("DROP TABLE tokens").ok());
+    ASSERT_TRUE(db->Exec("ALTER TABLE jobs DROP COLUMN owner").ok());
+    ASSERT_TRUE(db->Exec("ALTER TABLE captures DROP COLUMN owner").ok());
     ASSERT_TRUE(db->Exec("PRAGMA user_version = 1").ok());
     ASSERT_TRUE(
         db->Exec("INSERT INTO captures VALUES ('cap-0123456789abcdef', NULL, '[]', 0)").ok());
@@ -122,6 +129,7 @@ TEST(SqliteSchema, MigratesVersion1Jobs) {
   ASSERT_TRUE(job.ok()) << job.status().ToString();
   EXPECT_EQ(job->attempts, 2);
   EXPECT_EQ(job->released_attempts, 0);
+  EXPECT_EQ(job->owner, "");
   ASSERT_TRUE((*store)->Close().ok());
   Result<SqliteDatabase> db = SqliteDatabase::Open(path);
   ASSERT_TRUE(db.ok());
