@@ -344,6 +344,12 @@ int main(int argc, char** argv) {
   CLI::App* cancel = app.add_subcommand("cancel", "cancel a job");
   cancel->add_option("job", job_id)->required();
   CLI::App* health = app.add_subcommand("health", "check that the server is serving");
+  std::string capture_id;
+  CLI::App* delete_job = app.add_subcommand("delete", "delete a job that is not running");
+  delete_job->add_option("job", job_id)->required();
+  CLI::App* delete_capture = app.add_subcommand(
+      "delete-capture", "delete an uploaded capture that no job uses (delete its jobs first)");
+  delete_capture->add_option("capture", capture_id)->required();
 
   try {
     app.parse(argc, argv);
@@ -397,6 +403,13 @@ int main(int argc, char** argv) {
     return kExitOk;
   }
   if (watch->parsed()) return WatchUntilDone(client, job_id, flags);
+  if (delete_job->parsed() || delete_capture->parsed()) {
+    const bool job = delete_job->parsed();
+    const grpc::Status s = job ? client.DeleteJob(job_id) : client.DeleteCapture(capture_id);
+    if (!s.ok()) return Report(s, flags);
+    if (!flags.json) std::cout << (job ? job_id : capture_id) << " deleted\n";
+    return kExitOk;
+  }
   if (result->parsed()) {
     v1::Result r;
     grpc::Status s = client.GetResult(job_id, &r);

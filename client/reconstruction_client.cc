@@ -150,6 +150,15 @@ grpc::Status ReconstructionClient::CancelJob(const std::string& job_id, v1::Job*
   });
 }
 
+grpc::Status ReconstructionClient::DeleteCapture(const std::string& capture_id) {
+  v1::DeleteCaptureRequest request;
+  request.set_capture_id(capture_id);
+  v1::DeleteCaptureResponse response;
+  return WithRetry(options_.call_timeout, [&](grpc::ClientContext* context) {
+    return stub_->DeleteCapture(context, request, &response);
+  });
+}
+
 grpc::Status ReconstructionClient::DeleteJob(const std::string& job_id) {
   v1::DeleteJobRequest request;
   request.set_job_id(job_id);

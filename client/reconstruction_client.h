@@ -51,6 +51,7 @@ class ReconstructionClient {
   grpc::Status ListJobs(const v1::ListJobsRequest& request, v1::ListJobsResponse* out);
   grpc::Status CancelJob(const std::string& job_id, v1::Job* out);
   grpc::Status DeleteJob(const std::string& job_id);
+  grpc::Status DeleteCapture(const std::string& capture_id);
   grpc::Status GetResult(const std::string& job_id, v1::Result* out);
   // Calls `on_event` for every event until the job is terminal (OK). Resumes after a cut from the
   // last iteration seen, skipping events already delivered (by seq).

@@ -31,7 +31,10 @@ ServiceResult<Caller> GrpcReconstructionService::Authenticate(
   const auto it = metadata.find("authorization");
   std::optional<std::string_view> value;
   if (it != metadata.end()) value = std::string_view(it->second.data(), it->second.size());
-  return authenticator_->Authenticate(value);
+  ServiceResult<Caller> caller = authenticator_->Authenticate(value);
+  if (!caller.ok()) return caller;
+  if (ServiceStatus admitted = service_->Admit(*caller); !admitted.ok()) return admitted;
+  return caller;
 }
 
 grpc::Status GrpcReconstructionService::IdledOut() const {
@@ -98,6 +101,14 @@ grpc::Status GrpcReconstructionService::UploadCapture(
   if (!capture.ok()) return Reply("UploadCapture", capture.status());
   ToProto(*capture, response);
   return grpc::Status::OK;
+}
+
+grpc::Status GrpcReconstructionService::DeleteCapture(grpc::ServerContext* context,
+                                                      const v1::DeleteCaptureRequest* request,
+                                                      v1::DeleteCaptureResponse* response) {
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("DeleteCapture", caller.status());
+  return Reply("DeleteCapture", service_->DeleteCapture(*caller, request->capture_id()));
 }
 
 grpc::Status GrpcReconstructionService::CreateJob(grpc::ServerContext* context,

@@ -33,6 +33,8 @@ class GrpcReconstructionService final : public v1::Reconstruction::Service {
   grpc::Status UploadCapture(grpc::ServerContext* context,
                              grpc::ServerReader<v1::UploadCaptureRequest>* reader,
                              v1::Capture* response) override;
+  grpc::Status DeleteCapture(grpc::ServerContext* context, const v1::DeleteCaptureRequest* request,
+                             v1::DeleteCaptureResponse* response) override;
   grpc::Status CreateJob(grpc::ServerContext* context, const v1::CreateJobRequest* request,
                          v1::Job* response) override;
   grpc::Status GetJob(grpc::ServerContext* context, const v1::GetJobRequest* request,
@@ -54,7 +56,7 @@ class GrpcReconstructionService final : public v1::Reconstruction::Service {
   // The reply to an upload the watchdog cancelled.
   grpc::Status IdledOut() const;
 
-  // The caller of this call, from its "authorization" metadata.
+  // The caller of this call, from its "authorization" metadata, counted against its call rate.
   ServiceResult<Caller> Authenticate(const grpc::ServerContext* context) const;
 
   JobService* service_;

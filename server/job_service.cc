@@ -1,7 +1,9 @@
 #include "server/job_service.h"
 
+#include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <fstream>
 
 #include "core/common/untrusted_json.h"
@@ -33,20 +35,71 @@ JobService::JobService(store::JobStore* jobs, const store::BlobStore* blobs, Job
       blobs_(blobs),
       events_(events),
       options_(std::move(options)),
-      logger_(logger ? std::move(logger) : spdlog::default_logger()) {}
+      logger_(logger ? std::move(logger) : spdlog::default_logger()),
+      rate_limiter_(options_.quotas.requests_per_second, options_.quotas.request_burst) {}
+
+JobService::StationState& JobService::Station(const std::string& station) {
+  std::lock_guard lock(stations_mutex_);
+  std::unique_ptr<StationState>& state = stations_[station];
+  if (!state) state = std::make_unique<StationState>();
+  return *state;
+}
+
+ServiceStatus JobService::Admit(const Caller& caller) {
+  if (caller.admin || rate_limiter_.Admit(caller.station)) return ServiceStatus::Ok();
+  return ServiceStatus(
+      ServiceCode::kResourceExhausted,
+      fmt::format("station \"{}\": more than {:g} calls per second (bursts of {:g}); retry later",
+                  caller.station, options_.quotas.requests_per_second,
+                  options_.quotas.request_burst));
+}
+
+// ResourceExhausted when `adding` more bytes would take the station past its stored-bytes quota.
+ServiceStatus JobService::CheckStoredBytes(const Caller& caller, int64_t adding) {
+  if (caller.admin) return ServiceStatus::Ok();
+  Result<int64_t> stored = jobs_->StoredBytes(caller.station);
+  if (!stored.ok()) return stored.status();
+  const int64_t quota = options_.quotas.max_stored_bytes;
+  if (*stored + adding <= quota) return ServiceStatus::Ok();
+  return ServiceStatus(ServiceCode::kResourceExhausted,
+                       fmt::format("station \"{}\" stores {} bytes of captures; {} more would "
+                                   "exceed its quota of {} bytes: delete captures first",
+                                   caller.station, *stored, adding, quota));
+}
 
 ServiceResult<std::unique_ptr<CaptureUpload>> JobService::BeginUpload(const Caller& caller,
                                                                       UploadManifest manifest) {
   if (draining()) return ServiceStatus(ServiceCode::kUnavailable, "the server is shutting down");
   if (Status valid = store::CheckRequestId(manifest.request_id); !valid.ok()) return valid;
+  int64_t declared = 0;
+  for (const store::ManifestEntry& entry : manifest.files)
+    declared += std::max<int64_t>(0, entry.size_bytes);
+  if (ServiceStatus room = CheckStoredBytes(caller, declared); !room.ok()) return room;
+  StationState& station = Station(caller.station);
+  {
+    std::lock_guard lock(stations_mutex_);
+    if (!caller.admin && station.uploads >= options_.quotas.max_concurrent_uploads) {
+      return ServiceStatus(ServiceCode::kResourceExhausted,
+                           fmt::format("station \"{}\": {} uploads in progress, its quota; "
+                                       "retry when one has finished",
+                                       caller.station, station.uploads));
+    }
+    ++station.uploads;
+  }
   const int limit = options_.upload_limits.max_concurrent;
   if (uploads_in_progress_.fetch_add(1) >= limit) {
     uploads_in_progress_.fetch_sub(1);
+    std::lock_guard lock(stations_mutex_);
+    --station.uploads;
     return ServiceStatus(ServiceCode::kResourceExhausted,
                          "uploads: " + std::to_string(limit) +
                              " are in progress, the most accepted at once; retry later");
   }
-  std::shared_ptr<void> slot(nullptr, [this](void*) { uploads_in_progress_.fetch_sub(1); });
+  std::shared_ptr<void> slot(nullptr, [this, &station](void*) {
+    uploads_in_progress_.fetch_sub(1);
+    std::lock_guard lock(stations_mutex_);
+    --station.uploads;
+  });
   ServiceResult<std::unique_ptr<CaptureUpload>> upload =
       CaptureUpload::Begin(std::move(manifest), options_.staging_root, options_.upload_limits);
   if (upload.ok()) (*upload)->HoldSlot(std::move(slot));
@@ -61,6 +114,12 @@ ServiceResult<store::Capture> JobService::FinishUpload(const Caller& caller,
   // added are removed again if it fails before its row is committed (disk full part way, a
   // request_id reused for other files), unless another capture refers to them by then.
   std::vector<std::string> added;
+  // The station's quota is checked again with its commits ordered, so two of its uploads cannot
+  // both fit the last of its room.
+  std::lock_guard quota(Station(caller.station).quota);
+  int64_t bytes = 0;
+  for (const store::ManifestEntry& entry : *manifest) bytes += entry.size_bytes;
+  if (ServiceStatus room = CheckStoredBytes(caller, bytes); !room.ok()) return room;
   ServiceResult<store::Capture> capture = [&]() -> ServiceResult<store::Capture> {
     std::shared_lock puts(blob_puts_);
     for (const store::ManifestEntry& entry : *manifest) {
@@ -107,7 +166,7 @@ void JobService::RemoveUnreferencedBlobs(const std::vector<std::string>& sha256s
     }
     ++removed;
   }
-  logger_->info("failed upload: removed {} of its {} new blob(s)", removed, sha256s.size());
+  logger_->info("removed {} of {} blob(s) no capture lists any more", removed, sha256s.size());
 }
 
 ServiceResult<store::Job> JobService::CreateJob(const Caller& caller, const std::string& capture_id,
@@ -127,6 +186,21 @@ ServiceResult<store::Job> JobService::CreateJob(const Caller& caller, const std:
   if (ServiceStatus fits = CheckJobFitsCapture(caller, *parsed, capture_id, request_id);
       !fits.ok()) {
     return fits;
+  }
+  // The station's quota: checked with its creates ordered; a repeated request_id still gets its
+  // job back (the store returns it) when the station is at its quota.
+  std::lock_guard quota(Station(caller.station).quota);
+  Result<int64_t> queued = jobs_->CountJobs(store::JobState::kQueued, caller.station);
+  if (!queued.ok()) return queued.status();
+  if (!caller.admin && *queued >= options_.quotas.max_queued_jobs) {
+    Result<bool> repeat = jobs_->HasJobWithRequestId(request_id);
+    if (!repeat.ok()) return repeat.status();
+    if (!*repeat) {
+      return ServiceStatus(ServiceCode::kResourceExhausted,
+                           fmt::format("station \"{}\" has {} jobs QUEUED, its quota; retry when "
+                                       "some have started",
+                                       caller.station, *queued));
+    }
   }
   // The store checks the bound in the transaction that inserts, so concurrent creates cannot
   // overshoot it, and a repeated request_id gets its job back even when the queue is full.
@@ -171,6 +245,21 @@ ServiceStatus JobService::CheckJobFitsCapture(const Caller& caller,
     return ServiceStatus(ServiceCode::kInvalidArgument,
                          "config_json: " + estimate.status().message());
   }
+  return ServiceStatus::Ok();
+}
+
+ServiceStatus JobService::DeleteCapture(const Caller& caller, const std::string& capture_id) {
+  Result<store::Capture> capture = jobs_->GetCapture(capture_id);
+  if (!capture.ok()) return capture.status();
+  if (!caller.Sees(capture->owner)) {
+    return ServiceStatus(ServiceCode::kNotFound, "capture " + capture_id + " not found");
+  }
+  Result<store::Capture> deleted = jobs_->DeleteCapture(capture_id);
+  if (!deleted.ok()) return deleted.status();
+  std::vector<std::string> sha256s;
+  for (const store::ManifestEntry& entry : deleted->manifest) sha256s.push_back(entry.sha256);
+  RemoveUnreferencedBlobs(sha256s);
+  logger_->info("capture {}: deleted", capture_id);
   return ServiceStatus::Ok();
 }
 

@@ -12,7 +12,9 @@
 #include <chrono>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <shared_mutex>
 #include <string>
 #include <vector>
@@ -21,11 +23,23 @@
 #include "server/caller.h"
 #include "server/capture_upload.h"
 #include "server/job_events.h"
+#include "server/rate_limiter.h"
 #include "server/service_status.h"
 #include "server/store/blob_store.h"
 #include "server/store/job_store.h"
 
 namespace softid::server {
+
+// What one station may use; every limit is answered RESOURCE_EXHAUSTED naming it. Admin tokens
+// and the operator of a server without authentication are not limited (the server-wide bounds
+// still hold: max_queued_jobs, upload_limits).
+struct StationQuotas {
+  int64_t max_queued_jobs = 100;                 // its jobs QUEUED at once
+  int64_t max_stored_bytes = int64_t{64} << 30;  // bytes of its stored captures
+  int max_concurrent_uploads = 4;                // its uploads in progress at once
+  double requests_per_second = 50.0;             // sustained call rate; <= 0: unlimited
+  double request_burst = 200.0;                  // calls it may make at once
+};
 
 struct JobServiceOptions {
   // CreateJob answers RESOURCE_EXHAUSTED once this many jobs are QUEUED: a bound on the work
@@ -43,6 +57,7 @@ struct JobServiceOptions {
   // job whose estimated needs exceed `job_limits` (inverse::EstimateJobResources).
   std::filesystem::path scratch_root;
   inverse::JobResourceLimits job_limits;
+  StationQuotas quotas;
 };
 
 // What GetResult returns.
@@ -92,6 +107,12 @@ class JobService {
   ServiceStatus WatchJob(const Caller& caller, const std::string& job_id, int from_iteration,
                          const EventSink& send, const std::function<bool()>& stop);
 
+  // Counts a call against the caller's request rate: ResourceExhausted when it is over.
+  ServiceStatus Admit(const Caller& caller);
+  // Deletes a capture of the caller's that no job uses, with the blobs no other capture lists.
+  // FailedPrecondition naming a job that still uses it.
+  ServiceStatus DeleteCapture(const Caller& caller, const std::string& capture_id);
+
   // Refuse new jobs and end watches (shutdown).
   void StartDraining();
   bool draining() const { return draining_.load(); }
@@ -112,6 +133,17 @@ class JobService {
   std::shared_ptr<spdlog::logger> logger_;
   std::atomic<bool> draining_{false};
   std::atomic<int> uploads_in_progress_{0};
+  RateLimiter rate_limiter_;
+  // Per station: uploads in progress, and a lock that orders its quota checks with the commits
+  // they guard (so concurrent calls of one station cannot overshoot a quota together).
+  struct StationState {
+    int uploads = 0;
+    std::mutex quota;
+  };
+  StationState& Station(const std::string& station);
+  ServiceStatus CheckStoredBytes(const Caller& caller, int64_t adding);
+  std::mutex stations_mutex_;
+  std::map<std::string, std::unique_ptr<StationState>> stations_;
   // Shared from an upload's first blob put to its commit; exclusive while a failed upload removes
   // its blobs (RemoveUnreferencedBlobs).
   std::shared_mutex blob_puts_;

@@ -116,6 +116,27 @@ int main(int argc, char** argv) {
       ->envname("SOFTID_AUTH")
       ->check(CLI::IsMember({"auto", "token", "none"}))
       ->capture_default_str();
+  softid::server::StationQuotas& quotas = options.quotas;
+  app.add_option("--quota-queued-jobs", quotas.max_queued_jobs,
+                 "jobs one station may have QUEUED at once")
+      ->envname("SOFTID_QUOTA_QUEUED_JOBS")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  double quota_stored_gib = static_cast<double>(quotas.max_stored_bytes) / (1ull << 30);
+  app.add_option("--quota-stored-gib", quota_stored_gib, "GiB of captures one station may store")
+      ->envname("SOFTID_QUOTA_STORED_GIB")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--quota-uploads", quotas.max_concurrent_uploads,
+                 "uploads one station may have in progress at once")
+      ->envname("SOFTID_QUOTA_UPLOADS")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
+  app.add_option("--quota-rate", quotas.requests_per_second,
+                 "calls per second one station may make (bursts of 4x); 0: unlimited")
+      ->envname("SOFTID_QUOTA_RATE")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   softid::server::TokensCommand tokens;
   softid::server::AddTokensCommand(app, &tokens);
   app.add_option("--port-file", port_file,
@@ -142,6 +163,8 @@ int main(int argc, char** argv) {
   // Files of the data directory (database, blobs) are private to the server's user.
   ::umask(077);
   options.max_job_memory_bytes = max_job_memory_gib * (1ull << 30);
+  quotas.max_stored_bytes = static_cast<int64_t>(quota_stored_gib * (1ull << 30));
+  quotas.request_burst = 4.0 * quotas.requests_per_second;
   options.upload_limits.idle_timeout =
       std::chrono::milliseconds(static_cast<int64_t>(upload_idle_timeout_s * 1000.0));
   spdlog::set_level(spdlog::level::from_str(log_level));

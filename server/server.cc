@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <mutex>
+#include <set>
 #include <system_error>
 #include <thread>
 
@@ -43,11 +44,15 @@ void RemoveOrphanBlobs(store::JobStore& jobs, const store::BlobStore& blobs,
     log->warn("orphan blob sweep skipped: {}", hashes.status().message());
     return;
   }
+  Result<std::vector<std::string>> listed = jobs.ListReferencedBlobs();
+  if (!listed.ok()) {
+    log->warn("orphan blob sweep skipped: {}", listed.status().message());
+    return;
+  }
+  const std::set<std::string> referenced(listed->begin(), listed->end());
   int removed = 0;
   for (const std::string& sha256 : *hashes) {
-    Result<bool> referenced = jobs.IsBlobReferenced(sha256);
-    if (!referenced.ok() || *referenced) continue;
-    if (blobs.Remove(sha256).ok()) ++removed;
+    if (!referenced.contains(sha256) && blobs.Remove(sha256).ok()) ++removed;
   }
   if (removed > 0) log->info("removed {} blob(s) that no capture refers to", removed);
 }
@@ -81,6 +86,12 @@ Status ServerOptions::Validate() const {
         "listen = " + listen_address +
         ": not a loopback address, and TLS is off: give --tls-cert and --tls-key, or "
         "--allow-insecure to serve in plain text anyway (only behind a trusted network)");
+  }
+  if (quotas.max_queued_jobs < 1 || quotas.max_stored_bytes < 1 ||
+      quotas.max_concurrent_uploads < 1) {
+    return Status::InvalidArgument(
+        "quota-queued-jobs, quota-stored-gib and quota-uploads must be "
+        "positive");
   }
   if (max_rpc_threads < 4) {
     return Status::InvalidArgument("max_rpc_threads = " + std::to_string(max_rpc_threads) +
@@ -183,6 +194,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   service_options.upload_limits = options.upload_limits;
   service_options.staging_root = staging;
   service_options.scratch_root = work;
+  service_options.quotas = options.quotas;
   service_options.job_limits.max_memory_bytes = options.max_job_memory_bytes;
   const int cores = static_cast<int>(std::thread::hardware_concurrency());
   service_options.job_limits.cores = std::max(1, cores / std::max(1, options.num_workers));

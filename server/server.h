@@ -19,6 +19,7 @@
 #include "core/common/status.h"
 #include "server/api_tokens.h"
 #include "server/capture_upload.h"
+#include "server/job_service.h"
 #include "server/transport_security.h"
 
 namespace softid::server {
@@ -49,6 +50,8 @@ struct ServerOptions {
   // Whether calls need a per-station API token (api_tokens.h). nullopt ("auto"): tokens on any
   // address but loopback, none on loopback.
   std::optional<AuthMode> auth;
+  // What each station may use (job_service.h).
+  StationQuotas quotas;
   // CreateJob refuses a job whose estimated memory exceeds this (inverse::JobResourceLimits).
   double max_job_memory_bytes = 4.0 * (1ull << 30);  // > 0
 

@@ -80,6 +80,11 @@ class JobStore {
                                         const std::string& request_id,
                                         const std::string& owner = "") = 0;
   virtual Result<Capture> GetCapture(const std::string& capture_id) = 0;
+  // Deletes a capture no job refers to and returns it (its blobs are the caller's to remove
+  // when no other capture lists them). FailedPrecondition naming a job that uses it.
+  virtual Result<Capture> DeleteCapture(const std::string& capture_id) = 0;
+  // Bytes of every file of the captures `owner` uploaded (as their manifests declare).
+  virtual Result<int64_t> StoredBytes(const std::string& owner) = 0;
 
   // --- Jobs: API side -------------------------------------------------------------------------
 
@@ -97,9 +102,12 @@ class JobStore {
                                                       int64_t max_queued,
                                                       const std::string& owner = "") = 0;
   virtual Result<Job> GetJob(const std::string& job_id) = 0;
+  // Whether a job was created with `request_id` (non-empty).
+  virtual Result<bool> HasJobWithRequestId(const std::string& request_id) = 0;
   virtual Result<JobPage> ListJobs(const ListJobsRequest& request) = 0;
-  // Jobs in `state`, or all jobs; used to bound the queue before CreateJob.
-  virtual Result<int64_t> CountJobs(std::optional<JobState> state) = 0;
+  // Jobs in `state`, or all jobs (of `owner` only, when given); used to bound the queue.
+  virtual Result<int64_t> CountJobs(std::optional<JobState> state,
+                                    std::optional<std::string> owner = std::nullopt) = 0;
   // QUEUED: CANCELLED at once. RUNNING: sets cancel_requested (the worker stops at its next check
   // and calls MarkCancelled); repeating it is harmless. Terminal: FailedPrecondition.
   // Returns the job after the change.
@@ -155,6 +163,8 @@ class JobStore {
   // True when some capture's manifest lists a file with this sha256: the blob must be kept. Used
   // to remove the blobs of an upload that failed after they were stored.
   virtual Result<bool> IsBlobReferenced(const std::string& sha256) = 0;
+  // The sha256 of every file some capture lists, in one pass (the start-up sweep of orphans).
+  virtual Result<std::vector<std::string>> ListReferencedBlobs() = 0;
 
   // Releases the connection(s). Later calls fail with FailedPrecondition. Idempotent.
   virtual Status Close() = 0;

@@ -311,6 +311,43 @@ Result<Capture> SqliteJobStore::GetCapture(const std::string& capture_id) {
   });
 }
 
+Result<Capture> SqliteJobStore::DeleteCapture(const std::string& capture_id) {
+  SOFTID_RETURN_IF_ERROR(CheckResourceId(capture_id, kCaptureIdPrefix, "capture id"));
+  SOFTID_ASSIGN_OR_RETURN(Capture capture, GetCapture(capture_id));
+  return Write([&]() -> Result<Capture> {
+    {
+      SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                              db_.Prepare("SELECT id FROM jobs WHERE capture_id = ?1 LIMIT 1"));
+      SOFTID_RETURN_IF_ERROR(stmt.Bind(capture_id));
+      SOFTID_ASSIGN_OR_RETURN(const bool used, stmt.Step());
+      if (used) {
+        return Status::FailedPrecondition("capture " + capture_id + " is used by job " +
+                                          stmt.ColumnText(0) + ": delete its jobs first");
+      }
+    }
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                            db_.Prepare("DELETE FROM captures WHERE id = ?1 RETURNING id"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(capture_id));
+    SOFTID_ASSIGN_OR_RETURN(const bool deleted, stmt.Step());
+    if (!deleted) return Status::NotFound("capture " + capture_id + " not found");
+    SOFTID_ASSIGN_OR_RETURN(const bool more, stmt.Step());
+    (void)more;
+    return capture;
+  });
+}
+
+Result<int64_t> SqliteJobStore::StoredBytes(const std::string& owner) {
+  return Read([&]() -> Result<int64_t> {
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        SELECT COALESCE(SUM(json_extract(file.value, '$.size')), 0)
+        FROM captures, json_each(captures.manifest) AS file WHERE captures.owner = ?1)sql"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(owner));
+    SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+    if (!has_row) return Status::Internal("SUM returned no row");
+    return stmt.ColumnInt64(0);
+  });
+}
+
 // --- Jobs: API side ------------------------------------------------------------------------------
 
 Result<Job> SqliteJobStore::CreateJob(const std::string& capture_id, const nlohmann::json& config,
@@ -395,6 +432,14 @@ Result<Job> SqliteJobStore::GetJob(const std::string& job_id) {
   return Read([&] { return LoadJob(job_id); });
 }
 
+Result<bool> SqliteJobStore::HasJobWithRequestId(const std::string& request_id) {
+  if (request_id.empty()) return false;
+  return Read([&]() -> Result<bool> {
+    SOFTID_ASSIGN_OR_RETURN(std::optional<Job> job, FindJobByRequestId(request_id));
+    return job.has_value();
+  });
+}
+
 Result<JobPage> SqliteJobStore::ListJobs(const ListJobsRequest& request) {
   if (request.page_size < 0) {
     return Status::InvalidArgument("page_size = " + std::to_string(request.page_size) +
@@ -449,13 +494,15 @@ Result<JobPage> SqliteJobStore::ListJobs(const ListJobsRequest& request) {
   });
 }
 
-Result<int64_t> SqliteJobStore::CountJobs(std::optional<JobState> state) {
+Result<int64_t> SqliteJobStore::CountJobs(std::optional<JobState> state,
+                                          std::optional<std::string> owner) {
   return Read([&]() -> Result<int64_t> {
-    SOFTID_ASSIGN_OR_RETURN(
-        SqliteStatement stmt,
-        db_.Prepare(state.has_value() ? "SELECT count(*) FROM jobs WHERE state = ?1"
-                                      : "SELECT count(*) FROM jobs"));
-    if (state.has_value()) SOFTID_RETURN_IF_ERROR(stmt.Bind(ToString(*state)));
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        SELECT count(*) FROM jobs
+        WHERE (?1 IS NULL OR state = ?1) AND (?2 IS NULL OR owner = ?2))sql"));
+    std::optional<std::string> state_text;
+    if (state.has_value()) state_text = ToString(*state);
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(state_text, owner));
     SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
     if (!has_row) return Status::Internal("count(*) returned no row");
     return stmt.ColumnInt64(0);
@@ -777,6 +824,21 @@ Result<bool> SqliteJobStore::IsBlobReferenced(const std::string& sha256) {
         WHERE json_extract(file.value, '$.sha256') = ?1 LIMIT 1)sql"));
     SOFTID_RETURN_IF_ERROR(stmt.Bind(sha256));
     return stmt.Step();
+  });
+}
+
+Result<std::vector<std::string>> SqliteJobStore::ListReferencedBlobs() {
+  return Read([&]() -> Result<std::vector<std::string>> {
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        SELECT DISTINCT json_extract(file.value, '$.sha256')
+        FROM captures, json_each(captures.manifest) AS file)sql"));
+    std::vector<std::string> hashes;
+    while (true) {
+      SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+      if (!has_row) break;
+      hashes.push_back(stmt.ColumnText(0));
+    }
+    return hashes;
   });
 }
 

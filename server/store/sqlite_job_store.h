@@ -52,6 +52,8 @@ class SqliteJobStore final : public JobStore, public TokenStore {
                                 const std::string& request_id,
                                 const std::string& owner = "") override;
   Result<Capture> GetCapture(const std::string& capture_id) override;
+  Result<Capture> DeleteCapture(const std::string& capture_id) override;
+  Result<int64_t> StoredBytes(const std::string& owner) override;
 
   Result<Job> CreateJob(const std::string& capture_id, const nlohmann::json& config,
                         const std::string& request_id, const std::string& owner = "") override;
@@ -60,8 +62,10 @@ class SqliteJobStore final : public JobStore, public TokenStore {
                                               const std::string& request_id, int64_t max_queued,
                                               const std::string& owner = "") override;
   Result<Job> GetJob(const std::string& job_id) override;
+  Result<bool> HasJobWithRequestId(const std::string& request_id) override;
   Result<JobPage> ListJobs(const ListJobsRequest& request) override;
-  Result<int64_t> CountJobs(std::optional<JobState> state) override;
+  Result<int64_t> CountJobs(std::optional<JobState> state,
+                            std::optional<std::string> owner = std::nullopt) override;
   Result<Job> RequestCancel(const std::string& job_id) override;
   Status DeleteJob(const std::string& job_id) override;
 
@@ -83,6 +87,7 @@ class SqliteJobStore final : public JobStore, public TokenStore {
 
   Result<RecoverySummary> RecoverAfterCrash(int max_attempts, RecoveryScope scope) override;
   Result<bool> IsBlobReferenced(const std::string& sha256) override;
+  Result<std::vector<std::string>> ListReferencedBlobs() override;
   Status Close() override;
 
   // TokenStore

@@ -61,11 +61,30 @@ class JobServiceTest : public ::testing::Test {
     blobs_.emplace(std::move(*blobs));
     fs::create_directories(data_.path() / "uploads");
     fs::create_directories(data_.path() / "work");
+    StartService({});
+  }
+
+  // A fresh service on the same store with `quotas`.
+  void StartService(const StationQuotas& quotas) {
     JobServiceOptions options;
     options.staging_root = data_.path() / "uploads";
     options.scratch_root = data_.path() / "work";
     options.job_limits.cores = 2;
+    options.quotas = quotas;
     service_ = std::make_unique<JobService>(jobs_.get(), &*blobs_, &events_, options);
+  }
+
+  int NumBlobs() const {
+    Result<std::vector<std::string>> listed = blobs_->List();
+    return listed.ok() ? static_cast<int>(listed->size()) : -1;
+  }
+
+  // Bytes of the small capture's files as uploaded (capture.json included).
+  int64_t SmallCaptureBytes() const {
+    UploadFiles files = SmallCaptureFiles();
+    int64_t bytes = static_cast<int64_t>(files.capture_json.dump().size());
+    for (const auto& [path, data] : files.files) bytes += static_cast<int64_t>(data.size());
+    return bytes;
   }
 
   // The small capture's files as they lie on disk.
@@ -305,6 +324,75 @@ TEST_F(JobServiceTest, StationsSeeOnlyTheirOwnCapturesAndJobs) {
   EXPECT_TRUE(service_->GetJob(admin, job->id).ok());
   EXPECT_TRUE(service_->CancelJob(a, job->id).ok());
   EXPECT_TRUE(service_->DeleteJob(a, job->id).ok());
+}
+
+// Each station's quotas hold and are refused RESOURCE_EXHAUSTED naming the station: jobs QUEUED
+// (a repeated request id still gets its job), bytes stored (room comes back when a capture is
+// deleted) and uploads in progress; other stations are not affected.
+TEST_F(JobServiceTest, StationQuotasHold) {
+  StationQuotas quotas;
+  quotas.max_queued_jobs = 2;
+  quotas.max_stored_bytes = SmallCaptureBytes() + 10;
+  quotas.max_concurrent_uploads = 1;
+  StartService(quotas);
+  const Caller a{"lab-a", false}, b{"lab-b", false};
+  ServiceResult<store::Capture> capture = UploadAs(a, SmallCaptureFiles());
+  ASSERT_TRUE(capture.ok()) << capture.status().ToString();
+
+  ASSERT_TRUE(service_->CreateJob(a, capture->id, R"({"cells": 8})", "first").ok());
+  ASSERT_TRUE(service_->CreateJob(a, capture->id, R"({"cells": 8})", "").ok());
+  const ServiceStatus third = service_->CreateJob(a, capture->id, R"({"cells": 8})", "").status();
+  EXPECT_EQ(third.code(), ServiceCode::kResourceExhausted);
+  EXPECT_NE(third.message().find("station \"lab-a\" has 2 jobs QUEUED"), std::string::npos)
+      << third.message();
+  EXPECT_TRUE(service_->CreateJob(a, capture->id, R"({"cells": 8})", "first").ok());
+
+  // Bytes: a second copy does not fit A's quota; B has its own.
+  const ServiceStatus full = UploadAs(a, SmallCaptureFiles()).status();
+  EXPECT_EQ(full.code(), ServiceCode::kResourceExhausted);
+  EXPECT_NE(full.message().find("exceed its quota"), std::string::npos) << full.message();
+  ServiceResult<store::Capture> b_capture = UploadAs(b, SmallCaptureFiles());
+  ASSERT_TRUE(b_capture.ok()) << b_capture.status().ToString();
+
+  // Uploads in progress: B's second at once is refused while its first is open; A is not.
+  UploadManifest manifest;
+  const UploadFiles files = SmallCaptureFiles();
+  manifest.capture_json = files.capture_json.dump();
+  for (const auto& [path, bytes] : files.files) {
+    manifest.files.push_back({path, store::Sha256::Hex(bytes), static_cast<int64_t>(bytes.size())});
+  }
+  ASSERT_TRUE(service_->DeleteCapture(b, b_capture->id).ok());
+  ServiceResult<std::unique_ptr<CaptureUpload>> open = service_->BeginUpload(b, manifest);
+  ASSERT_TRUE(open.ok()) << open.status().ToString();
+  EXPECT_EQ(service_->BeginUpload(b, manifest).status().code(), ServiceCode::kResourceExhausted);
+  open->reset();
+  EXPECT_TRUE(service_->BeginUpload(b, manifest).ok());
+}
+
+// A capture is deleted only when no job uses it, only by its station, and its files go unless
+// another capture has them.
+TEST_F(JobServiceTest, DeleteCaptureRemovesItsUnsharedFiles) {
+  const Caller a{"lab-a", false}, b{"lab-b", false};
+  ServiceResult<store::Capture> first = UploadAs(a, SmallCaptureFiles());
+  ASSERT_TRUE(first.ok());
+  const int blobs = NumBlobs();
+  ServiceResult<store::Capture> copy = UploadAs(a, SmallCaptureFiles());  // same files
+  ASSERT_TRUE(copy.ok());
+  EXPECT_EQ(NumBlobs(), blobs);
+  ServiceResult<store::Job> job = service_->CreateJob(a, first->id, R"({"cells": 8})", "");
+  ASSERT_TRUE(job.ok());
+
+  EXPECT_EQ(service_->DeleteCapture(b, first->id).code(), ServiceCode::kNotFound);
+  const ServiceStatus used = service_->DeleteCapture(a, first->id);
+  EXPECT_EQ(used.code(), ServiceCode::kFailedPrecondition);
+  EXPECT_NE(used.message().find(job->id), std::string::npos) << used.message();
+
+  ASSERT_TRUE(service_->DeleteCapture(a, copy->id).ok());
+  EXPECT_EQ(NumBlobs(), blobs);  // still listed by the first capture
+  ASSERT_TRUE(service_->DeleteJob(a, job->id).ok());
+  ASSERT_TRUE(service_->DeleteCapture(a, first->id).ok());
+  EXPECT_EQ(NumBlobs(), 0);
+  EXPECT_EQ(service_->DeleteCapture(a, first->id).code(), ServiceCode::kNotFound);
 }
 
 }  // namespace
