@@ -17,6 +17,8 @@ packages=(
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libsqlite3-dev libssl-dev
   # utilities
   libspdlog-dev libfmt-dev nlohmann-json3-dev libcli11-dev
+  # the server's /metrics endpoint (HTTP)
+  libcpp-httplib-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
 )

@@ -14,11 +14,13 @@ namespace softid::server {
 
 GrpcReconstructionService::GrpcReconstructionService(JobService* service,
                                                      const Authenticator* authenticator,
+                                                     Metrics* metrics,
                                                      std::filesystem::path data_dir,
                                                      std::chrono::milliseconds upload_idle_timeout,
                                                      std::shared_ptr<spdlog::logger> logger)
     : service_(service),
       authenticator_(authenticator),
+      metrics_(metrics),
       data_dir_(std::move(data_dir)),
       logger_(logger ? std::move(logger) : spdlog::default_logger()),
       upload_watchdog_(upload_idle_timeout,
@@ -48,6 +50,9 @@ grpc::Status GrpcReconstructionService::IdledOut() const {
 grpc::Status GrpcReconstructionService::Reply(std::string_view method,
                                               const ServiceStatus& status) const {
   if (status.ok()) return grpc::Status::OK;
+  if (metrics_ != nullptr && status.code() != ServiceCode::kCancelled) {
+    metrics_->CountRefused(method, ToString(status.code()));
+  }
   // Cancelled calls are the caller leaving; everything else is a refusal worth a line.
   if (status.code() == ServiceCode::kInternal) {
     logger_->error("{}: {}", method, status.ToString());

@@ -14,6 +14,7 @@
 #include "server/api_tokens.h"
 #include "server/idle_stream_watchdog.h"
 #include "server/job_service.h"
+#include "server/metrics.h"
 #include "softid/v1/softid.grpc.pb.h"
 
 namespace softid::server {
@@ -25,8 +26,9 @@ class GrpcReconstructionService final : public v1::Reconstruction::Service {
   // Upload streams idle for longer than `upload_idle_timeout` are cancelled.
   // Every call is authenticated by `authenticator` (from its "authorization" metadata) before
   // it reaches the service.
+  // Refusals are counted in `metrics` (may be null).
   GrpcReconstructionService(JobService* service, const Authenticator* authenticator,
-                            std::filesystem::path data_dir,
+                            Metrics* metrics, std::filesystem::path data_dir,
                             std::chrono::milliseconds upload_idle_timeout,
                             std::shared_ptr<spdlog::logger> logger);
 
@@ -61,6 +63,7 @@ class GrpcReconstructionService final : public v1::Reconstruction::Service {
 
   JobService* service_;
   const Authenticator* authenticator_;
+  Metrics* metrics_;
   std::filesystem::path data_dir_;
   std::shared_ptr<spdlog::logger> logger_;
   IdleStreamWatchdog upload_watchdog_;

@@ -207,6 +207,7 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
                   seq.status().message());
       }
       context.events->Notify(job.id);
+      if (context.metrics != nullptr && p.iteration > 0) context.metrics->CountIteration();
       log->debug("job {}: iteration {}/{} cost {:.4e}", job.id, p.iteration, p.max_iterations,
                  p.cost);
       Result<bool> requested = context.jobs->IsCancelRequested(job.id);

@@ -13,6 +13,7 @@
 #include <string>
 
 #include "server/job_events.h"
+#include "server/metrics.h"
 #include "server/store/blob_store.h"
 #include "server/store/job_store.h"
 
@@ -33,6 +34,8 @@ struct JobRunnerContext {
   // simulations' teams take what it is given). 0: every core.
   int cores_per_job = 0;
   std::shared_ptr<spdlog::logger> logger;
+  // Counts optimiser iterations; may be null.
+  Metrics* metrics = nullptr;
 };
 
 enum class JobOutcome {

@@ -140,8 +140,10 @@ ServiceResult<store::Capture> JobService::FinishUpload(const Caller& caller,
   }();
   if (!capture.ok()) {
     RemoveUnreferencedBlobs(added);
+    if (options_.metrics != nullptr) options_.metrics->CountUpload(false, 0);
     return capture.status();
   }
+  if (options_.metrics != nullptr) options_.metrics->CountUpload(true, bytes);
   logger_->info("capture {}: stored {} files (request_id '{}')", capture->id,
                 capture->manifest.size(), capture->request_id);
   return capture;

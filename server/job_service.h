@@ -23,6 +23,7 @@
 #include "server/caller.h"
 #include "server/capture_upload.h"
 #include "server/job_events.h"
+#include "server/metrics.h"
 #include "server/rate_limiter.h"
 #include "server/service_status.h"
 #include "server/store/blob_store.h"
@@ -58,6 +59,8 @@ struct JobServiceOptions {
   std::filesystem::path scratch_root;
   inverse::JobResourceLimits job_limits;
   StationQuotas quotas;
+  // Where uploads are counted; may be null.
+  Metrics* metrics = nullptr;
 };
 
 // What GetResult returns.

@@ -116,6 +116,9 @@ int main(int argc, char** argv) {
       ->envname("SOFTID_AUTH")
       ->check(CLI::IsMember({"auto", "token", "none"}))
       ->capture_default_str();
+  app.add_option("--metrics-listen", options.metrics_listen,
+                 "serve Prometheus metrics at http://HOST:PORT/metrics (default: off)")
+      ->envname("SOFTID_METRICS_LISTEN");
   softid::server::StationQuotas& quotas = options.quotas;
   app.add_option("--quota-queued-jobs", quotas.max_queued_jobs,
                  "jobs one station may have QUEUED at once")

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <map>
 #include <mutex>
 #include <set>
 #include <system_error>
@@ -18,6 +19,7 @@
 #include "server/grpc_reconstruction_service.h"
 #include "server/job_events.h"
 #include "server/job_service.h"
+#include "server/metrics_http.h"
 #include "server/store/blob_store.h"
 #include "server/store/sqlite_job_store.h"
 #include "server/worker_pool.h"
@@ -125,10 +127,12 @@ struct Server::Parts {
   std::unique_ptr<store::SqliteJobStore> jobs;
   std::optional<store::BlobStore> blobs;
   JobEvents events;
+  Metrics metrics;  // before everything that counts into it
   std::unique_ptr<WorkerPool> pool;
   std::unique_ptr<JobService> service;
   std::unique_ptr<Authenticator> authenticator;
   std::unique_ptr<GrpcReconstructionService> grpc_service;
+  std::unique_ptr<MetricsHttpServer> metrics_http;
   std::unique_ptr<grpc::Server> grpc_server;
   int port = 0;
   std::mutex shutdown_mutex;
@@ -186,6 +190,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   pool_options.idle_poll_interval = options.idle_poll_interval;
   pool_options.work_root = work;
   pool_options.worker_id_prefix = HostName() + "-" + std::to_string(::getpid());
+  pool_options.metrics = &parts->metrics;
   parts->pool = std::make_unique<WorkerPool>(parts->jobs.get(), &*parts->blobs, &parts->events,
                                              pool_options, parts->logger);
 
@@ -195,6 +200,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   service_options.staging_root = staging;
   service_options.scratch_root = work;
   service_options.quotas = options.quotas;
+  service_options.metrics = &parts->metrics;
   service_options.job_limits.max_memory_bytes = options.max_job_memory_bytes;
   const int cores = static_cast<int>(std::thread::hardware_concurrency());
   service_options.job_limits.cores = std::max(1, cores / std::max(1, options.num_workers));
@@ -220,7 +226,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
     }
   }
   parts->grpc_service = std::make_unique<GrpcReconstructionService>(
-      parts->service.get(), parts->authenticator.get(), options.data_dir,
+      parts->service.get(), parts->authenticator.get(), &parts->metrics, options.data_dir,
       options.upload_limits.idle_timeout, parts->logger);
 
   grpc::EnableDefaultHealthCheckService(true);
@@ -244,6 +250,23 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   }
   parts->grpc_server->GetHealthCheckService()->SetServingStatus(
       v1::Reconstruction::service_full_name(), true);
+  if (!options.metrics_listen.empty()) {
+    store::JobStore* jobs = parts->jobs.get();
+    const Metrics* metrics = &parts->metrics;
+    SOFTID_ASSIGN_OR_RETURN(
+        parts->metrics_http, MetricsHttpServer::Start(options.metrics_listen, [jobs, metrics] {
+          std::map<std::string, int64_t> by_state;
+          for (store::JobState state :
+               {store::JobState::kQueued, store::JobState::kRunning, store::JobState::kSucceeded,
+                store::JobState::kFailed, store::JobState::kCancelled}) {
+            Result<int64_t> count = jobs->CountJobs(state);
+            if (count.ok()) by_state[store::ToString(state)] = *count;
+          }
+          return metrics->Render(by_state);
+        }));
+    log->info("metrics on http://{}/metrics (port {})", options.metrics_listen,
+              parts->metrics_http->port());
+  }
   parts->pool->Start();
   log->info(
       "softid-server listening on {} (port {}, {}, auth {}), data {}, {} worker(s), max {} queued",
@@ -264,6 +287,10 @@ int Server::port() const {
   return parts_->port;
 }
 
+int Server::metrics_port() const {
+  return parts_->metrics_http ? parts_->metrics_http->port() : 0;
+}
+
 Status Server::Shutdown() {
   std::lock_guard lock(parts_->shutdown_mutex);
   if (parts_->shut_down) return Status::Ok();
@@ -275,6 +302,7 @@ Status Server::Shutdown() {
   parts_->pool->Stop();
   parts_->grpc_server->Shutdown(std::chrono::system_clock::now() + parts_->options.shutdown_grace);
   parts_->grpc_server->Wait();
+  parts_->metrics_http.reset();  // scrapes read the store
   Status closed = parts_->jobs->Close();
   log->info("shut down");
   return closed;

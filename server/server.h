@@ -50,6 +50,8 @@ struct ServerOptions {
   // Whether calls need a per-station API token (api_tokens.h). nullopt ("auto"): tokens on any
   // address but loopback, none on loopback.
   std::optional<AuthMode> auth;
+  // "host:port" where GET /metrics serves Prometheus metrics (port 0 picks one); empty: off.
+  std::string metrics_listen;
   // What each station may use (job_service.h).
   StationQuotas quotas;
   // CreateJob refuses a job whose estimated memory exceeds this (inverse::JobResourceLimits).
@@ -71,6 +73,8 @@ class Server {
 
   // The port actually bound.
   int port() const;
+  // The port /metrics is served on; 0 when off.
+  int metrics_port() const;
   // Drains: health NOT_SERVING, refuse new work, interrupt running fits (their jobs go back to
   // QUEUED without using up an attempt), end open RPCs within shutdown_grace, close the store.
   // Idempotent.

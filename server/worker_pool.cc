@@ -20,6 +20,8 @@ WorkerPool::WorkerPool(store::JobStore* jobs, const store::BlobStore* blobs, Job
   const int cores = static_cast<int>(std::thread::hardware_concurrency());
   context_.cores_per_job = cores > 0 ? std::max(1, cores / std::max(1, options_.num_workers)) : 0;
   context_.logger = logger ? std::move(logger) : spdlog::default_logger();
+  context_.metrics = options_.metrics;
+  if (options_.metrics != nullptr) options_.metrics->SetWorkers(options_.num_workers);
 }
 
 WorkerPool::~WorkerPool() {
@@ -97,9 +99,20 @@ void WorkerPool::WorkerLoop(int index) {
       if (stopping_.load()) cancel.store(true);
       running_.insert(&cancel);
     }
+    Metrics* metrics = options_.metrics;
+    const auto began = std::chrono::steady_clock::now();
+    if (metrics != nullptr) {
+      metrics->AddBusyWorkers(1);
+      if (job.started_at.has_value()) {
+        metrics->ObserveQueueWait(
+            std::chrono::duration<double>(*job.started_at - job.created_at).count());
+      }
+    }
+    std::string outcome_name = "failed";
     // Exceptions must not cross the thread boundary (they would terminate the server).
     try {
       const JobOutcome outcome = RunClaimedJob(job, worker_id, context_, cancel, stopping_);
+      outcome_name = ToString(outcome);
       log->debug("job {}: {} on {}", job.id, ToString(outcome), worker_id);
     } catch (const std::exception& e) {
       log->error("job {}: internal error: {}", job.id, e.what());
@@ -107,6 +120,12 @@ void WorkerPool::WorkerLoop(int index) {
     } catch (...) {
       log->error("job {}: internal error (unknown exception)", job.id);
       RecordCrash(job.id, "internal error (unknown exception)");
+    }
+    if (metrics != nullptr) {
+      metrics->AddBusyWorkers(-1);
+      metrics->ObserveRun(
+          outcome_name,
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - began).count());
     }
     std::lock_guard lock(mutex_);
     running_.erase(&cancel);

@@ -22,6 +22,7 @@
 
 #include "server/job_events.h"
 #include "server/job_runner.h"
+#include "server/metrics.h"
 #include "server/store/blob_store.h"
 #include "server/store/job_store.h"
 
@@ -39,6 +40,8 @@ struct WorkerPoolOptions {
   std::filesystem::path work_root;
   // Worker ids are "<prefix>-<index>"; the prefix names the process (host and pid).
   std::string worker_id_prefix = "worker";
+  // Where busy workers, queue waits, run times and iterations are counted; may be null.
+  Metrics* metrics = nullptr;
 };
 
 class WorkerPool {

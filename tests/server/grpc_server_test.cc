@@ -23,6 +23,9 @@
 #include "tests/core/inverse/inverse_test_util.h"
 #include "tests/server/temp_dir.h"
 
+// Last: <httplib.h> pulls in <resolv.h>, whose _res macro breaks Eigen headers included after it.
+#include <httplib.h>
+
 namespace softid::server {
 namespace {
 
@@ -357,6 +360,51 @@ TEST_F(GrpcServerTest, SixteenStationsWithTokensSeeOnlyTheirOwnJobs) {
   // Health stays open for load balancers and probes.
   client::ServingStatus serving = client::ServingStatus::kUnknown;
   EXPECT_TRUE(client_for("")->Health("", &serving).ok());
+}
+
+// GET /metrics serves the Prometheus text format: jobs by state, iterations, uploads and their
+// bytes, refusals by method and code, and the time histograms.
+TEST_F(GrpcServerTest, MetricsEndpointCountsWhatHappened) {
+  StartServer(/*num_workers=*/1,
+              [](ServerOptions& options) { options.metrics_listen = "127.0.0.1:0"; });
+  ASSERT_GT(server_->metrics_port(), 0);
+  const v1::Capture capture = Upload();
+  const v1::Job job = CreateJob(capture.id(), FitConfig(/*max_iterations=*/2));
+  ASSERT_TRUE(client_->WatchJob(job.id(), 0, [](const v1::JobEvent&) {}).ok());
+  v1::CreateJobRequest bad;
+  bad.set_capture_id(capture.id());
+  bad.set_config_json(R"({"cells": "many"})");
+  v1::Job refused;
+  EXPECT_EQ(client_->CreateJob(bad, &refused).error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+
+  httplib::Client http("127.0.0.1", server_->metrics_port());
+  // The worker counts the run just after it records the job's end: wait for it to be idle.
+  httplib::Result response = http.Get("/metrics");
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (response && response->body.find("softid_workers_busy 0\n") == std::string::npos &&
+         std::chrono::steady_clock::now() < deadline) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    response = http.Get("/metrics");
+  }
+  ASSERT_TRUE(response) << "no answer from /metrics";
+  EXPECT_EQ(response->status, 200);
+  EXPECT_NE(response->get_header_value("Content-Type").find("text/plain; version=0.0.4"),
+            std::string::npos);
+  const std::string& text = response->body;
+  for (const char* line :
+       {"softid_jobs{state=\"SUCCEEDED\"} 1\n", "softid_jobs{state=\"QUEUED\"} 0\n",
+        "softid_uploads_total{outcome=\"stored\"} 1\n", "softid_workers 1\n",
+        "softid_workers_busy 0\n",
+        "softid_refused_requests_total{method=\"CreateJob\",code=\"INVALID_ARGUMENT\"} 1\n",
+        "softid_job_queue_wait_seconds_count 1\n",
+        "softid_job_run_seconds_count{outcome=\"succeeded\"} 1\n",
+        "# TYPE softid_job_run_seconds histogram\n"}) {
+    EXPECT_NE(text.find(line), std::string::npos) << "missing " << line << " in:\n" << text;
+  }
+  const size_t iterations = text.find("\nsoftid_iterations_total ");
+  ASSERT_NE(iterations, std::string::npos);
+  EXPECT_GE(std::stoi(text.substr(iterations + 25)), 1);
+  EXPECT_EQ(http.Get("/other")->status, 404);
 }
 
 // A config the core rejects is INVALID_ARGUMENT naming the field and value.
