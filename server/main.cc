@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "core/common/cpu_support.h"
+#include "server/log_context.h"
 #include "server/server.h"
 #include "server/tokens_command.h"
 
@@ -144,6 +145,11 @@ int main(int argc, char** argv) {
   softid::server::AddTokensCommand(app, &tokens);
   app.add_option("--port-file", port_file,
                  "once listening, write the bound port here (for --listen host:0)");
+  std::string log_format = "text";
+  app.add_option("--log-format", log_format, "text, or json (one object per line)")
+      ->envname("SOFTID_LOG_FORMAT")
+      ->check(CLI::IsMember({"text", "json"}))
+      ->capture_default_str();
   app.add_option("--log-level", log_level, "trace, debug, info, warn, error")
       ->envname("SOFTID_LOG_LEVEL")
       ->capture_default_str();
@@ -171,6 +177,10 @@ int main(int argc, char** argv) {
   options.upload_limits.idle_timeout =
       std::chrono::milliseconds(static_cast<int64_t>(upload_idle_timeout_s * 1000.0));
   spdlog::set_level(spdlog::level::from_str(log_level));
+  softid::server::ConfigureLogging(*softid::server::LogFormatFromString(log_format));
+  // libpng (through OpenCV) and others write warnings to stderr: logged as lines instead.
+  const std::unique_ptr<softid::server::StderrCapture> stderr_capture =
+      softid::server::CaptureStderr();
 
   // Block the shutdown signals in this thread and every thread it starts (gRPC's and the
   // workers' inherit the mask) so they reach only the sigwait thread below; Shutdown is not

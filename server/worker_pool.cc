@@ -6,6 +6,8 @@
 #include <exception>
 #include <thread>
 
+#include "server/log_context.h"
+
 namespace softid::server {
 
 WorkerPool::WorkerPool(store::JobStore* jobs, const store::BlobStore* blobs, JobEvents* events,
@@ -109,6 +111,7 @@ void WorkerPool::WorkerLoop(int index) {
       }
     }
     std::string outcome_name = "failed";
+    const ScopedJobLog job_log(job.id);  // this thread's lines name the job, the core's too
     // Exceptions must not cross the thread boundary (they would terminate the server).
     try {
       const JobOutcome outcome = RunClaimedJob(job, worker_id, context_, cancel, stopping_);
