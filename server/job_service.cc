@@ -265,6 +265,27 @@ ServiceStatus JobService::DeleteCapture(const Caller& caller, const std::string&
   return ServiceStatus::Ok();
 }
 
+ServiceResult<std::pair<int, int>> JobService::RemoveOlderThan(std::chrono::seconds age) {
+  const store::Timestamp cutoff = store::ToTimestamp(std::chrono::system_clock::now() - age);
+  const Caller operator_caller = Caller::Operator();
+  Result<std::vector<std::string>> jobs = jobs_->ListEndedJobs(cutoff);
+  if (!jobs.ok()) return jobs.status();
+  int jobs_removed = 0, captures_removed = 0;
+  for (const std::string& id : *jobs) {
+    if (DeleteJob(operator_caller, id).ok()) ++jobs_removed;
+  }
+  Result<std::vector<std::string>> captures = jobs_->ListUnusedCaptures(cutoff);
+  if (!captures.ok()) return captures.status();
+  for (const std::string& id : *captures) {
+    if (DeleteCapture(operator_caller, id).ok()) ++captures_removed;
+  }
+  if (jobs_removed + captures_removed > 0) {
+    logger_->info("retention: removed {} job(s) and {} capture(s) older than {} s", jobs_removed,
+                  captures_removed, age.count());
+  }
+  return std::make_pair(jobs_removed, captures_removed);
+}
+
 ServiceResult<store::Job> JobService::VisibleJob(const Caller& caller, const std::string& job_id) {
   Result<store::Job> job = jobs_->GetJob(job_id);
   if (!job.ok()) return job.status();

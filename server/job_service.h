@@ -116,6 +116,10 @@ class JobService {
   // FailedPrecondition naming a job that still uses it.
   ServiceStatus DeleteCapture(const Caller& caller, const std::string& capture_id);
 
+  // Deletes jobs that ended more than `age` ago, then captures older than that which no job uses
+  // (with their unshared files). Returns how many jobs and captures went.
+  ServiceResult<std::pair<int, int>> RemoveOlderThan(std::chrono::seconds age);
+
   // Refuse new jobs and end watches (shutdown).
   void StartDraining();
   bool draining() const { return draining_.load(); }

@@ -120,6 +120,12 @@ int main(int argc, char** argv) {
   app.add_option("--metrics-listen", options.metrics_listen,
                  "serve Prometheus metrics at http://HOST:PORT/metrics (default: off)")
       ->envname("SOFTID_METRICS_LISTEN");
+  double retention_days = 0.0;
+  app.add_option("--retention-days", retention_days,
+                 "delete ended jobs and unused captures older than this (checked hourly); 0: keep")
+      ->envname("SOFTID_RETENTION_DAYS")
+      ->check(CLI::NonNegativeNumber)
+      ->capture_default_str();
   softid::server::StationQuotas& quotas = options.quotas;
   app.add_option("--quota-queued-jobs", quotas.max_queued_jobs,
                  "jobs one station may have QUEUED at once")
@@ -174,6 +180,9 @@ int main(int argc, char** argv) {
   options.max_job_memory_bytes = max_job_memory_gib * (1ull << 30);
   quotas.max_stored_bytes = static_cast<int64_t>(quota_stored_gib * (1ull << 30));
   quotas.request_burst = 4.0 * quotas.requests_per_second;
+  if (retention_days > 0) {
+    options.retention = std::chrono::seconds(static_cast<int64_t>(retention_days * 86400.0));
+  }
   options.upload_limits.idle_timeout =
       std::chrono::milliseconds(static_cast<int64_t>(upload_idle_timeout_s * 1000.0));
   spdlog::set_level(spdlog::level::from_str(log_level));

@@ -20,6 +20,7 @@
 #include "server/job_events.h"
 #include "server/job_service.h"
 #include "server/metrics_http.h"
+#include "server/periodic_task.h"
 #include "server/store/blob_store.h"
 #include "server/store/sqlite_job_store.h"
 #include "server/worker_pool.h"
@@ -133,6 +134,7 @@ struct Server::Parts {
   std::unique_ptr<Authenticator> authenticator;
   std::unique_ptr<GrpcReconstructionService> grpc_service;
   std::unique_ptr<MetricsHttpServer> metrics_http;
+  std::unique_ptr<PeriodicTask> retention;
   std::unique_ptr<grpc::Server> grpc_server;
   int port = 0;
   std::mutex shutdown_mutex;
@@ -267,6 +269,12 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
     log->info("metrics on http://{}/metrics (port {})", options.metrics_listen,
               parts->metrics_http->port());
   }
+  if (options.retention.has_value()) {
+    JobService* service = parts->service.get();
+    const std::chrono::seconds age = *options.retention;
+    parts->retention = std::make_unique<PeriodicTask>(
+        options.retention_interval, [service, age] { (void)service->RemoveOlderThan(age); });
+  }
   parts->pool->Start();
   log->info(
       "softid-server listening on {} (port {}, {}, auth {}), data {}, {} worker(s), max {} queued",
@@ -298,6 +306,7 @@ Status Server::Shutdown() {
   const auto& log = parts_->logger;
   log->info("shutting down: NOT_SERVING, no new jobs, interrupting running fits");
   parts_->grpc_server->GetHealthCheckService()->SetServingStatus(false);
+  parts_->retention.reset();
   parts_->service->StartDraining();
   parts_->pool->Stop();
   parts_->grpc_server->Shutdown(std::chrono::system_clock::now() + parts_->options.shutdown_grace);

@@ -52,6 +52,10 @@ struct ServerOptions {
   std::optional<AuthMode> auth;
   // "host:port" where GET /metrics serves Prometheus metrics (port 0 picks one); empty: off.
   std::string metrics_listen;
+  // Jobs that ended and unused captures older than this are deleted (with their files), checked
+  // at start and every retention_interval; nullopt: kept until deleted.
+  std::optional<std::chrono::seconds> retention;
+  std::chrono::milliseconds retention_interval{std::chrono::hours(1)};
   // What each station may use (job_service.h).
   StationQuotas quotas;
   // CreateJob refuses a job whose estimated memory exceeds this (inverse::JobResourceLimits).

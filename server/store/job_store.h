@@ -83,6 +83,10 @@ class JobStore {
   // Deletes a capture no job refers to and returns it (its blobs are the caller's to remove
   // when no other capture lists them). FailedPrecondition naming a job that uses it.
   virtual Result<Capture> DeleteCapture(const std::string& capture_id) = 0;
+  // Captures created before `created_before` that no job refers to (retention).
+  virtual Result<std::vector<std::string>> ListUnusedCaptures(Timestamp created_before) = 0;
+  // Jobs in a terminal state that ended before `finished_before` (retention).
+  virtual Result<std::vector<std::string>> ListEndedJobs(Timestamp finished_before) = 0;
   // Bytes of every file of the captures `owner` uploaded (as their manifests declare).
   virtual Result<int64_t> StoredBytes(const std::string& owner) = 0;
 

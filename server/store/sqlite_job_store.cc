@@ -336,6 +336,42 @@ Result<Capture> SqliteJobStore::DeleteCapture(const std::string& capture_id) {
   });
 }
 
+namespace {
+
+// The first column of every row of `stmt`.
+Result<std::vector<std::string>> Column0(SqliteStatement& stmt) {
+  std::vector<std::string> out;
+  while (true) {
+    SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+    if (!has_row) break;
+    out.push_back(stmt.ColumnText(0));
+  }
+  return out;
+}
+
+}  // namespace
+
+Result<std::vector<std::string>> SqliteJobStore::ListUnusedCaptures(Timestamp created_before) {
+  return Read([&]() -> Result<std::vector<std::string>> {
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        SELECT id FROM captures WHERE created_at < ?1
+          AND NOT EXISTS (SELECT 1 FROM jobs WHERE jobs.capture_id = captures.id)
+        ORDER BY created_at, id)sql"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(ToUnixMicros(created_before)));
+    return Column0(stmt);
+  });
+}
+
+Result<std::vector<std::string>> SqliteJobStore::ListEndedJobs(Timestamp finished_before) {
+  return Read([&]() -> Result<std::vector<std::string>> {
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        SELECT id FROM jobs WHERE state IN ('SUCCEEDED', 'FAILED', 'CANCELLED')
+          AND finished_at < ?1 ORDER BY finished_at, id)sql"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(ToUnixMicros(finished_before)));
+    return Column0(stmt);
+  });
+}
+
 Result<int64_t> SqliteJobStore::StoredBytes(const std::string& owner) {
   return Read([&]() -> Result<int64_t> {
     SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(

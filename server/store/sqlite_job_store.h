@@ -54,6 +54,8 @@ class SqliteJobStore final : public JobStore, public TokenStore {
   Result<Capture> GetCapture(const std::string& capture_id) override;
   Result<Capture> DeleteCapture(const std::string& capture_id) override;
   Result<int64_t> StoredBytes(const std::string& owner) override;
+  Result<std::vector<std::string>> ListUnusedCaptures(Timestamp created_before) override;
+  Result<std::vector<std::string>> ListEndedJobs(Timestamp finished_before) override;
 
   Result<Job> CreateJob(const std::string& capture_id, const nlohmann::json& config,
                         const std::string& request_id, const std::string& owner = "") override;

@@ -395,5 +395,29 @@ TEST_F(JobServiceTest, DeleteCaptureRemovesItsUnsharedFiles) {
   EXPECT_EQ(service_->DeleteCapture(a, first->id).code(), ServiceCode::kNotFound);
 }
 
+// Retention deletes ended jobs and then unused captures older than the age, with their files,
+// and keeps what is younger.
+TEST_F(JobServiceTest, RetentionRemovesEndedJobsAndUnusedCapturesOlderThanTheAge) {
+  ServiceResult<store::Capture> used = Upload(SmallCaptureFiles());
+  ServiceResult<store::Capture> unused = Upload(SmallCaptureFiles());
+  ASSERT_TRUE(used.ok() && unused.ok());
+  ServiceResult<store::Job> job = service_->CreateJob(caller_, used->id, R"({"cells": 8})", "");
+  ASSERT_TRUE(job.ok());
+  ASSERT_TRUE(service_->CancelJob(caller_, job->id).ok());  // QUEUED: CANCELLED at once
+  ServiceResult<store::Job> queued = service_->CreateJob(caller_, used->id, R"({"cells": 8})", "");
+  ASSERT_TRUE(queued.ok());
+
+  ServiceResult<std::pair<int, int>> young = service_->RemoveOlderThan(std::chrono::hours(1));
+  ASSERT_TRUE(young.ok());
+  EXPECT_EQ(*young, std::make_pair(0, 0));
+  std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  ServiceResult<std::pair<int, int>> old = service_->RemoveOlderThan(std::chrono::seconds(0));
+  ASSERT_TRUE(old.ok());
+  EXPECT_EQ(*old, std::make_pair(1, 1));  // the QUEUED job keeps its capture
+  EXPECT_EQ(service_->GetJob(caller_, job->id).status().code(), ServiceCode::kNotFound);
+  EXPECT_TRUE(service_->GetJob(caller_, queued->id).ok());
+  EXPECT_GT(NumBlobs(), 0);
+}
+
 }  // namespace
 }  // namespace softid::server
