@@ -13,6 +13,8 @@
 #include <sstream>
 #include <system_error>
 
+#include "core/common/json_fields.h"
+
 namespace softid::capture {
 
 using nlohmann::json;
@@ -36,10 +38,7 @@ std::string IndexPath(std::string_view parent, size_t index) {
 
 // A JSON value for an error message, shortened when long.
 std::string Shown(const json& value) {
-  std::string text = value.dump();
-  constexpr size_t kMaxChars = 80;
-  if (text.size() > kMaxChars) text = text.substr(0, kMaxChars - 3) + "...";
-  return text;
+  return softid::json::Brief(value);
 }
 
 // Builds InvalidArgument messages "<source>: <path> = <value>: <reason>".

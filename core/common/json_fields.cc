@@ -5,9 +5,17 @@
 namespace softid::json {
 
 std::string Brief(const nlohmann::json& value) {
-  std::string text = value.dump();
+  // Invalid UTF-8 in a string (a value built from bytes a client sent) is shown as U+FFFD rather
+  // than throwing.
+  std::string text = value.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
   constexpr size_t kMaxLength = 80;
-  if (text.size() > kMaxLength) text = text.substr(0, kMaxLength - 3) + "...";
+  if (text.size() > kMaxLength) {
+    size_t cut = kMaxLength - 3;
+    // Never inside a multi-byte character: the message must stay valid UTF-8 (gRPC status
+    // messages and proto string fields carry it).
+    while (cut > 0 && (static_cast<unsigned char>(text[cut]) & 0xC0) == 0x80) --cut;
+    text = text.substr(0, cut) + "...";
+  }
   return text;
 }
 

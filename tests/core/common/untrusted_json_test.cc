@@ -5,6 +5,8 @@
 #include <string>
 #include <thread>
 
+#include "core/common/json_fields.h"
+
 namespace softid::json {
 namespace {
 
@@ -69,6 +71,23 @@ TEST(UntrustedJsonTest, InvalidLimitsAreNamed) {
   limits.max_depth = 0;
   EXPECT_NE(ParseUntrustedJson("1", "x", limits).status().message().find("max_depth = 0"),
             std::string::npos);
+}
+
+// Error messages quote values shortened to 80 bytes, never inside a multi-byte character, and
+// show invalid UTF-8 as U+FFFD instead of throwing.
+TEST(JsonBriefTest, ShortenedValuesStayValidUtf8) {
+  for (int pad = 0; pad < 4; ++pad) {
+    std::string value = std::string(pad, 'a');
+    for (int i = 0; i < 40; ++i) value += "\xc3\xa9";  // é
+    const std::string brief = Brief(value);
+    EXPECT_LE(brief.size(), 80u);
+    ASSERT_EQ(brief.substr(brief.size() - 3), "...");
+    const std::string kept = brief.substr(0, brief.size() - 3);
+    // A JSON string of the kept bytes parses: no character was cut.
+    EXPECT_TRUE(ParseUntrustedJson(kept + "\"", "x").ok()) << brief;
+  }
+  EXPECT_NO_THROW(Brief(std::string("bad \xff byte")));
+  EXPECT_NE(Brief(std::string("bad \xff byte")).find("\xef\xbf\xbd"), std::string::npos);
 }
 
 }  // namespace
