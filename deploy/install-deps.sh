@@ -21,6 +21,9 @@ packages=(
   libcpp-httplib-dev
   # tests and benchmarks
   libgtest-dev libgmock-dev libbenchmark-dev
+  # fuzzing (tests/fuzz): clang with libFuzzer and the sanitizer runtimes; llvm-14 for
+  # llvm-symbolizer, which puts file and line into the stack trace of a crash
+  clang-14 libclang-rt-14-dev llvm-14
 )
 
 missing=()
