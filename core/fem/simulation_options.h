@@ -95,7 +95,7 @@ struct SimulationOptions {
   // inexact adjoint solve is an error in the gradient itself. 1e-5 made the adjoint ~19 % faster
   // (torus-drop, 3,100 cells) and left Table 1 c1-50, bar-hanging and the diagnosis proof
   // unchanged, but L-BFGS in pillow-ramp's curved 9-variable valleys then took other paths: of its
-  // first 4 starts 1 instead of 2 reached the minimum (session 15; a small sample, but the gradient
+  // first 4 starts 1 instead of 2 reached the minimum (2026-11-25; a small sample, but the gradient
   // is what those valleys are walked by). Gradient tests tighten it to 1e-12.
   double adjoint_linear_tolerance = 1e-6;
   // The adjoint pass preconditions each step with the factor the forward pass solved it with,

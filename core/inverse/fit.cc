@@ -248,7 +248,7 @@ constexpr double kStageFunctionTolerance = 1e-4;
 constexpr double kStageBudgetFraction = 0.5;
 // L-BFGS's initial inverse Hessian scaled by the last curvature pair, gamma = s^T y / y^T y
 // (Nocedal and Wright's usual choice), is left off, as in Ceres: one scalar cannot serve
-// variables of very different sensitivity. Measured (session 15): the teddy-sized job (gravity,
+// variables of very different sensitivity. Measured (2026-11-25): the teddy-sized job (gravity,
 // E, alpha, beta) did better with it (E 0.3 % instead of 3.0 % off after 50 iterations, 67
 // instead of 75 evaluations), but the diagnosis' drag-given-spin refit stopped at drag 0.42 and
 // spin 3.1 rad/s instead of 0.6 and 4.0. One variable: the same either way.
