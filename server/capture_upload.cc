@@ -189,6 +189,12 @@ ServiceStatus CaptureUpload::CompleteFile(const std::string& path, FileState& fi
   return ServiceStatus::Ok();
 }
 
+int64_t CaptureUpload::declared_bytes() const {
+  int64_t total = 0;
+  for (const store::ManifestEntry& entry : manifest_.files) total += entry.size_bytes;
+  return total;
+}
+
 ServiceResult<std::vector<store::ManifestEntry>> CaptureUpload::Finish() {
   for (const auto& [path, file] : files_) {
     if (!file.complete) {

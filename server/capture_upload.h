@@ -68,6 +68,8 @@ class CaptureUpload {
   ServiceResult<std::vector<store::ManifestEntry>> Finish();
 
   const std::string& request_id() const { return manifest_.request_id; }
+  // Bytes of the listed files as declared (checked by Begin against the limits).
+  int64_t declared_bytes() const;
   // Keeps `slot` (a count of uploads in progress, say) until the upload is destroyed.
   void HoldSlot(std::shared_ptr<void> slot) { slot_ = std::move(slot); }
   // Where the validated files lie: <dir>/<manifest path>.

@@ -71,10 +71,6 @@ ServiceResult<std::unique_ptr<CaptureUpload>> JobService::BeginUpload(const Call
                                                                       UploadManifest manifest) {
   if (draining()) return ServiceStatus(ServiceCode::kUnavailable, "the server is shutting down");
   if (Status valid = store::CheckRequestId(manifest.request_id); !valid.ok()) return valid;
-  int64_t declared = 0;
-  for (const store::ManifestEntry& entry : manifest.files)
-    declared += std::max<int64_t>(0, entry.size_bytes);
-  if (ServiceStatus room = CheckStoredBytes(caller, declared); !room.ok()) return room;
   StationState& station = Station(caller.station);
   {
     std::lock_guard lock(stations_mutex_);
@@ -102,7 +98,13 @@ ServiceResult<std::unique_ptr<CaptureUpload>> JobService::BeginUpload(const Call
   });
   ServiceResult<std::unique_ptr<CaptureUpload>> upload =
       CaptureUpload::Begin(std::move(manifest), options_.staging_root, options_.upload_limits);
-  if (upload.ok()) (*upload)->HoldSlot(std::move(slot));
+  if (!upload.ok()) return upload;
+  (*upload)->HoldSlot(std::move(slot));
+  // After Begin, which bounds every declared size and their sum (summing a client's sizes first
+  // could overflow): a station out of room learns it before sending any file.
+  if (ServiceStatus room = CheckStoredBytes(caller, (*upload)->declared_bytes()); !room.ok()) {
+    return room;
+  }
   return upload;
 }
 

@@ -228,6 +228,14 @@ TEST_F(JobServiceTest, ManifestMistakesAreInvalidArgumentNamingTheFile) {
     upload.files["cam0"] = "x";
     ExpectInvalid(Upload(upload).status(), "lies in a folder named like the file \"cam0\"");
   }
+  {  // Declared sizes whose sum overflows 64 bits: refused by the per-file limit, never summed.
+    UploadManifest manifest;
+    manifest.capture_json = SmallCaptureFiles().capture_json.dump();
+    for (const auto& [path, bytes] : SmallCaptureFiles().files) {
+      manifest.files.push_back({path, store::Sha256::Hex(bytes), int64_t{1} << 62});
+    }
+    ExpectInvalid(service_->BeginUpload(caller_, manifest).status(), "exceeds the limit");
+  }
   {  // A control character in a name.
     UploadFiles upload = SmallCaptureFiles();
     upload.files["cam0/a\nb.png"] = "x";

@@ -92,7 +92,7 @@ class ServerProcess {
     int workers = 1;
     int max_queued = 100;
     int max_attempts = 3;
-    std::vector<std::string> extra;  // further flags
+    std::vector<std::string> extra = {};  // further flags
   };
 
   ServerProcess(const fs::path& data_dir, const fs::path& log_file, const Flags& flags)
