@@ -18,17 +18,41 @@ constexpr double kBytesPerNodeStep = 3 * 3 * sizeof(double);
 // plus per-node vectors and the distance-field grid; rounded up.
 constexpr double kBytesPerNode = 27 * 9 * sizeof(double) * 10;
 
+// CPU time of one forward plus adjoint step per grid node, at kReferenceNodes, on one core of an
+// x86-64-v3 machine; the time grows as nodes^1.25 (sparse factorisation fill-in). Measured with
+// `softid-lab bench` (29 ms per forward+adjoint step on 2 cores at 3,100 active cells, about
+// 7,300 grid nodes; the exponent from its table of grid sizes), 2026-11-26.
+constexpr double kCpuSecondsPerNodeStep = 8e-6;
+constexpr double kReferenceNodes = 7300.0;
+constexpr double kNodeExponent = 0.25;
+// Cost evaluations per optimiser iteration: the line search, and the horizon continuation's
+// stages, each of which re-evaluates the cost.
+constexpr double kEvaluationsPerIteration = 3.0;
+// A diagnosis refits the model with each candidate physics and on held-out frames.
+constexpr double kDiagnosisFitFactor = 8.0;
+
 std::string GiB(double bytes) {
   return fmt::format("{:.3g} GiB", bytes / (1ull << 30));
 }
 
 // The config key that most plausibly made the job large, for the message.
-std::string Culprit(const JobConfig& config) {
+std::string Hours(double seconds) {
+  return fmt::format("{:.3g} h", seconds / 3600.0);
+}
+
+std::string MemoryCulprit(const JobConfig& config) {
   if (config.cell_size > 0.0) return fmt::format("cell_size = {}", config.cell_size);
   if (config.substeps != kAutoSubsteps && config.substeps > 64) {
     return fmt::format("substeps = {}", config.substeps);
   }
   return fmt::format("cells = {}", config.cells);
+}
+
+// The key that most plausibly made the job long: many iterations or starts, else the grid.
+std::string TimeCulprit(const JobConfig& config) {
+  if (config.max_iterations > 200) return fmt::format("max_iterations = {}", config.max_iterations);
+  if (config.starts > 16) return fmt::format("starts = {}", config.starts);
+  return MemoryCulprit(config);
 }
 
 }  // namespace
@@ -37,6 +61,10 @@ Status JobResourceLimits::Validate() const {
   if (!(max_memory_bytes > 0.0)) {
     return Status::InvalidArgument(
         fmt::format("max_memory_bytes = {}: must be positive", max_memory_bytes));
+  }
+  if (!(max_wall_seconds > 0.0)) {
+    return Status::InvalidArgument(
+        fmt::format("max_wall_seconds = {}: must be positive", max_wall_seconds));
   }
   if (cores < 1) return Status::InvalidArgument(fmt::format("cores = {}: must be >= 1", cores));
   return Status::Ok();
@@ -80,13 +108,33 @@ Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
   estimate.grid_nodes = static_cast<int64_t>(std::min(nodes, 9e18));
   estimate.steps_per_run = static_cast<int64_t>(std::min(steps, 9e18));
 
+  const double step_cpu_seconds =
+      kCpuSecondsPerNodeStep * nodes * std::pow(nodes / kReferenceNodes, kNodeExponent);
+  const double evaluations_per_start = kEvaluationsPerIteration * (config.max_iterations + 1.0);
+  const double start_rounds =
+      std::ceil(static_cast<double>(config.starts) / estimate.concurrent_starts);
+  // Each concurrent start gets cores / concurrent_starts cores (at least one).
+  const double cores_per_start =
+      std::max(1.0, static_cast<double>(cores) / estimate.concurrent_starts);
+  estimate.wall_seconds = start_rounds * evaluations_per_start * steps * step_cpu_seconds /
+                          cores_per_start * (config.diagnose ? kDiagnosisFitFactor : 1.0);
+
   if (!(estimate.memory_bytes <= limits.max_memory_bytes)) {
     return Status::InvalidArgument(fmt::format(
         "{}: the job would need about {} of memory (grid of {:.3g} nodes at h = {:.3g} m, {:.3g} "
         "steps per run, {} start(s) at once); at most {} is accepted: use fewer cells, substeps, "
         "frames or threads",
-        Culprit(config), GiB(estimate.memory_bytes), nodes, estimate.cell_size_m, steps,
+        MemoryCulprit(config), GiB(estimate.memory_bytes), nodes, estimate.cell_size_m, steps,
         estimate.concurrent_starts, GiB(limits.max_memory_bytes)));
+  }
+  if (!(estimate.wall_seconds <= limits.max_wall_seconds)) {
+    return Status::InvalidArgument(fmt::format(
+        "{}: the job could run for about {} (grid of {:.3g} nodes, {:.3g} steps per run, {} "
+        "start(s) of up to {} iterations{}); at most {} is accepted: use fewer iterations, "
+        "starts, cells, substeps or frames",
+        TimeCulprit(config), Hours(estimate.wall_seconds), nodes, steps, config.starts,
+        config.max_iterations, config.diagnose ? ", with a diagnosis" : "",
+        Hours(limits.max_wall_seconds)));
   }
   return estimate;
 }

@@ -1,6 +1,6 @@
 // What a job will need before it runs: the simulation grid and steps its config implies on a
-// given capture, and an estimate of its memory. A service checks this at the door, so a config
-// like {"cells": 300} or {"substeps": 20000} is refused with the field and the limit named
+// given capture, and estimates of its memory and time. A service checks this at the door, so a
+// config like {"cells": 300} or {"substeps": 20000} is refused with the field and the limit named
 // instead of exhausting the machine hours later.
 #pragma once
 
@@ -25,11 +25,16 @@ struct JobResourceEstimate {
   int64_t steps_per_run = 0;  // simulation steps of one forward run over the fitted frames
   int concurrent_starts = 0;  // starts that run at once
   double memory_bytes = 0.0;  // peak estimate over the concurrent starts [B]
+  // Wall time if every start ran all max_iterations (an upper estimate: fits usually converge
+  // sooner, and "auto" substeps usually choose fewer steps) [s].
+  double wall_seconds = 0.0;
 };
 
 struct JobResourceLimits {
   // Largest accepted memory estimate of one job [B]; default 4 GiB.
   double max_memory_bytes = 4.0 * (1ull << 30);
+  // Largest accepted wall-time estimate of one job [s]; default 24 h.
+  double max_wall_seconds = 24.0 * 3600.0;
   // Cores a job gets when its config leaves "threads" at 0; bounds its concurrent starts.
   int cores = 1;
 
@@ -41,6 +46,7 @@ struct JobResourceLimits {
 //   frames.last = 100: the capture has 60 frames (0-59)
 //   cells = 300: the job would need about 41 GiB of memory (grid 301 x 301 x 108 nodes, 960
 //   steps per run); at most 4 GiB is accepted: use fewer cells, substeps or frames
+//   max_iterations = 5000: the job could run for about 31 h (...); at most 24 h is accepted
 // "auto" substeps count as their largest candidate (SubstepSelectionOptions::max_substeps).
 Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
                                                  const CaptureExtent& extent,

@@ -52,6 +52,40 @@ TEST(JobResources, OversizedConfigsAreRefusedNamingTheKey) {
   ExpectRefused(EstimateJobResources(cell_size, TorusSized(), limits), "cell_size = 1e-09");
 }
 
+// Time: the default job is hours below the limit; an absurd iteration or start count is refused
+// naming the key; the estimate grows with the work and a diagnosis multiplies it.
+TEST(JobResources, WallTimeIsEstimatedAndBounded) {
+  JobResourceLimits limits;
+  limits.cores = 2;
+  const Result<JobResourceEstimate> plain = EstimateJobResources({}, TorusSized(), limits);
+  ASSERT_TRUE(plain.ok()) << plain.status().ToString();
+  EXPECT_GT(plain->wall_seconds, 60.0);
+  EXPECT_LT(plain->wall_seconds, 0.25 * limits.max_wall_seconds);
+
+  JobConfig iterations;
+  iterations.max_iterations = 100000;
+  ExpectRefused(EstimateJobResources(iterations, TorusSized(), limits),
+                "max_iterations = 100000: the job could run for about");
+  ExpectRefused(EstimateJobResources(iterations, TorusSized(), limits), "at most 24 h is accepted");
+  JobConfig starts;
+  starts.starts = 5000;
+  ExpectRefused(EstimateJobResources(starts, TorusSized(), limits), "starts = 5000");
+
+  JobConfig longer;
+  longer.max_iterations = 2 * JobConfig{}.max_iterations;
+  EXPECT_GT(EstimateJobResources(longer, TorusSized(), limits)->wall_seconds,
+            1.9 * plain->wall_seconds);
+  JobConfig diagnosed;
+  diagnosed.diagnose = true;
+  EXPECT_GT(EstimateJobResources(diagnosed, TorusSized(), limits)->wall_seconds,
+            4.0 * plain->wall_seconds);
+  // More cores for the same starts: never slower.
+  limits.cores = 8;
+  EXPECT_LE(EstimateJobResources({}, TorusSized(), limits)->wall_seconds, plain->wall_seconds);
+  limits.max_wall_seconds = 0;
+  EXPECT_FALSE(EstimateJobResources({}, TorusSized(), limits).ok());
+}
+
 TEST(JobResources, FramesMustLieInTheCapture) {
   const JobResourceLimits limits;
   JobConfig last;
