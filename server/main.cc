@@ -88,6 +88,13 @@ int main(int argc, char** argv) {
       ->envname("SOFTID_MAX_JOB_MEMORY_GIB")
       ->check(CLI::PositiveNumber)
       ->capture_default_str();
+  double max_job_hours = 24.0;
+  app.add_option("--max-job-hours", max_job_hours,
+                 "jobs whose estimated time (all iterations run) exceeds this many hours are "
+                 "refused at CreateJob")
+      ->envname("SOFTID_MAX_JOB_HOURS")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--max-uploads", options.upload_limits.max_concurrent,
                  "uploads in progress at once; more are answered RESOURCE_EXHAUSTED")
       ->envname("SOFTID_MAX_UPLOADS")
@@ -107,6 +114,16 @@ int main(int argc, char** argv) {
   app.add_option("--tls-client-ca", tls_client_ca,
                  "require client certificates signed by this CA (PEM): mutual TLS")
       ->envname("SOFTID_TLS_CLIENT_CA");
+  softid::server::TlsOptions self_signed_tls;
+  app.add_flag("--tls-self-signed", self_signed_tls.self_signed,
+               "without --tls-cert, serve TLS with a certificate made on first start and kept "
+               "in DATA/tls/ (clients: --tls-ca DATA/tls/server.crt)")
+      ->envname("SOFTID_TLS_SELF_SIGNED");
+  app.add_option("--tls-hostnames", self_signed_tls.host_names,
+                 "names or addresses clients connect by, for the self-signed certificate "
+                 "(besides localhost); comma-separated")
+      ->envname("SOFTID_TLS_HOSTNAMES")
+      ->delimiter(',');
   app.add_flag("--allow-insecure", options.allow_insecure,
                "serve without TLS on a non-loopback address (only behind a trusted network)")
       ->envname("SOFTID_ALLOW_INSECURE");
@@ -174,10 +191,15 @@ int main(int argc, char** argv) {
     options.auth =
         auth == "token" ? softid::server::AuthMode::kToken : softid::server::AuthMode::kNone;
   }
-  options.tls = {tls_cert, tls_key, tls_client_ca};
+  options.tls = self_signed_tls;
+  options.tls.cert_file = tls_cert;
+  options.tls.key_file = tls_key;
+  options.tls.client_ca_file = tls_client_ca;
   // Files of the data directory (database, blobs) are private to the server's user.
   ::umask(077);
   options.max_job_memory_bytes = max_job_memory_gib * (1ull << 30);
+  options.max_job_wall_time =
+      std::chrono::seconds(std::max<int64_t>(1, static_cast<int64_t>(max_job_hours * 3600.0)));
   quotas.max_stored_bytes = static_cast<int64_t>(quota_stored_gib * (1ull << 30));
   quotas.request_burst = 4.0 * quotas.requests_per_second;
   if (retention_days > 0) {

@@ -21,6 +21,7 @@
 #include "server/job_service.h"
 #include "server/metrics_http.h"
 #include "server/periodic_task.h"
+#include "server/self_signed_certificate.h"
 #include "server/store/blob_store.h"
 #include "server/store/sqlite_job_store.h"
 #include "server/worker_pool.h"
@@ -66,6 +67,34 @@ std::string HostName() {
   return name;
 }
 
+// `options.tls` with a self-signed certificate's files filled in (made in DATA/tls/ if needed).
+Result<TlsOptions> ResolveTls(const ServerOptions& options, spdlog::logger& log) {
+  TlsOptions tls = options.tls;
+  if (!tls.self_signed || !tls.cert_file.empty()) {
+    tls.self_signed = false;  // a certificate of the operator's own takes precedence
+    return tls;
+  }
+  SelfSignedCertificateOptions certificate_options;
+  certificate_options.host_names = tls.host_names;
+  SOFTID_ASSIGN_OR_RETURN(
+      const SelfSignedCertificate certificate,
+      EnsureSelfSignedCertificate(options.data_dir / "tls", certificate_options));
+  if (!certificate.replaced_because.empty()) {
+    log.warn("replaced the self-signed TLS certificate ({}): clients must copy the new {}",
+             certificate.replaced_because, certificate.cert_file.string());
+  }
+  log.info(
+      "TLS with the self-signed certificate {} (SHA-256 {}){}; clients trust it with "
+      "--tls-ca",
+      certificate.cert_file.string(), certificate.sha256_fingerprint,
+      certificate.created ? ", made now" : "");
+  tls.self_signed = false;
+  tls.host_names.clear();
+  tls.cert_file = certificate.cert_file;
+  tls.key_file = certificate.key_file;
+  return tls;
+}
+
 }  // namespace
 
 Status ServerOptions::Validate() const {
@@ -88,7 +117,8 @@ Status ServerOptions::Validate() const {
     return Status::InvalidArgument(
         "listen = " + listen_address +
         ": not a loopback address, and TLS is off: give --tls-cert and --tls-key, or "
-        "--allow-insecure to serve in plain text anyway (only behind a trusted network)");
+        "--tls-self-signed, or --allow-insecure to serve in plain text anyway (only behind a "
+        "trusted network)");
   }
   if (quotas.max_queued_jobs < 1 || quotas.max_stored_bytes < 1 ||
       quotas.max_concurrent_uploads < 1) {
@@ -112,6 +142,11 @@ Status ServerOptions::Validate() const {
   if (!(max_job_memory_bytes > 0.0)) {
     return Status::InvalidArgument("max_job_memory = " + std::to_string(max_job_memory_bytes) +
                                    " bytes: must be positive");
+  }
+  if (max_job_wall_time.count() <= 0) {
+    return Status::InvalidArgument(
+        "max_job_hours = " + std::to_string(max_job_wall_time.count() / 3600.0) +
+        ": must be positive");
   }
   if (heartbeat_interval.count() <= 0 || lease <= heartbeat_interval) {
     return Status::InvalidArgument("lease = " + std::to_string(lease.count()) +
@@ -166,6 +201,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   const fs::path work = options.data_dir / "work";
   SOFTID_RETURN_IF_ERROR(ResetFolder(staging));
   SOFTID_RETURN_IF_ERROR(ResetFolder(work));
+  SOFTID_ASSIGN_OR_RETURN(const TlsOptions tls, ResolveTls(options, *log));
 
   store::SqliteJobStoreOptions store_options;
   store_options.logger = parts->logger;
@@ -204,6 +240,8 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   service_options.quotas = options.quotas;
   service_options.metrics = &parts->metrics;
   service_options.job_limits.max_memory_bytes = options.max_job_memory_bytes;
+  service_options.job_limits.max_wall_seconds =
+      static_cast<double>(options.max_job_wall_time.count());
   const int cores = static_cast<int>(std::thread::hardware_concurrency());
   service_options.job_limits.cores = std::max(1, cores / std::max(1, options.num_workers));
   if (options.num_workers == 0) {
@@ -241,7 +279,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   quota.SetMaxThreads(options.max_rpc_threads);
   builder.SetResourceQuota(quota);
   SOFTID_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> credentials,
-                          MakeServerCredentials(options.tls));
+                          MakeServerCredentials(tls));
   builder.AddListeningPort(options.listen_address, credentials, &parts->port);
   builder.RegisterService(parts->grpc_service.get());
   parts->grpc_server = builder.BuildAndStart();

@@ -6,6 +6,7 @@
 //   DIR/softid.db            jobs, captures, progress (WAL; schema migrated on start)
 //   DIR/blobs/               uploaded files, content-addressed (blob_store.h)
 //   DIR/uploads/, DIR/work/  staging of uploads and per-job capture folders; emptied on start
+//   DIR/tls/                 the self-signed certificate and key (--tls-self-signed only)
 #pragma once
 
 #include <spdlog/logger.h>
@@ -60,6 +61,8 @@ struct ServerOptions {
   StationQuotas quotas;
   // CreateJob refuses a job whose estimated memory exceeds this (inverse::JobResourceLimits).
   double max_job_memory_bytes = 4.0 * (1ull << 30);  // > 0
+  // ... and whose estimated wall time exceeds this (an upper estimate: all iterations run).
+  std::chrono::seconds max_job_wall_time{std::chrono::hours(24)};  // > 0
 
   // InvalidArgument naming the field and value.
   Status Validate() const;

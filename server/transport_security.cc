@@ -5,6 +5,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "server/self_signed_certificate.h"
+
 namespace softid::server {
 namespace {
 
@@ -33,10 +35,21 @@ Status TlsOptions::Validate() const {
     return Status::InvalidArgument(cert_file.empty() ? "--tls-key is given without --tls-cert"
                                                      : "--tls-cert is given without --tls-key");
   }
-  if (!client_ca_file.empty() && cert_file.empty()) {
-    return Status::InvalidArgument("--tls-client-ca needs --tls-cert and --tls-key");
+  if (!client_ca_file.empty() && !enabled()) {
+    return Status::InvalidArgument(
+        "--tls-client-ca needs --tls-cert and --tls-key (or --tls-self-signed)");
   }
-  if (!enabled()) return Status::Ok();
+  if (!host_names.empty() && !self_signed) {
+    return Status::InvalidArgument("--tls-hostnames is given without --tls-self-signed");
+  }
+  for (const std::string& name : host_names) {
+    if (!IsValidCertificateHostName(name)) {
+      return Status::InvalidArgument("--tls-hostnames = '" + name +
+                                     "': not a host name (letters, digits, '-', '.') or an IP "
+                                     "address");
+    }
+  }
+  if (cert_file.empty()) return Status::Ok();
   SOFTID_RETURN_IF_ERROR(ReadPem(cert_file, "--tls-cert", "CERTIFICATE").status());
   SOFTID_RETURN_IF_ERROR(ReadPem(key_file, "--tls-key", "PRIVATE KEY").status());
   if (!client_ca_file.empty()) {
@@ -61,6 +74,9 @@ bool IsLoopbackAddress(std::string_view listen_address) {
 Result<std::shared_ptr<grpc::ServerCredentials>> MakeServerCredentials(const TlsOptions& tls) {
   SOFTID_RETURN_IF_ERROR(tls.Validate());
   if (!tls.enabled()) return grpc::InsecureServerCredentials();
+  if (tls.cert_file.empty()) {
+    return Status::Internal("the self-signed certificate was not made before listening");
+  }
   grpc::SslServerCredentialsOptions options(
       tls.client_ca_file.empty() ? GRPC_SSL_DONT_REQUEST_CLIENT_CERTIFICATE
                                  : GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY);

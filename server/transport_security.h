@@ -10,6 +10,7 @@
 #include <memory>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "core/common/status.h"
 
@@ -20,10 +21,16 @@ struct TlsOptions {
   std::filesystem::path key_file;   // its private key, PEM; required with cert_file
   // CA bundle (PEM) that client certificates must chain to; empty: no client certificates asked.
   std::filesystem::path client_ca_file;
+  // When cert_file is empty: serve TLS with a certificate the server makes and keeps in
+  // DATA/tls/ (self_signed_certificate.h), naming these hosts besides localhost; Server::Start
+  // fills cert_file and key_file with its files. A given cert_file takes precedence, so an image
+  // can default to self-signed and an operator can still mount a certificate of their own.
+  bool self_signed = false;
+  std::vector<std::string> host_names;
 
-  bool enabled() const { return !cert_file.empty(); }
+  bool enabled() const { return !cert_file.empty() || self_signed; }
   // InvalidArgument naming the flag (--tls-cert, --tls-key, --tls-client-ca) when a file is
-  // missing, unreadable or not PEM, or only one of cert and key is given.
+  // missing, unreadable or not PEM, or only one of cert and key is given; a bad host name.
   Status Validate() const;
 };
 

@@ -10,6 +10,7 @@
 
 #include <cstdlib>
 #include <fstream>
+#include <iterator>
 #include <memory>
 #include <sstream>
 #include <string>
@@ -97,14 +98,18 @@ class TlsServerTest : public ::testing::Test {
     ASSERT_EQ(std::system((script + " > /dev/null 2>&1").c_str()), 0) << "openssl failed";
   }
 
-  void StartServer(bool require_client_certificate) {
+  void StartServer(bool require_client_certificate, bool self_signed = false,
+                   bool own_certificate = true) {
     ServerOptions options;
     options.listen_address = "localhost:0";
     options.data_dir = data_.path();
     options.num_workers = 0;
     options.shutdown_grace = std::chrono::milliseconds(200);
-    options.tls.cert_file = certs_.path() / "server.pem";
-    options.tls.key_file = certs_.path() / "server.key";
+    options.tls.self_signed = self_signed;
+    if (own_certificate) {
+      options.tls.cert_file = certs_.path() / "server.pem";
+      options.tls.key_file = certs_.path() / "server.key";
+    }
     if (require_client_certificate) options.tls.client_ca_file = certs_.path() / "ca.pem";
     Result<std::unique_ptr<Server>> server = Server::Start(options);
     ASSERT_TRUE(server.ok()) << server.status().ToString();
@@ -153,6 +158,53 @@ TEST_F(TlsServerTest, MutualTlsRequiresAClientCertificateFromTheCa) {
   EXPECT_EQ(Health(Trusting(certs_.path(), "ca", "client")), grpc::StatusCode::OK);
   // A certificate signed by another CA is refused.
   EXPECT_NE(Health(Trusting(certs_.path(), "ca", "other")), grpc::StatusCode::OK);
+}
+
+// With --tls-self-signed the first start makes DATA/tls/server.crt; clients that trust that file
+// connect, others do not, and a restart keeps the same certificate.
+TEST_F(TlsServerTest, SelfSignedCertificateIsMadeOnceAndTrustedByItsFile) {
+  StartServer(/*require_client_certificate=*/false, /*self_signed=*/true,
+              /*own_certificate=*/false);
+  const fs::path cert = data_.path() / "tls" / "server.crt";
+  ASSERT_TRUE(fs::exists(cert));
+  client::TlsClientOptions trusting;
+  trusting.ca_file = cert.string();
+  EXPECT_EQ(Health(trusting), grpc::StatusCode::OK);
+  EXPECT_NE(Health(Trusting(certs_.path(), "ca")), grpc::StatusCode::OK);
+  EXPECT_NE(Health({}), grpc::StatusCode::OK);
+
+  std::ifstream first_in(cert);
+  const std::string first((std::istreambuf_iterator<char>(first_in)), {});
+  ASSERT_TRUE(server_->Shutdown().ok());
+  StartServer(/*require_client_certificate=*/false, /*self_signed=*/true,
+              /*own_certificate=*/false);
+  std::ifstream second_in(cert);
+  EXPECT_EQ(std::string((std::istreambuf_iterator<char>(second_in)), {}), first);
+  EXPECT_EQ(Health(trusting), grpc::StatusCode::OK);
+
+  // The operator's own certificate takes precedence over the self-signed default.
+  ASSERT_TRUE(server_->Shutdown().ok());
+  StartServer(/*require_client_certificate=*/false, /*self_signed=*/true,
+              /*own_certificate=*/true);
+  EXPECT_EQ(Health(Trusting(certs_.path(), "ca")), grpc::StatusCode::OK);
+  EXPECT_NE(Health(trusting), grpc::StatusCode::OK);
+}
+
+TEST(TransportSecurity, SelfSignedHostNamesAreChecked) {
+  TempDir data;
+  ServerOptions options;
+  options.data_dir = data.path();
+  options.listen_address = "0.0.0.0:0";
+  options.tls.self_signed = true;
+  EXPECT_TRUE(options.Validate().ok()) << options.Validate().message();
+  options.tls.host_names = {"bad name"};
+  EXPECT_NE(options.Validate().message().find("--tls-hostnames = 'bad name'"), std::string::npos)
+      << options.Validate().message();
+  options.tls.self_signed = false;
+  options.tls.host_names = {"softid.example"};
+  EXPECT_NE(options.Validate().message().find("--tls-hostnames is given without"),
+            std::string::npos)
+      << options.Validate().message();
 }
 
 }  // namespace
