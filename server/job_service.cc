@@ -249,6 +249,8 @@ ServiceStatus JobService::CheckJobFitsCapture(const Caller& caller,
     return ServiceStatus(ServiceCode::kInvalidArgument,
                          "config_json: " + estimate.status().message());
   }
+  logger_->info("capture {}: a job estimated at {:.2g} GiB and at most {:.3g} min accepted",
+                capture_id, estimate->memory_bytes / (1ull << 30), estimate->wall_seconds / 60.0);
   return ServiceStatus::Ok();
 }
 

@@ -168,8 +168,8 @@ TEST_F(JobServiceTest, NanInCaptureJsonNamesTheField) {
   ExpectInvalid(service_->BeginUpload(caller_, manifest).status(), "(in cameras[0].fx)");
 }
 
-// Configs that would exhaust memory, or that do not fit the capture, are refused at CreateJob
-// with the field named; an ordinary config is queued.
+// Configs that would exhaust memory or run for days, or that do not fit the capture, are refused
+// at CreateJob with the field named; an ordinary config is queued.
 TEST_F(JobServiceTest, ResourceBoundsAreCheckedAtCreateJob) {
   ServiceResult<store::Capture> capture = Upload(SmallCaptureFiles());
   ASSERT_TRUE(capture.ok()) << capture.status().ToString();
@@ -181,6 +181,8 @@ TEST_F(JobServiceTest, ResourceBoundsAreCheckedAtCreateJob) {
                 "substeps = 20000");
   ExpectInvalid(service_->CreateJob(caller_, id, R"({"cell_size": 1e-9})", "").status(),
                 "cell_size = 1e-09");
+  ExpectInvalid(service_->CreateJob(caller_, id, R"({"max_iterations": 1000000})", "").status(),
+                "max_iterations = 1000000: the job could run for about");
   const int frames = capture_->capture.NumFrames();
   ExpectInvalid(
       service_->CreateJob(caller_, id, nlohmann::json{{"frames", {{"last", frames}}}}.dump(), "")
