@@ -47,29 +47,8 @@ class [[nodiscard]] ServiceStatus {
   std::string message_;
 };
 
-// A value or a non-OK ServiceStatus.
+// A value or a non-OK ServiceStatus (core's Result; a core Status converts as above).
 template <typename T>
-class [[nodiscard]] ServiceResult {
- public:
-  ServiceResult(T value) : storage_(std::move(value)) {}                    // NOLINT
-  ServiceResult(ServiceStatus status) : storage_(std::move(status)) {}      // NOLINT
-  ServiceResult(const Status& status) : storage_(ServiceStatus(status)) {}  // NOLINT
-
-  bool ok() const { return std::holds_alternative<T>(storage_); }
-  ServiceStatus status() const {
-    return ok() ? ServiceStatus() : std::get<ServiceStatus>(storage_);
-  }
-  // @pre ok()
-  const T& value() const& { return std::get<T>(storage_); }
-  T& value() & { return std::get<T>(storage_); }
-  T&& value() && { return std::get<T>(std::move(storage_)); }
-  const T& operator*() const& { return value(); }
-  T& operator*() & { return value(); }
-  const T* operator->() const { return &value(); }
-  T* operator->() { return &value(); }
-
- private:
-  std::variant<T, ServiceStatus> storage_;
-};
+using ServiceResult = Result<T, ServiceStatus>;
 
 }  // namespace softid::server

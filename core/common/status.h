@@ -5,6 +5,7 @@
 
 #include <optional>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <variant>
 
@@ -59,17 +60,22 @@ class [[nodiscard]] Status {
   std::string message_;
 };
 
-// Holds a value or a non-OK Status.
-template <typename T>
+// Holds a value or a non-OK status. `StatusT` is Status in core; the server speaks the API's
+// vocabulary (server::ServiceStatus, which has codes core does not need) through the same
+// template, and such a Result also takes a core Status, converted by StatusT's constructor.
+template <typename T, typename StatusT = Status>
 class [[nodiscard]] Result {
  public:
-  Result(T value) : storage_(std::move(value)) {}         // NOLINT: implicit by design
-  Result(Status status) : storage_(std::move(status)) {}  // NOLINT: implicit by design
+  Result(T value) : storage_(std::move(value)) {}          // NOLINT: implicit by design
+  Result(StatusT status) : storage_(std::move(status)) {}  // NOLINT: implicit by design
+  Result(const Status& status)                             // NOLINT: implicit by design
+    requires(!std::is_same_v<StatusT, Status>)
+      : storage_(StatusT(status)) {}
 
   bool ok() const { return std::holds_alternative<T>(storage_); }
-  const Status& status() const {
-    static const Status kOkStatus;
-    return ok() ? kOkStatus : std::get<Status>(storage_);
+  const StatusT& status() const {
+    static const StatusT kOkStatus;
+    return ok() ? kOkStatus : std::get<StatusT>(storage_);
   }
   // @pre ok()
   const T& value() const& { return std::get<T>(storage_); }
@@ -81,7 +87,7 @@ class [[nodiscard]] Result {
   T* operator->() { return &value(); }
 
  private:
-  std::variant<T, Status> storage_;
+  std::variant<T, StatusT> storage_;
 };
 
 }  // namespace softid
