@@ -11,13 +11,18 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <latch>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <random>
 #include <set>
 #include <sstream>
 #include <string>
@@ -748,6 +753,347 @@ TEST_F(ServerProcessTest, TokensCreatedAndRevokedFromTheCommandLine) {
             0);
   EXPECT_EQ(station.ListJobs(v1::ListJobsRequest(), &page).error_code(),
             grpc::StatusCode::UNAUTHENTICATED);
+  StopCleanly(*server);
+}
+
+// Every page of ListJobs as `client`'s caller sees it, `page_size` jobs a page.
+grpc::Status ListAllJobs(ReconstructionClient& client, int page_size, std::vector<v1::Job>* jobs) {
+  v1::ListJobsRequest request;
+  request.set_page_size(page_size);
+  while (true) {
+    v1::ListJobsResponse page;
+    const grpc::Status status = client.ListJobs(request, &page);
+    if (!status.ok()) return status;
+    jobs->insert(jobs->end(), page.jobs().begin(), page.jobs().end());
+    if (page.next_page_token().empty()) return grpc::Status::OK;
+    request.set_page_token(page.next_page_token());
+  }
+}
+
+// The secret `softid-server tokens create` prints for a new token of `station`, or "" (with a
+// failure) if it printed none.
+std::string CreateToken(const fs::path& data, const std::string& station, bool admin = false) {
+  const auto [out, status] = RunServerCommand("tokens create --data " + data.string() +
+                                              " --station " + station + (admin ? " --admin" : ""));
+  const std::string secret = out.substr(0, out.find('\n'));
+  EXPECT_EQ(status, 0) << station;
+  EXPECT_EQ(secret.rfind("softid_", 0), 0u) << station << ": " << out;
+  return secret;
+}
+
+// Sixteen stations, each with its own API token, upload a capture and submit jobs all at once.
+// Each station then lists exactly the jobs it created (across pages); another station's job and
+// capture answer NOT_FOUND to it, word for word like a missing one, for every call (get, cancel,
+// delete, result, watch, create on the capture, delete the capture), and leave that job untouched;
+// another station's request_id gets ALREADY_EXISTS without its job. An admin token lists every
+// job; a call without a token, or with an unknown one, is UNAUTHENTICATED.
+TEST_F(ServerProcessTest, SixteenStationsWithTheirOwnTokensSeeOnlyTheirOwnJobs) {
+  constexpr int kStations = 16;  // also the server's default --max-uploads: all upload at once
+  constexpr int kJobsPerStation = 3;
+  fs::create_directories(data_dir());
+  std::vector<std::string> names;
+  std::vector<std::string> tokens;
+  for (int s = 0; s < kStations; ++s) {
+    names.push_back("station-" + std::to_string(s));
+    tokens.push_back(CreateToken(data_dir(), names.back()));
+  }
+  const std::string admin_token = CreateToken(data_dir(), "operator", /*admin=*/true);
+  ASSERT_FALSE(HasFailure());
+
+  ServerProcess::Flags flags{.workers = 0};  // the jobs stay QUEUED
+  flags.extra = {"--auth", "token"};
+  std::unique_ptr<ServerProcess> server = Start(flags);
+  ASSERT_NE(server, nullptr);
+
+  std::vector<std::string> capture_ids(kStations);
+  std::vector<std::vector<std::string>> job_ids(kStations);  // in creation order
+  {
+    std::latch ready(kStations);
+    std::vector<std::thread> stations;
+    for (int s = 0; s < kStations; ++s) {
+      stations.emplace_back([&, s] {
+        ReconstructionClient client = server->Client(tokens[s]);
+        ready.arrive_and_wait();
+        capture_ids[s] = Upload(client, names[s] + "/take-1");
+        if (capture_ids[s].empty()) return;
+        for (int k = 0; k < kJobsPerStation; ++k) {
+          const std::string request_id = names[s] + "/take-1/job-" + std::to_string(k);
+          job_ids[s].push_back(CreateOk(client, capture_ids[s], FitConfig(1), request_id).id());
+        }
+      });
+    }
+    for (std::thread& station : stations) station.join();
+  }
+  std::set<std::string> all_jobs;
+  std::set<std::string> all_captures;
+  for (int s = 0; s < kStations; ++s) {
+    ASSERT_EQ(job_ids[s].size(), static_cast<size_t>(kJobsPerStation)) << names[s];
+    all_jobs.insert(job_ids[s].begin(), job_ids[s].end());
+    all_captures.insert(capture_ids[s]);
+  }
+  ASSERT_EQ(all_jobs.size(), static_cast<size_t>(kStations * kJobsPerStation));
+  ASSERT_EQ(all_captures.size(), static_cast<size_t>(kStations));
+
+  const std::string missing_job = "job-0123456789abcdef";
+  for (int s = 0; s < kStations; ++s) {
+    SCOPED_TRACE(names[s]);
+    ReconstructionClient client = server->Client(tokens[s]);
+    std::vector<v1::Job> listed;
+    ASSERT_TRUE(ListAllJobs(client, /*page_size=*/2, &listed).ok());
+    std::set<std::string> listed_ids;
+    for (const v1::Job& job : listed) {
+      listed_ids.insert(job.id());
+      EXPECT_EQ(job.capture_id(), capture_ids[s]) << job.id();
+    }
+    EXPECT_EQ(listed.size(), job_ids[s].size());
+    EXPECT_EQ(listed_ids, std::set<std::string>(job_ids[s].begin(), job_ids[s].end()));
+
+    const int other = (s + 5) % kStations;
+    const std::string& theirs = job_ids[other][1];
+    v1::Job job;
+    const grpc::Status absent = client.GetJob(missing_job, &job);
+    ASSERT_EQ(absent.error_code(), grpc::StatusCode::NOT_FOUND);
+    std::string as_if_absent = absent.error_message();
+    const size_t named = as_if_absent.find(missing_job);
+    ASSERT_NE(named, std::string::npos) << as_if_absent;
+    as_if_absent.replace(named, missing_job.size(), theirs);
+    const grpc::Status got = client.GetJob(theirs, &job);
+    EXPECT_EQ(got.error_code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_EQ(got.error_message(), as_if_absent);
+    EXPECT_EQ(client.CancelJob(theirs, &job).error_code(), grpc::StatusCode::NOT_FOUND);
+    EXPECT_EQ(client.DeleteJob(theirs).error_code(), grpc::StatusCode::NOT_FOUND);
+    v1::Result result;
+    EXPECT_EQ(client.GetResult(theirs, &result).error_code(), grpc::StatusCode::NOT_FOUND);
+    int watched = 0;
+    EXPECT_EQ(client.WatchJob(theirs, 0, [&](const v1::JobEvent&) { ++watched; }).error_code(),
+              grpc::StatusCode::NOT_FOUND);
+    EXPECT_EQ(watched, 0);
+    EXPECT_EQ(Create(client, capture_ids[other], FitConfig(1), "", &job).error_code(),
+              grpc::StatusCode::NOT_FOUND);
+    EXPECT_EQ(client.DeleteCapture(capture_ids[other]).error_code(), grpc::StatusCode::NOT_FOUND);
+    job.Clear();
+    const grpc::Status reused =
+        Create(client, capture_ids[s], FitConfig(1), names[other] + "/take-1/job-0", &job);
+    EXPECT_EQ(reused.error_code(), grpc::StatusCode::ALREADY_EXISTS) << reused.error_message();
+    EXPECT_TRUE(job.id().empty()) << job.id();
+    for (const std::string& id : job_ids[other]) {
+      EXPECT_EQ(reused.error_message().find(id), std::string::npos) << reused.error_message();
+    }
+  }
+
+  // The admin sees all of them, in pages that cross stations, none touched by the calls above.
+  ReconstructionClient admin = server->Client(admin_token);
+  std::vector<v1::Job> everything;
+  ASSERT_TRUE(ListAllJobs(admin, /*page_size=*/7, &everything).ok());
+  std::set<std::string> everything_ids;
+  for (const v1::Job& job : everything) {
+    everything_ids.insert(job.id());
+    EXPECT_EQ(job.state(), v1::QUEUED) << job.id();
+    EXPECT_FALSE(job.cancel_requested()) << job.id();
+  }
+  EXPECT_EQ(everything.size(), all_jobs.size());
+  EXPECT_EQ(everything_ids, all_jobs);
+  v1::Job job;
+  EXPECT_TRUE(admin.GetJob(job_ids[3][2], &job).ok());
+
+  // Each station cancels its own first job: those, and only those, are cancelled.
+  std::set<std::string> cancelled;
+  for (int s = 0; s < kStations; ++s) {
+    ReconstructionClient client = server->Client(tokens[s]);
+    EXPECT_TRUE(client.CancelJob(job_ids[s][0], &job).ok()) << names[s];
+    cancelled.insert(job_ids[s][0]);
+  }
+  everything.clear();
+  ASSERT_TRUE(ListAllJobs(admin, /*page_size=*/0, &everything).ok());
+  EXPECT_EQ(everything.size(), all_jobs.size());
+  for (const v1::Job& listed : everything) {
+    const bool was_cancelled = listed.cancel_requested() || listed.state() == v1::CANCELLED;
+    EXPECT_EQ(was_cancelled, cancelled.contains(listed.id())) << listed.id();
+  }
+
+  for (const std::string& token : {std::string(), "softid_" + std::string(64, '0')}) {
+    SCOPED_TRACE(token.empty() ? "no token" : "unknown token");
+    ReconstructionClient stranger = server->Client(token);
+    v1::ListJobsResponse page;
+    EXPECT_EQ(stranger.ListJobs(v1::ListJobsRequest(), &page).error_code(),
+              grpc::StatusCode::UNAUTHENTICATED);
+    EXPECT_EQ(page.jobs_size(), 0);
+    EXPECT_EQ(stranger.GetJob(job_ids[0][1], &job).error_code(), grpc::StatusCode::UNAUTHENTICATED);
+    EXPECT_EQ(Create(stranger, capture_ids[0], FitConfig(1), "", &job).error_code(),
+              grpc::StatusCode::UNAUTHENTICATED);
+    v1::Capture capture;
+    EXPECT_EQ(stranger.UploadCapture(CaptureFiles(), "", &capture).error_code(),
+              grpc::StatusCode::UNAUTHENTICATED);
+  }
+  StopCleanly(*server);
+}
+
+// What lies in a data directory's blobs/ and uploads/ (the staging folders) at one moment. Files
+// may come and go while it is read; those are skipped.
+struct DiskState {
+  std::set<std::string> blobs;  // names of the files under blobs/<xx>/
+  int blob_temp_files = 0;      // under blobs/tmp/
+  int64_t blob_temp_bytes = 0;
+  int staged_files = 0;  // under uploads/
+  int64_t staged_bytes = 0;
+};
+
+DiskState ReadDiskState(const fs::path& data) {
+  DiskState state;
+  for (const char* folder : {"blobs", "uploads"}) {
+    std::error_code error;
+    for (fs::recursive_directory_iterator it(data / folder, error), end; !error && it != end;
+         it.increment(error)) {
+      std::error_code stat_error;
+      if (!it->is_regular_file(stat_error)) continue;
+      const uintmax_t size = it->file_size(stat_error);
+      const int64_t bytes = stat_error ? 0 : static_cast<int64_t>(size);
+      if (folder == std::string("uploads")) {
+        ++state.staged_files;
+        state.staged_bytes += bytes;
+      } else if (it->path().parent_path().filename() == "tmp") {
+        ++state.blob_temp_files;
+        state.blob_temp_bytes += bytes;
+      } else {
+        state.blobs.insert(it->path().filename().string());
+      }
+    }
+  }
+  return state;
+}
+
+// Names of the stored blobs whose bytes do not hash to their name.
+std::vector<std::string> CorruptBlobs(const fs::path& data, const std::set<std::string>& blobs) {
+  std::vector<std::string> corrupt;
+  for (const std::string& name : blobs) {
+    std::string sha256;
+    int64_t size = 0;
+    const fs::path path = data / "blobs" / name.substr(0, 2) / name;
+    if (!client::Sha256OfFile(path, &sha256, &size) || sha256 != name) corrupt.push_back(name);
+  }
+  return corrupt;
+}
+
+// `count` files of random bytes, bulk/part-<i>.bin in `directory`, listed after the capture's own
+// files: the upload stores them as blobs last. The server keeps files the capture does not name.
+client::CaptureFiles WithBulkFiles(const fs::path& directory, int count, int64_t bytes_each) {
+  client::CaptureFiles files;
+  std::string error;
+  EXPECT_TRUE(client::ReadCaptureFiles(directory, &files, &error)) << error;
+  fs::create_directories(directory / "bulk");
+  std::vector<uint64_t> buffer((size_t{1} << 20) / sizeof(uint64_t));
+  for (int i = 0; i < count; ++i) {
+    const std::string path = "bulk/part-" + std::to_string(i) + ".bin";
+    std::mt19937_64 random(static_cast<uint64_t>(bytes_each) * 31 + i);
+    {
+      std::ofstream out(directory / path, std::ios::binary | std::ios::trunc);
+      for (int64_t written = 0; written < bytes_each; written += int64_t{1} << 20) {
+        for (uint64_t& word : buffer) word = random();
+        out.write(reinterpret_cast<const char*>(buffer.data()),
+                  std::min<int64_t>(int64_t{1} << 20, bytes_each - written));
+      }
+      EXPECT_TRUE(out.flush()) << path;
+    }
+    v1::CaptureFile file;
+    file.set_path(path);
+    std::string sha256;
+    int64_t size = 0;
+    EXPECT_TRUE(client::Sha256OfFile(directory / path, &sha256, &size)) << path;
+    file.set_sha256(sha256);
+    file.set_size_bytes(size);
+    files.files.push_back(file);
+  }
+  return files;
+}
+
+// kill -9 while an upload's files are being stored as blobs (some under their names already, the
+// next one part-written, the capture not committed): the restarted server has swept them all (no
+// capture lists them), its staging and temporary folders are empty, and the same upload (same
+// request_id) then succeeds, leaving exactly the blobs its capture lists, and a job can be created
+// on it. Blobs under their final name are never a prefix of their bytes.
+TEST_F(ServerProcessTest, KillNineDuringBlobStorageLeavesNothingOrphanedAfterRestart) {
+  constexpr int kBulkFiles = 4;
+  TempDir copy;
+  fs::copy(capture_->directory, copy.path(), fs::copy_options::recursive);
+  client::CaptureFiles files;
+  DiskState at_kill;
+  bool killed_while_storing = false;
+  std::string attempts;
+  // Each attempt doubles the bulk files, should the blob writes end before they were seen.
+  for (int attempt = 0; attempt < 3 && !killed_while_storing; ++attempt) {
+    const int64_t bytes_each = (int64_t{32} << 20) << attempt;
+    files = WithBulkFiles(copy.path(), kBulkFiles, bytes_each);
+    ASSERT_FALSE(HasFailure());
+    std::error_code ignored;
+    fs::remove_all(data_dir(), ignored);
+    std::unique_ptr<ServerProcess> server = Start({.workers = 0});
+    ASSERT_NE(server, nullptr);
+    ReconstructionClient client = server->Client();
+    std::atomic<bool> done{false};
+    grpc::Status uploaded;
+    std::thread upload([&] {
+      v1::Capture capture;
+      uploaded = client.UploadCapture(files, "take-1", &capture);
+      done = true;
+    });
+    // Blob writes are under way when a blob has its name and a temporary file holds more than
+    // a chunk: only the bulk files are that large, and they are stored last.
+    bool seen_storing = false;
+    const Clock::time_point give_up = Clock::now() + std::chrono::seconds(60);
+    while (!done && Clock::now() < give_up) {
+      const DiskState now = ReadDiskState(data_dir());
+      if (!now.blobs.empty() && now.blob_temp_bytes > (int64_t{1} << 20)) {
+        seen_storing = true;
+        break;
+      }
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    server->Signal(SIGKILL);
+    const std::optional<int> status = server->Wait(std::chrono::seconds(10));
+    upload.join();
+    ASSERT_EQ(status, 128 + SIGKILL) << ReadFile(log_file());
+    at_kill = ReadDiskState(data_dir());
+    // The capture is committed only after its last file, the last bulk file, was stored.
+    const bool committed = uploaded.ok() || at_kill.blobs.contains(files.files.back().sha256());
+    attempts += "attempt " + std::to_string(attempt) + ": " + std::to_string(kBulkFiles) + " x " +
+                std::to_string(bytes_each >> 20) + " MiB, " +
+                (seen_storing ? "seen storing" : "not seen storing") +
+                (committed ? ", killed too late" : "") + "; upload: " + uploaded.error_message() +
+                "\n";
+    killed_while_storing = seen_storing && !committed;
+  }
+  ASSERT_TRUE(killed_while_storing) << attempts;
+  RecordProperty("attempts", attempts);
+  RecordProperty("at_kill", std::to_string(at_kill.blobs.size()) + " blobs named, " +
+                                std::to_string(at_kill.blob_temp_bytes) + " bytes in blobs/tmp, " +
+                                std::to_string(at_kill.staged_bytes) + " bytes staged");
+  // Bytes were on disk at the kill: the staged upload, and blobs no capture lists.
+  EXPECT_GT(at_kill.staged_bytes, 0) << attempts;
+  EXPECT_FALSE(at_kill.blobs.empty()) << attempts;
+  EXPECT_EQ(CorruptBlobs(data_dir(), at_kill.blobs), std::vector<std::string>());
+
+  std::unique_ptr<ServerProcess> server = Start({.workers = 0});
+  ASSERT_NE(server, nullptr);
+  const DiskState restarted = ReadDiskState(data_dir());
+  EXPECT_EQ(restarted.blobs, std::set<std::string>()) << "no capture lists them";
+  EXPECT_TRUE(fs::is_empty(data_dir() / "blobs" / "tmp"));
+  EXPECT_TRUE(fs::is_empty(data_dir() / "uploads"));
+
+  ReconstructionClient client = server->Client();
+  v1::Capture capture;
+  const grpc::Status fresh = client.UploadCapture(files, "take-1", &capture);
+  ASSERT_TRUE(fresh.ok()) << fresh.error_message();
+  std::set<std::string> listed;
+  for (const v1::CaptureFile& file : capture.files()) listed.insert(file.sha256());
+  for (const v1::CaptureFile& file : files.files) EXPECT_TRUE(listed.contains(file.sha256()));
+  const DiskState stored = ReadDiskState(data_dir());
+  EXPECT_EQ(stored.blobs, listed);
+  EXPECT_EQ(stored.blob_temp_files, 0);
+  EXPECT_EQ(stored.staged_files, 0);
+  EXPECT_EQ(CorruptBlobs(data_dir(), stored.blobs), std::vector<std::string>());
+  const v1::Job job = CreateOk(client, capture.id(), FitConfig(1));
+  EXPECT_EQ(job.capture_id(), capture.id());
+  EXPECT_EQ(job.state(), v1::QUEUED);
   StopCleanly(*server);
 }
 
