@@ -19,8 +19,8 @@ packages=(
   libspdlog-dev libfmt-dev nlohmann-json3-dev libcli11-dev
   # the server's /metrics endpoint (HTTP)
   libcpp-httplib-dev
-  # tests and benchmarks
-  libgtest-dev libgmock-dev libbenchmark-dev
+  # tests and benchmarks; the Python client example and its test (clients/python)
+  libgtest-dev libgmock-dev libbenchmark-dev python3-grpcio python3-protobuf
   # fuzzing (tests/fuzz): clang with libFuzzer and the sanitizer runtimes; llvm-14 for
   # llvm-symbolizer, which puts file and line into the stack trace of a crash
   clang-14 libclang-rt-14-dev llvm-14
