@@ -3,7 +3,8 @@
 # No Docker engine runs here, so the Dockerfile is checked as text for what the deployment relies
 # on: a bookworm build stage that uses the CI dependency script, a bookworm-slim runtime stage
 # with the runtime package list, a non-root user, the data volume, a HEALTHCHECK through
-# `softid health`, and tini as PID 1 (from a listed package); the compose file builds it.
+# `softid health`, tini as PID 1 (from a listed package), TLS and tokens on; the compose file
+# builds it and turns neither off.
 set -euo pipefail
 
 source_dir=$1
@@ -28,8 +29,19 @@ expect "runtime packages come from the list" '^COPY deploy/runtime-packages\.txt
 expect "binaries come from the build stage" '^COPY --from=build ' "$dockerfile"
 expect "a data volume" '^VOLUME .*/var/lib/softid' "$dockerfile"
 expect "the server's data directory is the volume" 'SOFTID_DATA=/var/lib/softid' "$dockerfile"
-expect "health checked with the client" 'CMD \["softid", "--retry-for", "0", "--timeout", "3", "health"\]' \
+expect "health checked with the client" 'CMD \[.*"softid", "--retry-for", "0", "--timeout", "3", "health"\]' \
   "$dockerfile"
+expect "TLS on by default (self-signed)" 'SOFTID_TLS_SELF_SIGNED=true' "$dockerfile"
+expect "the client in the image trusts that certificate" 'SOFTID_TLS_CA=/var/lib/softid/tls/server.crt' \
+  "$dockerfile"
+if grep -Eq 'SOFTID_ALLOW_INSECURE|--allow-insecure' "$dockerfile" "$compose"; then
+  echo "FAIL: the image or compose file serves plain text on the network (allow-insecure)" >&2
+  failed=1
+fi
+if grep -Eq 'SOFTID_AUTH=none|--auth none|SOFTID_AUTH: *"?none' "$dockerfile" "$compose"; then
+  echo "FAIL: the image or compose file turns API tokens off" >&2
+  failed=1
+fi
 expect "tini as PID 1" '^ENTRYPOINT \["/usr/bin/tini", "--", "softid-server"\]' "$dockerfile"
 expect "tini is installed" '^tini([[:space:]]|#|$)' "$list"
 
