@@ -2,7 +2,9 @@
 
 #include <cmath>
 
+#include "core/common/check.h"
 #include "core/common/json_fields.h"
+#include "core/fem/parameter_registry.h"
 
 namespace softid::diagnosis {
 
@@ -81,17 +83,10 @@ fem::StiffnessField HalvesField(const Eigen::AlignedBox3d& rest_bounds, int axis
 
 fem::PhysicalParameters CopyExtension(Extension extension, const fem::PhysicalParameters& from,
                                       fem::PhysicalParameters to) {
-  switch (extension) {
-    case Extension::kFriction: to.friction_coefficient = from.friction_coefficient; break;
-    case Extension::kAirDrag: to.drag_quadratic = from.drag_quadratic; break;
-    case Extension::kHeterogeneousStiffness: to.stiffness_field = from.stiffness_field; break;
-    case Extension::kContact:
-      to.contact_stiffness = from.contact_stiffness;
-      to.contact_damping = from.contact_damping;
-      break;
-    case Extension::kInitialSpin:
-      to.initial_angular_velocity = from.initial_angular_velocity;
-      break;
+  for (const std::string& name : GetCandidate(extension).parameters) {
+    const fem::ParameterInfo* parameter = fem::FindParameter(name);
+    SOFTID_DEMAND(parameter != nullptr);  // the library names registry parameters only
+    fem::CopyParameter(*parameter, from, &to);
   }
   return to;
 }

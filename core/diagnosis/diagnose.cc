@@ -299,7 +299,8 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
                      const std::vector<fem::PhysicalParameters>& fallbacks = {})
         -> Result<inverse::FitResult> {
       Result<inverse::FitResult> best = Status::Internal("no refit start");
-      const double k0 = DefaultContactStiffness(p0, context.rest_bounds.sizes().maxCoeff());
+      const double k0 =
+          fem::DefaultContactStiffness(p0.youngs_modulus, context.rest_bounds.sizes().maxCoeff());
       std::vector<fem::PhysicalParameters> all = starts;
       all.insert(all.end(), fallbacks.begin(), fallbacks.end());
       for (size_t i = 0; i < all.size(); ++i) {
@@ -364,8 +365,8 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
           tested->test.still_flagged.push_back("patch " + std::to_string(i) + " (" +
                                                tested->after.patches[i].label + ")");
       }
-      const double k0 =
-          DefaultContactStiffness(tested->parameters, context.rest_bounds.sizes().maxCoeff());
+      const double k0 = fem::DefaultContactStiffness(tested->parameters.youngs_modulus,
+                                                     context.rest_bounds.sizes().maxCoeff());
       tested->test.plausible =
           IsPlausible(candidate.extension, tested->parameters, k0, &tested->test.plausibility_note);
       tested->values = ExtensionValues(candidate.extension, tested->parameters, k0);
@@ -464,8 +465,8 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
       for (auto* list : {&starts, &fallbacks}) {
         for (fem::PhysicalParameters& start : *list) {
           if (s.extension == Extension::kContact && !(start.contact_stiffness > 0.0)) {
-            start.contact_stiffness =
-                DefaultContactStiffness(p0, context.rest_bounds.sizes().maxCoeff());
+            start.contact_stiffness = fem::DefaultContactStiffness(
+                p0.youngs_modulus, context.rest_bounds.sizes().maxCoeff());
           }
         }
       }
@@ -527,9 +528,10 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
         if (tested.test.refit_error.empty()) {
           tested.test.nuisance_lr = LikelihoodRatioStatistic(
               tested.test.physics_cost, tested.test.cost_after, tested.test.n_eff);
-          tested.nuisance_values = ExtensionValues(
-              nuisance_candidate.extension, tested.parameters,
-              DefaultContactStiffness(tested.parameters, context.rest_bounds.sizes().maxCoeff()));
+          tested.nuisance_values =
+              ExtensionValues(nuisance_candidate.extension, tested.parameters,
+                              fem::DefaultContactStiffness(tested.parameters.youngs_modulus,
+                                                           context.rest_bounds.sizes().maxCoeff()));
         }
         ApplyNuisanceCheck(rule, nuisance_candidate, &tested.test);
         report.tested.push_back(std::move(tested));

@@ -119,10 +119,6 @@ Status ScreeningOptions::Validate() const {
   return Status::Ok();
 }
 
-double DefaultContactStiffness(const fem::PhysicalParameters& p, double body_size) {
-  return 100.0 * p.youngs_modulus / body_size;
-}
-
 std::vector<bool> SignatureFrames(const Candidate& candidate,
                                   const std::vector<FrameMotion>& motion) {
   std::vector<bool> out(motion.size(), false);
@@ -148,8 +144,9 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
   const std::vector<double> x0 = space.ToVariables(p0);
   const int nb = space.NumVariables();
   const double body_size = base.rest_bounds.sizes().maxCoeff();
-  const double k0 =
-      p0.contact_stiffness > 0.0 ? p0.contact_stiffness : DefaultContactStiffness(p0, body_size);
+  const double k0 = p0.contact_stiffness > 0.0
+                        ? p0.contact_stiffness
+                        : fem::DefaultContactStiffness(p0.youngs_modulus, body_size);
 
   // H_bb^+ (pseudo-inverse over its positive eigenvalues): base directions the data do not fix
   // cannot absorb anything to second order.

@@ -129,7 +129,4 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
 // projected into their plane. The initial-spin screening tries a start along each.
 std::array<Eigen::Vector3d, 3> PrincipalAxes(const fem::HexMesh& mesh);
 
-// The default penalty stiffness 100 E / L [Pa/m] (physical_parameters.h).
-double DefaultContactStiffness(const fem::PhysicalParameters& p, double body_size);
-
 }  // namespace softid::diagnosis

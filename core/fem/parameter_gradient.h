@@ -1,6 +1,7 @@
 // The derivative of a scalar (a cost) with respect to every physical parameter, under the public
 // names of PhysicalParameters, in SI units (e.g. d cost / d youngs_modulus in [cost / Pa]). The
-// adjoint fills all of them in one backward pass; the optimiser picks the ones it fits.
+// adjoint fills all of them in one backward pass; the optimiser picks the ones it fits. Scalars
+// and vectors are reached through parameter_registry.h.
 #pragma once
 
 #include <Eigen/Core>
@@ -23,7 +24,7 @@ struct ParameterGradient {
   Eigen::Vector3d ground_normal = Eigen::Vector3d::Zero();
   double ground_offset = 0.0;
   // d / d of the effective contact stiffness k [Pa/m]. When PhysicalParameters::contact_stiffness
-  // is 0 (k = 100 E / L), this share is also included in youngs_modulus.
+  // is 0 (k = DefaultContactStiffness(E, L)), this share is also included in youngs_modulus.
   double contact_stiffness = 0.0;
   double contact_damping = 0.0;
   double friction_coefficient = 0.0;

@@ -1,6 +1,7 @@
 // The physical parameters of a simulated object and its surroundings, under the names used
 // everywhere in softid (truth.json, job configs, result.json, the service). These names are a
-// public contract: keep them stable.
+// public contract: keep them stable. Each parameter's name, unit and range are listed once, in
+// parameter_registry.h.
 #pragma once
 
 #include <Eigen/Core>
@@ -51,10 +52,8 @@ struct PhysicalParameters {
   Eigen::Vector3d initial_velocity = Eigen::Vector3d::Zero();  // of the centre of mass [m/s]
   Eigen::Vector3d initial_angular_velocity = Eigen::Vector3d::Zero();  // about it [rad/s]
   std::optional<GroundPlane> ground;                                   // none: free flight
-  // Penalty contact with the ground: pressure per metre of penetration [Pa/m]. 0 selects the
-  // default 100 E / L (L = longest side of the rest mesh): a contact pressure p = E eps then sinks
-  // in by eps L / 100, 1 % of the shortening the same stress causes over the body's length,
-  // independent of grid and time step.
+  // Penalty contact with the ground: pressure per metre of penetration [Pa/m]. 0 selects
+  // DefaultContactStiffness (below).
   double contact_stiffness = 0.0;
   double contact_damping = 0.0;  // [s]: damping force = contact_damping * contact stiffness * v
   double friction_coefficient = 0.0;  // Coulomb mu [-], >= 0 (regularised; 0: frictionless)
@@ -64,7 +63,7 @@ struct PhysicalParameters {
   double drag_linear = 0.0;     // [kg/(m^2 s)] = [Pa s/m], >= 0
   double drag_quadratic = 0.0;  // [kg/m^3] (rho_air C_d / 2), >= 0
 
-  // Names the first field that is out of range and its value.
+  // Names the first field that is out of range (parameter_registry.h) and its value.
   Status Validate() const;
   // Lame parameters of the base modulus.
   double LameMu() const { return youngs_modulus / (2.0 * (1.0 + poisson_ratio)); }
@@ -72,6 +71,14 @@ struct PhysicalParameters {
     return youngs_modulus * poisson_ratio / ((1.0 + poisson_ratio) * (1.0 - 2.0 * poisson_ratio));
   }
 };
+
+// The contact stiffness that contact_stiffness = 0 selects, 100 E / L [Pa/m] (L = longest side of
+// the rest mesh): a contact pressure p = E eps then sinks in by eps L / 100, 1 % of the shortening
+// the same stress causes over the body's length, independent of grid and time step.
+inline constexpr double kDefaultContactStiffnessFactor = 100.0;  // k L / E [-]
+inline double DefaultContactStiffness(double youngs_modulus_pa, double length_m) {
+  return kDefaultContactStiffnessFactor * youngs_modulus_pa / length_m;
+}
 
 // JSON under the public names (truth.json, result values). Vectors are arrays; the ground plane is
 // {"normal": [..], "offset": d} or null; the stiffness field is {"kind": "uniform"} |
@@ -85,8 +92,5 @@ Result<PhysicalParameters> PhysicalParametersFromJson(const nlohmann::json& json
                                                       const PhysicalParameters& defaults = {});
 Result<GroundPlane> GroundPlaneFromJson(const nlohmann::json& json, const std::string& field);
 Result<StiffnessField> StiffnessFieldFromJson(const nlohmann::json& json, const std::string& field);
-
-// Units of every public parameter name ("Pa", "1/s", ...), for reports.
-const char* ParameterUnit(const std::string& name);
 
 }  // namespace softid::fem

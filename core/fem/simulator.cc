@@ -240,7 +240,7 @@ void Simulator::ApplyParameters() {
     contact_.plane = *parameters.ground;
     contact_.stiffness = parameters.contact_stiffness > 0.0
                              ? parameters.contact_stiffness
-                             : 100.0 * parameters.youngs_modulus / length_;
+                             : DefaultContactStiffness(parameters.youngs_modulus, length_);
     contact_.smoothing =
         options_.contact_smoothing > 0.0 ? options_.contact_smoothing : 1e-3 * length_;
     contact_.damping = parameters.contact_damping;

@@ -234,8 +234,9 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
     gradient->drag_quadratic += share.drag_quadratic;
   }
   gradient->contact_stiffness += d_stiffness;
+  // The default k = DefaultContactStiffness(E, L) is linear in E.
   if (p.ground && p.contact_stiffness <= 0.0)
-    gradient->youngs_modulus += d_stiffness * 100.0 / length_;
+    gradient->youngs_modulus += d_stiffness * kDefaultContactStiffnessFactor / length_;
 
   for (int i = 0; i < n; ++i) {
     if (!fixed_[i]) continue;

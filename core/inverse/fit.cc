@@ -200,6 +200,13 @@ class IterationReporter : public ceres::IterationCallback {
   StartResult* stats_;
 };
 
+// Whether the optimiser works with log(value): ranges of such parameters are sampled on a log
+// scale.
+bool IsLogScaled(const std::string& name) {
+  const fem::ParameterInfo* parameter = fem::FindParameter(name);
+  return parameter != nullptr && parameter->transform == fem::ParameterTransform::kLog;
+}
+
 // Starting parameters: start s draws every ranged parameter (log-uniform for positive
 // quantities, uniform otherwise) from a generator seeded by (seed, s). Without ranges all starts
 // would coincide, so there is one.
@@ -217,11 +224,11 @@ std::vector<fem::PhysicalParameters> DrawStarts(const JobConfig& config,
     fem::PhysicalParameters p = base;
     for (const auto& [name, initial] : config.initial) {
       if (!initial.range) continue;
-      double* value = ScalarParameter(p, name);
+      double* value = fem::ScalarParameter(p, name);
       if (value == nullptr) continue;
       const double t = unit(rng);
       const double lo = initial.range->min, hi = initial.range->max;
-      *value = IsLogParameter(name) && lo > 0.0 ? lo * std::pow(hi / lo, t) : lo + t * (hi - lo);
+      *value = IsLogScaled(name) && lo > 0.0 ? lo * std::pow(hi / lo, t) : lo + t * (hi - lo);
     }
     starts.push_back(p);
   }
@@ -234,10 +241,10 @@ fem::PhysicalParameters CentralStart(const JobConfig& config, const fem::Physica
   fem::PhysicalParameters p = base;
   for (const auto& [name, initial] : config.initial) {
     if (!initial.range) continue;
-    double* value = ScalarParameter(p, name);
+    double* value = fem::ScalarParameter(p, name);
     if (value == nullptr) continue;
     const double lo = initial.range->min, hi = initial.range->max;
-    *value = IsLogParameter(name) && lo > 0.0 ? std::sqrt(lo * hi) : 0.5 * (lo + hi);
+    *value = IsLogScaled(name) && lo > 0.0 ? std::sqrt(lo * hi) : 0.5 * (lo + hi);
   }
   return p;
 }
@@ -544,16 +551,9 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   return result;
 }
 
-nlohmann::json ParameterValueJson(const fem::PhysicalParameters& p_in, const std::string& name) {
-  fem::PhysicalParameters p = p_in;
-  if (double* value = ScalarParameter(p, name)) return *value;
-  if (name == "gravity") return json::FromVector3(p.gravity);
-  if (name == "initial_velocity") return json::FromVector3(p.initial_velocity);
-  if (name == "initial_angular_velocity") return json::FromVector3(p.initial_angular_velocity);
-  if (name == "ground_plane" || name == "ground")
-    return p.ground ? fem::ToJson(*p.ground) : nlohmann::json(nullptr);
-  if (name == "stiffness_field") return fem::ToJson(p.stiffness_field);
-  return nullptr;
+nlohmann::json ParameterValueJson(const fem::PhysicalParameters& p, const std::string& name) {
+  const fem::ParameterInfo* parameter = fem::FindParameter(name);
+  return parameter != nullptr ? fem::ToJson(p, *parameter) : nlohmann::json(nullptr);
 }
 
 nlohmann::json ToJson(const FitResult& result) {
@@ -561,7 +561,7 @@ nlohmann::json ToJson(const FitResult& result) {
     nlohmann::json out = nlohmann::json::object();
     for (const std::string& name : result.fitted) {
       out[name] = {{"value", ParameterValueJson(start.final, name)},
-                   {"unit", fem::ParameterUnit(name)},
+                   {"unit", std::string(fem::ParameterUnit(name))},
                    {"initial", ParameterValueJson(start.initial, name)}};
     }
     return out;

@@ -48,34 +48,31 @@ PhysicalValue ValueOf(const ParameterSpace& space, const fem::PhysicalParameters
   const std::string parameter = ParameterOf(name);
   fem::PhysicalParameters p = space.ToParameters(x.data(), base);
   PhysicalValue out;
-  out.unit = fem::ParameterUnit(parameter);
-  if (double* scalar = ScalarParameter(p, parameter)) {
-    out.value = *scalar;
-    out.scale = std::abs(*scalar);
+  const fem::ParameterInfo* info = fem::FindParameter(parameter);
+  if (info == nullptr) return out;
+  out.unit = info->unit;
+  if (info->shape == fem::ParameterShape::kScalar) {
+    out.value = p.*info->scalar;
+    out.scale = std::abs(out.value);
     return out;
   }
-  const int component = name.find('[') != std::string::npos ? name[name.find('[') + 1] - '0' : 0;
-  const Eigen::Vector3d* vector = parameter == "gravity"            ? &p.gravity
-                                  : parameter == "initial_velocity" ? &p.initial_velocity
-                                  : parameter == "initial_angular_velocity"
-                                      ? &p.initial_angular_velocity
-                                      : nullptr;
-  if (vector != nullptr) {
-    out.value = (*vector)[component];
-    out.scale = vector->norm();
+  if (info->shape == fem::ParameterShape::kVector3) {
+    const Eigen::Vector3d& vector = p.*info->vector;
+    out.value = vector[name[name.find('[') + 1] - '0'];
+    out.scale = vector.norm();
     return out;
   }
-  if (name == "ground_plane.offset") {
-    out.value = p.ground ? p.ground->offset : 0.0;
-    out.unit = "m";
+  if (info->shape == fem::ParameterShape::kPlane) {
+    if (name == parameter + ".offset") {
+      out.value = p.ground ? p.ground->offset : 0.0;
+      out.unit = "m";
+    } else {  // tilt: radians for small tilts around the start normal
+      out.value = x[i];
+      out.unit = "rad";
+    }
     return out;
   }
-  if (parameter == "ground_plane") {  // tilt: radians for small tilts around the start normal
-    out.value = x[i];
-    out.unit = "rad";
-    return out;
-  }
-  if (parameter == "stiffness_field") {
+  if (info->shape == fem::ParameterShape::kStiffnessField) {
     // Index after "stiffness_field[" may have several digits.
     const int k = std::stoi(name.substr(name.find('[') + 1));
     if (p.stiffness_field.kind == fem::StiffnessField::Kind::kRegions) {

@@ -1,6 +1,7 @@
 #include "core/inverse/job_config.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <fstream>
 #include <initializer_list>
@@ -52,23 +53,18 @@ std::string Join(const std::vector<std::string>& names) {
 }
 
 std::string KnownFittable() {
-  return "unknown parameter (known: " +
-         Join(std::vector<std::string>(kFittableParameters.begin(), kFittableParameters.end())) +
-         "; \"ground\" is an alias of ground_plane)";
+  std::vector<std::string> names;
+  for (const fem::ParameterInfo& parameter : fem::ParameterRegistry())
+    names.emplace_back(parameter.name);
+  return "unknown parameter (known: " + Join(names) + "; \"ground\" is an alias of ground_plane)";
 }
 
-// The public PhysicalParameters keys, taken from fem::ToJson so they cannot drift.
+// The public PhysicalParameters keys.
 std::vector<std::string> PhysicalKeys() {
   std::vector<std::string> keys;
-  // Named: items() of a temporary would dangle.
-  const Json defaults = fem::ToJson(fem::PhysicalParameters{});
-  for (const auto& item : defaults.items()) keys.push_back(item.key());
+  for (const fem::ParameterInfo& parameter : fem::ParameterRegistry())
+    keys.emplace_back(parameter.json_key);
   return keys;
-}
-
-bool IsPhysicalKey(const std::string& key) {
-  const std::vector<std::string> keys = PhysicalKeys();
-  return std::find(keys.begin(), keys.end(), key) != keys.end();
 }
 
 Status UnknownKey(const std::string& object, const std::string& key) {
@@ -239,21 +235,21 @@ Result<Json> ParseFixed(const Json& value, const std::vector<std::string>& fit) 
   std::map<std::string, std::string> written_as;  // PhysicalParameters key -> key as written
   for (const auto& item : value.items()) {
     const std::string field = "fixed." + item.key();
-    const std::string key = item.key() == kGroundPlane ? std::string(kGroundAlias) : item.key();
-    if (!IsPhysicalKey(key)) {
+    const fem::ParameterInfo* parameter = fem::FindParameter(item.key());
+    if (parameter == nullptr) {
       return json::Invalid(field, item.value(),
                            "unknown parameter (known: " + Join(PhysicalKeys()) +
                                "; \"ground_plane\" is an alias of ground)");
     }
+    const std::string key(parameter->json_key);  // "ground" also when written "ground_plane"
     if (auto it = written_as.find(key); it != written_as.end()) {
       return json::Invalid(field, item.value(), "duplicate of fixed." + it->second);
     }
     written_as[key] = item.key();
-    const std::optional<std::string_view> fittable = CanonicalFittableName(key);
-    if (fittable && std::find(fit.begin(), fit.end(), *fittable) != fit.end()) {
-      return json::Invalid(
-          field, item.value(),
-          std::string(*fittable) + " is also in \"fit\"; a parameter is either fitted or fixed");
+    if (std::find(fit.begin(), fit.end(), parameter->name) != fit.end()) {
+      return json::Invalid(field, item.value(),
+                           std::string(parameter->name) +
+                               " is also in \"fit\"; a parameter is either fitted or fixed");
     }
     SOFTID_ASSIGN_OR_RETURN(fixed[key], NormalisedParameterValue(key, item.value(), field));
   }
@@ -328,32 +324,28 @@ Result<GradientMethod> ParseGradient(const Json& value) {
 }  // namespace
 
 bool IsFittable(std::string_view name) {
-  return std::find(kFittableParameters.begin(), kFittableParameters.end(), name) !=
-         kFittableParameters.end();
+  const fem::ParameterInfo* parameter = fem::FindParameter(name);
+  return parameter != nullptr && parameter->name == name;
 }
 
 std::optional<std::string_view> CanonicalFittableName(std::string_view name) {
-  if (name == kGroundAlias) return kGroundPlane;
-  const auto it = std::find(kFittableParameters.begin(), kFittableParameters.end(), name);
-  if (it == kFittableParameters.end()) return std::nullopt;
-  return *it;
+  // FindParameter also finds a parameter by its PhysicalParameters key: the alias "ground".
+  const fem::ParameterInfo* parameter = fem::FindParameter(name);
+  if (parameter == nullptr) return std::nullopt;
+  return parameter->name;
 }
 
 std::string_view PhysicalParameterKey(std::string_view fittable_name) {
   SOFTID_THROW_UNLESS(IsFittable(fittable_name),
                       "not a fittable parameter: " + std::string(fittable_name));
-  return fittable_name == kGroundPlane ? kGroundAlias : fittable_name;
+  return fem::FindParameter(fittable_name)->json_key;
 }
 
 ParameterShape ShapeOf(std::string_view fittable_name) {
-  const std::optional<std::string_view> name = CanonicalFittableName(fittable_name);
-  SOFTID_THROW_UNLESS(name.has_value(), "not a fittable parameter: " + std::string(fittable_name));
-  if (*name == "gravity" || *name == "initial_velocity" || *name == "initial_angular_velocity") {
-    return ParameterShape::kVector3;
-  }
-  if (*name == kGroundPlane) return ParameterShape::kPlane;
-  if (*name == "stiffness_field") return ParameterShape::kStiffnessField;
-  return ParameterShape::kScalar;
+  const fem::ParameterInfo* parameter = fem::FindParameter(fittable_name);
+  SOFTID_THROW_UNLESS(parameter != nullptr,
+                      "not a fittable parameter: " + std::string(fittable_name));
+  return parameter->shape;
 }
 
 const char* ToString(GradientMethod method) {

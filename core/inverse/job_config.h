@@ -5,7 +5,7 @@
 // The JSON form is a public contract that capture stations and the gRPC service send; every key is
 // optional (defaults below), unknown keys are rejected by name:
 //   {
-//     "fit": ["youngs_modulus", "poisson_ratio"],   // unique fittable names (kFittableParameters);
+//     "fit": ["youngs_modulus", "poisson_ratio"],   // unique fittable names (fem::ParameterInfo);
 //                                                   // "ground" is an alias of "ground_plane"
 //     "initial": {                                  // start values of fitted parameters only
 //       "youngs_modulus": {"min": 1e4, "max": 1e6}, // scalars: a range for random starts ...
@@ -39,7 +39,6 @@
 // fem::PhysicalParameters::Validate and fem::PhysicalParametersFromJson.
 #pragma once
 
-#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <map>
@@ -51,28 +50,18 @@
 
 #include "core/common/status.h"
 #include "core/cost/sparse_surface_cost.h"
+#include "core/fem/parameter_registry.h"
 #include "core/fem/physical_parameters.h"
 
 namespace softid::inverse {
 
-// Names of the parameters a job can fit, in the order reports list them. They equal the public
-// PhysicalParameters names except "ground_plane" (PhysicalParameters: "ground"), which is spelled
-// out because "ground" alone reads like a switch rather than a plane to fit.
-inline constexpr std::array<std::string_view, 15> kFittableParameters = {
-    "youngs_modulus",    "poisson_ratio",
-    "density",           "mass_damping",
-    "stiffness_damping", "gravity",
-    "initial_velocity",  "initial_angular_velocity",
-    "ground_plane",      "friction_coefficient",
-    "drag_linear",       "drag_quadratic",
-    "stiffness_field",   "contact_stiffness",
-    "contact_damping",
-};
-
 // JobConfig::substeps value meaning "choose by step doubling" ("auto" in JSON).
 inline constexpr int kAutoSubsteps = 0;
 
-// Whether `name` is in kFittableParameters (canonical names only: not the alias "ground").
+// The parameters a job can fit are those of fem::ParameterRegistry(), under their `name`; the
+// PhysicalParameters key "ground" is an alias of "ground_plane".
+
+// Whether `name` is a fittable name (canonical names only: not the alias "ground").
 bool IsFittable(std::string_view name);
 // The canonical fittable name of `name` ("ground" -> "ground_plane"), or nullopt when `name` is
 // neither a fittable name nor an alias of one.
@@ -81,8 +70,7 @@ std::optional<std::string_view> CanonicalFittableName(std::string_view name);
 // unchanged). Throws std::invalid_argument for a name that is not fittable.
 std::string_view PhysicalParameterKey(std::string_view fittable_name);
 
-// Whether the parameter is a scalar, a 3-vector, the ground plane or the stiffness field.
-enum class ParameterShape { kScalar, kVector3, kPlane, kStiffnessField };
+using ParameterShape = fem::ParameterShape;
 // Shape of a fittable name (or the alias "ground"); throws std::invalid_argument otherwise.
 ParameterShape ShapeOf(std::string_view fittable_name);
 

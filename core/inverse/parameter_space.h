@@ -1,33 +1,22 @@
 // The optimiser's variables: the fitted physical parameters mapped to an unconstrained vector x,
 // so that no step of the line search can leave the valid range and steps have comparable scales.
-//   positive quantities (youngs_modulus, density, damping, drag, contact stiffness and damping,
-//     stiffness field region scales): x = log(p)
-//   poisson_ratio in (0, 0.5): p = 0.5 logistic(x)
-//   friction_coefficient >= 0: p = softplus(x) (reaches 0 smoothly, unbounded above)
-//   gravity [m/s^2], initial_velocity [m/s], initial_angular_velocity [rad/s]: x = p
-//   ground_plane: n = normalise(n0 + x0 t1 + x1 t2) around the starting normal n0 (no pole
-//     singularity), offset = x2 * L / 10 (L the body size)
-//   stiffness_field (linear): log_gradient = x / L
+// Each parameter's map is its fem::ParameterTransform (fem/parameter_registry.h).
 #pragma once
 
 #include <string>
-#include <string_view>
 #include <vector>
 
 #include "core/common/status.h"
 #include "core/fem/parameter_gradient.h"
+#include "core/fem/parameter_registry.h"
 #include "core/fem/physical_parameters.h"
 
 namespace softid::inverse {
 
-// The scalar field of `p` named `name` (a public name), or null when it is not a scalar.
-double* ScalarParameter(fem::PhysicalParameters& p, std::string_view name);
-// Whether the optimiser works with log(value) for this parameter (positive quantities).
-bool IsLogParameter(std::string_view name);
-
 class ParameterSpace {
  public:
-  // @param names fittable parameter names (see job_config.h); each at most once.
+  // @param names fittable parameter names (fem::ParameterInfo::name); each at most once. Any
+  //   other name is refused.
   // @param reference the starting parameters: they fix the ground plane's tangent basis and the
   //   size of a stiffness field's coefficient vector. The ground plane must be set when fitted.
   // @param length_scale L [m], the body's size.
@@ -41,7 +30,8 @@ class ParameterSpace {
   const std::vector<std::string>& names() const { return names_; }
 
   // x for parameters p (fitted entries only). Values at the edge of a transform's range (a zero
-  // damping or friction) are moved just inside it: kMinimumStart below.
+  // damping or friction) are moved just inside it: fem::ParameterInfo::minimum_start. A zero
+  // contact stiffness starts at the default it selects.
   std::vector<double> ToVariables(const fem::PhysicalParameters& p) const;
   // `base` with the fitted entries replaced by those encoded in x.
   fem::PhysicalParameters ToParameters(const double* x, const fem::PhysicalParameters& base) const;
@@ -51,7 +41,7 @@ class ParameterSpace {
 
  private:
   struct Entry {
-    std::string name;
+    const fem::ParameterInfo* parameter = nullptr;
     int offset = 0;  // first variable
     int size = 1;
   };

@@ -7,7 +7,7 @@
 #include <numbers>
 
 #include "core/common/json_fields.h"
-#include "core/inverse/parameter_space.h"
+#include "core/fem/parameter_registry.h"
 
 namespace softid::lab::reproduce {
 namespace {
@@ -193,14 +193,13 @@ double MetricDisplayScale(Metric metric) {
                                                                                        : 100.0;
 }
 
-double ScoreError(const Quantity& quantity, const fem::PhysicalParameters& value_in,
-                  const fem::PhysicalParameters& truth_in) {
-  fem::PhysicalParameters value = value_in, truth = truth_in;
+double ScoreError(const Quantity& quantity, const fem::PhysicalParameters& value,
+                  const fem::PhysicalParameters& truth) {
   constexpr double kInfinity = std::numeric_limits<double>::infinity();
   switch (quantity.metric) {
     case Metric::kRelative: {
-      const double* v = inverse::ScalarParameter(value, quantity.name);
-      const double* t = inverse::ScalarParameter(truth, quantity.name);
+      const double* v = fem::ScalarParameter(value, quantity.name);
+      const double* t = fem::ScalarParameter(truth, quantity.name);
       if (v == nullptr || t == nullptr || *t == 0.0) return kInfinity;
       return std::abs(*v - *t) / std::abs(*t);
     }
@@ -252,13 +251,12 @@ Result<Benchmark> MakeBenchmark(const std::string& name) {
   return b;
 }
 
-nlohmann::json DrawStart(const Benchmark& benchmark, const fem::PhysicalParameters& truth_in,
+nlohmann::json DrawStart(const Benchmark& benchmark, const fem::PhysicalParameters& truth,
                          std::mt19937_64& rng) {
-  fem::PhysicalParameters truth = truth_in;
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   nlohmann::json initial = nlohmann::json::object();
   for (const std::string& name : benchmark.fit) {
-    if (const double* value = inverse::ScalarParameter(truth, name)) {
+    if (const double* value = fem::ScalarParameter(truth, name)) {
       initial[name] = *value * std::pow(10.0, -1.0 + 2.0 * unit(rng));
     } else if (name == "gravity") {
       const Eigen::Vector3d g =

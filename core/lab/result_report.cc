@@ -6,6 +6,7 @@
 #include <cstdio>
 #include <fstream>
 
+#include "core/fem/parameter_registry.h"
 #include "core/inverse/fit.h"
 
 namespace softid::lab {
@@ -50,7 +51,7 @@ std::string FormatParameters(const fem::PhysicalParameters& p,
   for (const std::string& name : names) {
     if (!out.empty()) out += " ";
     out += name + "=" + Compact(inverse::ParameterValueJson(p, name));
-    const std::string unit = fem::ParameterUnit(name);
+    const std::string unit(fem::ParameterUnit(name));
     if (!unit.empty() && unit != "1") out += " " + unit;
   }
   return out;

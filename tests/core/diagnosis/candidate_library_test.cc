@@ -2,7 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
+
+#include "core/fem/parameter_registry.h"
 
 namespace softid::diagnosis {
 namespace {
@@ -52,6 +55,36 @@ TEST(NullModelStart, OtherExtensionsKeepTheRefitsBaseParameters) {
   EXPECT_EQ(contact.contact_stiffness, NullParameters().contact_stiffness);
   EXPECT_EQ(contact.contact_damping, NullParameters().contact_damping);
   EXPECT_EQ(contact.youngs_modulus, 5000.0);
+}
+
+// The library names the parameters it frees under their registry names, and an extension's copy
+// takes exactly those from the refit.
+TEST(CandidateLibrary, FreesRegistryParameters) {
+  fem::PhysicalParameters from = NullParameters();
+  from.friction_coefficient = 0.4;
+  from.drag_quadratic = 0.6;
+  from.contact_stiffness = 2e6;
+  from.contact_damping = 1e-3;
+  from.initial_angular_velocity = Eigen::Vector3d(1, 2, 3);
+  from.stiffness_field = HalvesField(
+      Eigen::AlignedBox3d(Eigen::Vector3d::Zero(), Eigen::Vector3d::Constant(0.1)), 0, 2.0);
+  for (const Candidate& candidate : CandidateLibrary()) {
+    SCOPED_TRACE(ToString(candidate.extension));
+    const fem::PhysicalParameters copy = CopyExtension(candidate.extension, from, {});
+    const nlohmann::json copied = fem::ToJson(copy),
+                         defaults = fem::ToJson(fem::PhysicalParameters{});
+    for (const fem::ParameterInfo& parameter : fem::ParameterRegistry()) {
+      const bool freed = std::find(candidate.parameters.begin(), candidate.parameters.end(),
+                                   parameter.name) != candidate.parameters.end();
+      const std::string key(parameter.json_key);
+      EXPECT_EQ(copied[key], freed ? fem::ToJson(from, parameter) : defaults[key]) << key;
+    }
+    for (const std::string& name : candidate.parameters) {
+      const fem::ParameterInfo* parameter = fem::FindParameter(name);
+      ASSERT_NE(parameter, nullptr) << name;
+      EXPECT_EQ(parameter->name, name);
+    }
+  }
 }
 
 }  // namespace

@@ -91,8 +91,8 @@ json FullConfig() {
 }
 
 TEST(Fittable, NamesAndShapes) {
-  EXPECT_EQ(kFittableParameters.front(), "youngs_modulus");
-  EXPECT_EQ(kFittableParameters.back(), "contact_damping");
+  EXPECT_EQ(fem::ParameterRegistry().front().name, "youngs_modulus");
+  EXPECT_EQ(fem::ParameterRegistry().back().name, "contact_damping");
   EXPECT_TRUE(IsFittable("ground_plane"));
   EXPECT_FALSE(IsFittable("ground"));  // the alias is resolved by CanonicalFittableName
   EXPECT_FALSE(IsFittable("youngs_modulo"));
@@ -110,8 +110,10 @@ TEST(Fittable, NamesAndShapes) {
   EXPECT_THROW(ShapeOf("youngs_modulo"), std::invalid_argument);
   // Every fittable parameter is a public PhysicalParameters key (so "fixed" can hold it).
   const json public_keys = fem::ToJson(fem::PhysicalParameters{});
-  for (std::string_view name : kFittableParameters) {
-    EXPECT_TRUE(public_keys.contains(std::string(PhysicalParameterKey(name)))) << name;
+  for (const fem::ParameterInfo& parameter : fem::ParameterRegistry()) {
+    EXPECT_TRUE(IsFittable(parameter.name)) << parameter.name;
+    EXPECT_TRUE(public_keys.contains(std::string(PhysicalParameterKey(parameter.name))))
+        << parameter.name;
   }
 }
 
