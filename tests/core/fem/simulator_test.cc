@@ -612,7 +612,9 @@ TEST(Simulator, MatrixFreeNewtonFollowsTheAssembledTangent) {
     EXPECT_NEAR(free.linear_iterations, assembled.linear_iterations,
                 0.05 * assembled.linear_iterations);
     EXPECT_EQ(free.refactorizations, assembled.refactorizations);
-    if (scene == 0) EXPECT_GT(free.refactorizations, 0);  // the factor is assembled for
+    if (scene == 0) {
+      EXPECT_GT(free.refactorizations, 0);  // the factor is assembled for
+    }
   }
 }
 
