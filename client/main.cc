@@ -292,6 +292,56 @@ int WatchUntilDone(ReconstructionClient& client, const std::string& job_id,
   return job.state() == v1::SUCCEEDED ? kExitOk : kExitFailure;
 }
 
+// Uploads the capture folder `dir` and sets its id; an exit code.
+int UploadCaptureFolder(ReconstructionClient& client, const std::string& dir,
+                        const std::string& request_id, const GlobalFlags& flags,
+                        std::string* capture_id) {
+  softid::client::CaptureFiles files;
+  std::string error;
+  if (!softid::client::ReadCaptureFiles(dir, &files, &error)) {
+    std::fprintf(stderr, "softid: %s\n", error.c_str());
+    return kExitInvalidInput;
+  }
+  v1::Capture capture;
+  const grpc::Status s =
+      client.UploadCapture(files, request_id.empty() ? "" : request_id + "/capture", &capture);
+  if (!s.ok()) return Report(s, flags);
+  if (!flags.json) {
+    std::cout << "capture " << capture.id() << " uploaded (" << files.files.size() << " files)\n";
+  }
+  *capture_id = capture.id();
+  return kExitOk;
+}
+
+// Every capture the caller may see, a line each (or one JSON array).
+int ListCaptures(ReconstructionClient& client, const GlobalFlags& flags) {
+  v1::ListCapturesRequest request;
+  nlohmann::json all = nlohmann::json::array();
+  do {
+    v1::ListCapturesResponse page;
+    const grpc::Status s = client.ListCaptures(request, &page);
+    if (!s.ok()) return Report(s, flags);
+    for (const v1::Capture& capture : page.captures()) {
+      if (flags.json) {
+        all.push_back({{"id", capture.id()},
+                       {"request_id", capture.request_id()},
+                       {"num_files", capture.num_files()},
+                       {"total_bytes", capture.total_bytes()},
+                       {"num_jobs", capture.num_jobs()},
+                       {"create_time_s", capture.create_time().seconds()}});
+        continue;
+      }
+      std::printf("%s  %4d files  %8.1f MB  %3d job(s)%s%s\n", capture.id().c_str(),
+                  capture.num_files(), capture.total_bytes() / 1e6, capture.num_jobs(),
+                  capture.request_id().empty() ? "" : "  request ",
+                  capture.request_id().c_str());
+    }
+    request.set_page_token(page.next_page_token());
+  } while (!request.page_token().empty());
+  if (flags.json) std::cout << all.dump() << "\n";
+  return kExitOk;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -325,8 +375,18 @@ int main(int argc, char** argv) {
 
   std::string capture_dir, config_file, request_id, job_id, out_file, truth_file, state;
   bool wait = false;
+  std::string capture_id;
   CLI::App* submit = app.add_subcommand("submit", "upload a capture folder and queue a job");
-  submit->add_option("capture_dir", capture_dir, "capture folder (with capture.json)")->required();
+  CLI::Option* dir_option =
+      submit->add_option("capture_dir", capture_dir, "capture folder (with capture.json)");
+  CLI::Option* capture_option = submit->add_option(
+      "--capture", capture_id, "queue the job on this uploaded capture instead (see `captures`)");
+  dir_option->excludes(capture_option);
+  submit->callback([&] {
+    if (capture_dir.empty() && capture_id.empty()) {
+      throw CLI::ValidationError("submit", "give a capture folder or --capture ID");
+    }
+  });
   submit->add_option("-c,--config", config_file, "job config JSON (default: fit youngs_modulus)");
   submit->add_option("--request-id", request_id, "idempotency key for retried submissions");
   submit->add_flag("--wait", wait, "watch the job until it ends");
@@ -344,7 +404,7 @@ int main(int argc, char** argv) {
   CLI::App* cancel = app.add_subcommand("cancel", "cancel a job");
   cancel->add_option("job", job_id)->required();
   CLI::App* health = app.add_subcommand("health", "check that the server is serving");
-  std::string capture_id;
+  CLI::App* captures = app.add_subcommand("captures", "list uploaded captures");
   CLI::App* delete_job = app.add_subcommand("delete", "delete a job that is not running");
   delete_job->add_option("job", job_id)->required();
   CLI::App* delete_capture = app.add_subcommand(
@@ -361,12 +421,6 @@ int main(int argc, char** argv) {
   ReconstructionClient& client = *made;
 
   if (submit->parsed()) {
-    softid::client::CaptureFiles files;
-    std::string error;
-    if (!softid::client::ReadCaptureFiles(capture_dir, &files, &error)) {
-      std::fprintf(stderr, "softid: %s\n", error.c_str());
-      return kExitInvalidInput;
-    }
     v1::CreateJobRequest create;
     if (!config_file.empty()) {
       std::ifstream in(config_file);
@@ -378,20 +432,20 @@ int main(int argc, char** argv) {
       text << in.rdbuf();
       create.set_config_json(text.str());
     }
-    v1::Capture capture;
-    grpc::Status s =
-        client.UploadCapture(files, request_id.empty() ? "" : request_id + "/capture", &capture);
-    if (!s.ok()) return Report(s, flags);
-    create.set_capture_id(capture.id());
+    if (capture_id.empty()) {
+      const int uploaded = UploadCaptureFolder(client, capture_dir, request_id, flags, &capture_id);
+      if (uploaded != kExitOk) return uploaded;
+    }
+    create.set_capture_id(capture_id);
     create.set_request_id(request_id);
     v1::Job job;
-    s = client.CreateJob(create, &job);
+    const grpc::Status s = client.CreateJob(create, &job);
     if (!s.ok()) return Report(s, flags);
     if (flags.json) {
       std::cout << JobJson(job).dump() << "\n";
     } else {
-      std::cout << "capture " << capture.id() << " uploaded (" << files.files.size()
-                << " files); job " << job.id() << " " << StateName(job.state()) << "\n";
+      std::cout << "job " << job.id() << " " << StateName(job.state()) << " on capture "
+                << capture_id << "\n";
     }
     return wait ? WatchUntilDone(client, job.id(), flags) : kExitOk;
   }
@@ -478,6 +532,7 @@ int main(int argc, char** argv) {
     PrintJob(job, flags);
     return kExitOk;
   }
+  if (captures->parsed()) return ListCaptures(client, flags);
   if (health->parsed()) {
     softid::client::ServingStatus serving;
     grpc::Status s = client.Health("", &serving);

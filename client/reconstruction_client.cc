@@ -142,6 +142,13 @@ grpc::Status ReconstructionClient::ListJobs(const v1::ListJobsRequest& request,
   });
 }
 
+grpc::Status ReconstructionClient::ListCaptures(const v1::ListCapturesRequest& request,
+                                                v1::ListCapturesResponse* out) {
+  return WithRetry(options_.call_timeout, [&](grpc::ClientContext* context) {
+    return stub_->ListCaptures(context, request, out);
+  });
+}
+
 grpc::Status ReconstructionClient::CancelJob(const std::string& job_id, v1::Job* out) {
   v1::CancelJobRequest request;
   request.set_job_id(job_id);

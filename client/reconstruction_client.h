@@ -49,6 +49,7 @@ class ReconstructionClient {
   grpc::Status CreateJob(const v1::CreateJobRequest& request, v1::Job* out);
   grpc::Status GetJob(const std::string& job_id, v1::Job* out);
   grpc::Status ListJobs(const v1::ListJobsRequest& request, v1::ListJobsResponse* out);
+  grpc::Status ListCaptures(const v1::ListCapturesRequest& request, v1::ListCapturesResponse* out);
   grpc::Status CancelJob(const std::string& job_id, v1::Job* out);
   grpc::Status DeleteJob(const std::string& job_id);
   grpc::Status DeleteCapture(const std::string& capture_id);

@@ -157,6 +157,23 @@ grpc::Status GrpcReconstructionService::ListJobs(grpc::ServerContext* context,
   return grpc::Status::OK;
 }
 
+grpc::Status GrpcReconstructionService::ListCaptures(grpc::ServerContext* context,
+                                                     const v1::ListCapturesRequest* request,
+                                                     v1::ListCapturesResponse* response) {
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("ListCaptures", caller.status());
+  store::ListCapturesRequest list;
+  list.page_size = request->page_size();
+  list.page_token = request->page_token();
+  ServiceResult<store::CapturePage> page = service_->ListCaptures(*caller, list);
+  if (!page.ok()) return Reply("ListCaptures", page.status());
+  for (const store::CaptureListing& listing : page->captures) {
+    ToProto(listing, response->add_captures());
+  }
+  response->set_next_page_token(page->next_page_token);
+  return grpc::Status::OK;
+}
+
 grpc::Status GrpcReconstructionService::CancelJob(grpc::ServerContext* context,
                                                   const v1::CancelJobRequest* request,
                                                   v1::Job* response) {

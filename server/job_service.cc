@@ -197,7 +197,7 @@ ServiceResult<store::Job> JobService::CreateJob(const Caller& caller, const std:
   Result<int64_t> queued = jobs_->CountJobs(store::JobState::kQueued, caller.station);
   if (!queued.ok()) return queued.status();
   if (!caller.admin && *queued >= options_.quotas.max_queued_jobs) {
-    Result<bool> repeat = jobs_->HasJobWithRequestId(request_id);
+    Result<bool> repeat = jobs_->HasJobWithRequestId(request_id, caller.station);
     if (!repeat.ok()) return repeat.status();
     if (!*repeat) {
       return ServiceStatus(ServiceCode::kResourceExhausted,
@@ -307,6 +307,14 @@ ServiceResult<store::JobPage> JobService::ListJobs(const Caller& caller,
                                                    store::ListJobsRequest request) {
   if (!caller.admin) request.owner = caller.station;
   Result<store::JobPage> page = jobs_->ListJobs(request);
+  if (!page.ok()) return page.status();
+  return *page;
+}
+
+ServiceResult<store::CapturePage> JobService::ListCaptures(const Caller& caller,
+                                                           store::ListCapturesRequest request) {
+  if (!caller.admin) request.owner = caller.station;
+  Result<store::CapturePage> page = jobs_->ListCaptures(request);
   if (!page.ok()) return page.status();
   return *page;
 }

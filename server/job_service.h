@@ -98,6 +98,9 @@ class JobService {
   ServiceResult<store::Job> GetJob(const Caller& caller, const std::string& job_id);
   // A station lists its own jobs only (request.owner is set to it); admins list every job.
   ServiceResult<store::JobPage> ListJobs(const Caller& caller, store::ListJobsRequest request);
+  // The caller's captures (all for an admin).
+  ServiceResult<store::CapturePage> ListCaptures(const Caller& caller,
+                                                 store::ListCapturesRequest request);
   ServiceResult<store::Job> CancelJob(const Caller& caller, const std::string& job_id);
   ServiceStatus DeleteJob(const Caller& caller, const std::string& job_id);
   // FailedPrecondition naming the state unless the job SUCCEEDED.

@@ -39,13 +39,23 @@ ServiceResult<std::optional<store::JobState>> StateFilterFromProto(v1::JobState 
 void ToProto(const store::Capture& capture, v1::Capture* out) {
   out->set_id(capture.id);
   out->set_request_id(capture.request_id);
+  int64_t total_bytes = 0;
   for (const store::ManifestEntry& entry : capture.manifest) {
     v1::CaptureFile* file = out->add_files();
     file->set_path(entry.path);
     file->set_size_bytes(entry.size_bytes);
     file->set_sha256(entry.sha256);
+    total_bytes += entry.size_bytes;
   }
+  out->set_num_files(static_cast<int32_t>(capture.manifest.size()));
+  out->set_total_bytes(total_bytes);
   SetTimestamp(capture.created_at, out->mutable_create_time());
+}
+
+void ToProto(const store::CaptureListing& listing, v1::Capture* out) {
+  ToProto(listing.capture, out);
+  out->clear_files();
+  out->set_num_jobs(static_cast<int32_t>(listing.num_jobs));
 }
 
 void ToProto(const store::Job& job, v1::Job* out) {

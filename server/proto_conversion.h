@@ -5,6 +5,7 @@
 #include "server/service_status.h"
 #include "server/store/capture.h"
 #include "server/store/job.h"
+#include "server/store/job_store.h"
 #include "server/store/progress_event.h"
 #include "softid/v1/softid.pb.h"
 
@@ -15,6 +16,8 @@ v1::JobState ToProto(store::JobState state);
 ServiceResult<std::optional<store::JobState>> StateFilterFromProto(v1::JobState state);
 
 void ToProto(const store::Capture& capture, v1::Capture* out);
+// As listed: without the file entries, with the number of jobs using it.
+void ToProto(const store::CaptureListing& listing, v1::Capture* out);
 void ToProto(const store::Job& job, v1::Job* out);
 // `job` gives the context of the event (max_iterations from its config).
 void ToProto(const store::ProgressEvent& event, const store::Job& job, v1::JobEvent* out);

@@ -42,6 +42,26 @@ struct ListJobsRequest {
       "";  // empty for the first page; else a next_page_token from the last call
 };
 
+struct ListCapturesRequest {
+  std::optional<std::string> owner = std::nullopt;  // only this station's captures; all when empty
+  // As ListJobsRequest: 0 means the default, larger is lowered to the maximum, negative is
+  // InvalidArgument.
+  int page_size = 0;
+  std::string page_token = "";  // empty for the first page; else a next_page_token
+};
+
+// A capture as a list shows it: with the number of jobs that use it (it can be deleted at 0).
+struct CaptureListing {
+  Capture capture;
+  int64_t num_jobs = 0;
+};
+
+// Captures in creation order (created_at, then id).
+struct CapturePage {
+  std::vector<CaptureListing> captures;
+  std::string next_page_token;  // empty on the last page
+};
+
 // Jobs in creation order (created_at, then id).
 struct JobPage {
   std::vector<Job> jobs;
@@ -74,8 +94,8 @@ class JobStore {
 
   // Records an uploaded capture whose blobs are already stored (BlobStore::Put returned).
   // InvalidArgument for an invalid manifest (see ValidateManifest).
-  // `owner` is the uploading station (empty without authentication). A request_id is unique
-  // across stations: reusing another station's is FailedPrecondition like other arguments.
+  // `owner` is the uploading station (empty without authentication). Request ids are per
+  // station: another station's use of the same id is unrelated and invisible.
   virtual Result<Capture> CreateCapture(const std::vector<ManifestEntry>& manifest,
                                         const std::string& request_id,
                                         const std::string& owner = "") = 0;
@@ -83,6 +103,8 @@ class JobStore {
   // Deletes a capture no job refers to and returns it (its blobs are the caller's to remove
   // when no other capture lists them). FailedPrecondition naming a job that uses it.
   virtual Result<Capture> DeleteCapture(const std::string& capture_id) = 0;
+  // Captures in creation order, each with its number of jobs; paginated like ListJobs.
+  virtual Result<CapturePage> ListCaptures(const ListCapturesRequest& request) = 0;
   // Captures created before `created_before` that no job refers to (retention).
   virtual Result<std::vector<std::string>> ListUnusedCaptures(Timestamp created_before) = 0;
   // Jobs in a terminal state that ended before `finished_before` (retention).
@@ -106,8 +128,9 @@ class JobStore {
                                                       int64_t max_queued,
                                                       const std::string& owner = "") = 0;
   virtual Result<Job> GetJob(const std::string& job_id) = 0;
-  // Whether a job was created with `request_id` (non-empty).
-  virtual Result<bool> HasJobWithRequestId(const std::string& request_id) = 0;
+  // Whether `owner` created a job with `request_id` (non-empty).
+  virtual Result<bool> HasJobWithRequestId(const std::string& request_id,
+                                           const std::string& owner) = 0;
   virtual Result<JobPage> ListJobs(const ListJobsRequest& request) = 0;
   // Jobs in `state`, or all jobs (of `owner` only, when given); used to bound the queue.
   virtual Result<int64_t> CountJobs(std::optional<JobState> state,

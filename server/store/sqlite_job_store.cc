@@ -15,7 +15,7 @@ namespace {
 // Long enough for a UUID or any reasonable client key, short enough to keep the index small.
 
 constexpr std::string_view kJobColumns =
-    "id, request_id, capture_id, config, state, cancel_requested, attempts, error, created_at, "
+    "id, station_request_id, capture_id, config, state, cancel_requested, attempts, error, created_at, "
     "started_at, finished_at, lease_owner, lease_expires_at, result, released_attempts, owner";
 
 constexpr std::string_view kProgressColumns =
@@ -197,11 +197,11 @@ Result<Job> SqliteJobStore::LoadJob(const std::string& job_id) {
 }
 
 Result<std::optional<Capture>> SqliteJobStore::FindCaptureByRequestId(
-    const std::string& request_id) {
-  SOFTID_ASSIGN_OR_RETURN(
-      SqliteStatement stmt,
-      db_.Prepare("SELECT id, manifest, created_at, owner FROM captures WHERE request_id = ?1"));
-  SOFTID_RETURN_IF_ERROR(stmt.Bind(request_id));
+    const std::string& request_id, const std::string& owner) {
+  SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                          db_.Prepare("SELECT id, manifest, created_at, owner FROM captures "
+                                      "WHERE owner = ?1 AND station_request_id = ?2"));
+  SOFTID_RETURN_IF_ERROR(stmt.Bind(owner, request_id));
   SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
   if (!found) return std::optional<Capture>();
   Capture capture;
@@ -215,10 +215,13 @@ Result<std::optional<Capture>> SqliteJobStore::FindCaptureByRequestId(
   return std::optional<Capture>(std::move(capture));
 }
 
-Result<std::optional<Job>> SqliteJobStore::FindJobByRequestId(const std::string& request_id) {
-  SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare("SELECT " + std::string(kJobColumns) +
-                                                            " FROM jobs WHERE request_id = ?1"));
-  SOFTID_RETURN_IF_ERROR(stmt.Bind(request_id));
+Result<std::optional<Job>> SqliteJobStore::FindJobByRequestId(const std::string& request_id,
+                                                              const std::string& owner) {
+  SOFTID_ASSIGN_OR_RETURN(
+      SqliteStatement stmt,
+      db_.Prepare("SELECT " + std::string(kJobColumns) +
+                  " FROM jobs WHERE owner = ?1 AND station_request_id = ?2"));
+  SOFTID_RETURN_IF_ERROR(stmt.Bind(owner, request_id));
   SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
   if (!found) return std::optional<Job>();
   SOFTID_ASSIGN_OR_RETURN(Job job, ReadJob(stmt));
@@ -258,12 +261,9 @@ Result<Capture> SqliteJobStore::CreateCapture(const std::vector<ManifestEntry>& 
   SOFTID_RETURN_IF_ERROR(CheckRequestId(request_id));
   return Write([&]() -> Result<Capture> {
     if (!request_id.empty()) {
-      SOFTID_ASSIGN_OR_RETURN(std::optional<Capture> existing, FindCaptureByRequestId(request_id));
+      SOFTID_ASSIGN_OR_RETURN(std::optional<Capture> existing,
+                              FindCaptureByRequestId(request_id, owner));
       if (existing.has_value()) {
-        if (existing->owner != owner) {
-          return Status::FailedPrecondition("request_id '" + request_id +
-                                            "' is used by another station; choose another");
-        }
         if (existing->manifest != manifest) {
           return Status::FailedPrecondition("request_id '" + request_id +
                                             "' was already used to create capture " + existing->id +
@@ -280,7 +280,7 @@ Result<Capture> SqliteJobStore::CreateCapture(const std::vector<ManifestEntry>& 
     capture.owner = owner;
     SOFTID_ASSIGN_OR_RETURN(
         SqliteStatement stmt,
-        db_.Prepare("INSERT INTO captures (id, request_id, manifest, created_at, owner) "
+        db_.Prepare("INSERT INTO captures (id, station_request_id, manifest, created_at, owner) "
                     "VALUES (?1, ?2, ?3, ?4, ?5)"));
     SOFTID_RETURN_IF_ERROR(stmt.Bind(capture.id, NullIfEmpty(request_id),
                                      DumpJson(ManifestToJson(manifest)),
@@ -295,7 +295,8 @@ Result<Capture> SqliteJobStore::GetCapture(const std::string& capture_id) {
   return Read([&]() -> Result<Capture> {
     SOFTID_ASSIGN_OR_RETURN(
         SqliteStatement stmt,
-        db_.Prepare("SELECT request_id, manifest, created_at, owner FROM captures WHERE id = ?1"));
+        db_.Prepare("SELECT station_request_id, manifest, created_at, owner FROM captures "
+                    "WHERE id = ?1"));
     SOFTID_RETURN_IF_ERROR(stmt.Bind(capture_id));
     SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
     if (!found) return Status::NotFound("capture " + capture_id + " not found");
@@ -350,6 +351,61 @@ Result<std::vector<std::string>> Column0(SqliteStatement& stmt) {
 }
 
 }  // namespace
+
+Result<CapturePage> SqliteJobStore::ListCaptures(const ListCapturesRequest& request) {
+  if (request.page_size < 0) {
+    return Status::InvalidArgument("page_size = " + std::to_string(request.page_size) +
+                                   ": must not be negative");
+  }
+  const int page_size = std::min(
+      request.page_size == 0 ? ListJobsRequest::kDefaultPageSize : request.page_size,
+      ListJobsRequest::kMaxPageSize);
+  // "captures" keeps a token of a job list from being used here.
+  std::string filter = "captures";
+  if (request.owner.has_value()) filter += "&owner=" + *request.owner;
+  std::optional<PageCursor> after;
+  if (!request.page_token.empty()) {
+    SOFTID_ASSIGN_OR_RETURN(after, DecodePageToken(request.page_token, filter));
+  }
+  std::string sql =
+      "SELECT id, station_request_id, manifest, created_at, owner, "
+      "(SELECT count(*) FROM jobs WHERE jobs.capture_id = captures.id) FROM captures WHERE 1";
+  if (request.owner.has_value()) sql += " AND owner = ?1";
+  if (after.has_value()) sql += " AND (created_at, id) > (?2, ?3)";
+  sql += " ORDER BY created_at, id LIMIT ?4";  // the highest parameter: see ListJobs
+
+  return Read([&]() -> Result<CapturePage> {
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(sql));
+    std::optional<int64_t> after_created;
+    std::optional<std::string> after_id;
+    if (after.has_value()) {
+      after_created = ToUnixMicros(after->created_at);
+      after_id = after->id;
+    }
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(request.owner, after_created, after_id, page_size + 1));
+    CapturePage page;
+    while (true) {
+      SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+      if (!has_row) break;
+      CaptureListing listing;
+      listing.capture.id = stmt.ColumnText(0);
+      listing.capture.request_id = stmt.ColumnText(1);
+      SOFTID_ASSIGN_OR_RETURN(const nlohmann::json manifest,
+                              ParseStoredJson(stmt.ColumnText(2), "captures.manifest"));
+      SOFTID_ASSIGN_OR_RETURN(listing.capture.manifest, ManifestFromJson(manifest));
+      listing.capture.created_at = FromUnixMicros(stmt.ColumnInt64(3));
+      listing.capture.owner = stmt.ColumnText(4);
+      listing.num_jobs = stmt.ColumnInt64(5);
+      page.captures.push_back(std::move(listing));
+    }
+    if (static_cast<int>(page.captures.size()) > page_size) {
+      page.captures.pop_back();
+      const Capture& last = page.captures.back().capture;
+      page.next_page_token = EncodePageToken(PageCursor{last.created_at, last.id}, filter);
+    }
+    return page;
+  });
+}
 
 Result<std::vector<std::string>> SqliteJobStore::ListUnusedCaptures(Timestamp created_before) {
   return Read([&]() -> Result<std::vector<std::string>> {
@@ -415,12 +471,9 @@ Result<std::optional<Job>> SqliteJobStore::CreateJobIfRoom(const std::string& ca
   SOFTID_RETURN_IF_ERROR(CheckRequestId(request_id));
   return Write([&]() -> Result<std::optional<Job>> {
     if (!request_id.empty()) {
-      SOFTID_ASSIGN_OR_RETURN(std::optional<Job> existing, FindJobByRequestId(request_id));
+      SOFTID_ASSIGN_OR_RETURN(std::optional<Job> existing,
+                              FindJobByRequestId(request_id, owner));
       if (existing.has_value()) {
-        if (existing->owner != owner) {
-          return Status::FailedPrecondition("request_id '" + request_id +
-                                            "' is used by another station; choose another");
-        }
         if (existing->capture_id != capture_id || existing->config != config) {
           return Status::FailedPrecondition(
               "request_id '" + request_id + "' was already used to create job " + existing->id +
@@ -453,7 +506,7 @@ Result<std::optional<Job>> SqliteJobStore::CreateJobIfRoom(const std::string& ca
     job.created_at = Now();
     job.owner = owner;
     SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
-        INSERT INTO jobs (id, request_id, capture_id, config, state, created_at, owner)
+        INSERT INTO jobs (id, station_request_id, capture_id, config, state, created_at, owner)
         VALUES (?1, ?2, ?3, ?4, 'QUEUED', ?5, ?6))sql"));
     SOFTID_RETURN_IF_ERROR(stmt.Bind(job.id, NullIfEmpty(request_id), capture_id, DumpJson(config),
                                      ToUnixMicros(job.created_at), owner));
@@ -468,10 +521,11 @@ Result<Job> SqliteJobStore::GetJob(const std::string& job_id) {
   return Read([&] { return LoadJob(job_id); });
 }
 
-Result<bool> SqliteJobStore::HasJobWithRequestId(const std::string& request_id) {
+Result<bool> SqliteJobStore::HasJobWithRequestId(const std::string& request_id,
+                                                 const std::string& owner) {
   if (request_id.empty()) return false;
   return Read([&]() -> Result<bool> {
-    SOFTID_ASSIGN_OR_RETURN(std::optional<Job> job, FindJobByRequestId(request_id));
+    SOFTID_ASSIGN_OR_RETURN(std::optional<Job> job, FindJobByRequestId(request_id, owner));
     return job.has_value();
   });
 }

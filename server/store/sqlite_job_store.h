@@ -54,6 +54,7 @@ class SqliteJobStore final : public JobStore, public TokenStore {
   Result<Capture> GetCapture(const std::string& capture_id) override;
   Result<Capture> DeleteCapture(const std::string& capture_id) override;
   Result<int64_t> StoredBytes(const std::string& owner) override;
+  Result<CapturePage> ListCaptures(const ListCapturesRequest& request) override;
   Result<std::vector<std::string>> ListUnusedCaptures(Timestamp created_before) override;
   Result<std::vector<std::string>> ListEndedJobs(Timestamp finished_before) override;
 
@@ -64,7 +65,8 @@ class SqliteJobStore final : public JobStore, public TokenStore {
                                               const std::string& request_id, int64_t max_queued,
                                               const std::string& owner = "") override;
   Result<Job> GetJob(const std::string& job_id) override;
-  Result<bool> HasJobWithRequestId(const std::string& request_id) override;
+  Result<bool> HasJobWithRequestId(const std::string& request_id,
+                                   const std::string& owner) override;
   Result<JobPage> ListJobs(const ListJobsRequest& request) override;
   Result<int64_t> CountJobs(std::optional<JobState> state,
                             std::optional<std::string> owner = std::nullopt) override;
@@ -126,8 +128,10 @@ class SqliteJobStore final : public JobStore, public TokenStore {
 
   // Helpers for use inside Write/Read.
   Result<Job> LoadJob(const std::string& job_id);
-  Result<std::optional<Capture>> FindCaptureByRequestId(const std::string& request_id);
-  Result<std::optional<Job>> FindJobByRequestId(const std::string& request_id);
+  Result<std::optional<Capture>> FindCaptureByRequestId(const std::string& request_id,
+                                                        const std::string& owner);
+  Result<std::optional<Job>> FindJobByRequestId(const std::string& request_id,
+                                                const std::string& owner);
   // Records a state change (or a worker's note) in the job's progress history.
   Result<int64_t> AppendStateEvent(const Job& job, const std::string& message, Timestamp now);
 

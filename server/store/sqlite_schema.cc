@@ -99,6 +99,20 @@ CREATE TABLE tokens (
   revoked_at     INTEGER
 ) STRICT;
 )sql",
+    // 4 -> 5: listing captures (ListCaptures), a station's or all, in creation order; and request
+    // ids per station, so that two stations may use the same key and none can learn another's.
+    // Schema 1's column-level UNIQUE on request_id cannot be dropped without rebuilding the
+    // tables, so the key moves to station_request_id (unique per owner) and request_id stays NULL.
+    R"sql(
+CREATE INDEX captures_by_owner ON captures (owner, created_at, id);
+CREATE INDEX captures_by_creation ON captures (created_at, id);
+ALTER TABLE captures ADD COLUMN station_request_id TEXT;
+ALTER TABLE jobs ADD COLUMN station_request_id TEXT;
+UPDATE captures SET station_request_id = request_id, request_id = NULL WHERE request_id IS NOT NULL;
+UPDATE jobs SET station_request_id = request_id, request_id = NULL WHERE request_id IS NOT NULL;
+CREATE UNIQUE INDEX captures_by_request ON captures (owner, station_request_id);
+CREATE UNIQUE INDEX jobs_by_request ON jobs (owner, station_request_id);
+)sql",
 };
 
 Result<int64_t> ReadPragma(SqliteDatabase& db, std::string_view pragma) {

@@ -322,12 +322,12 @@ TEST_F(JobServiceTest, StationsSeeOnlyTheirOwnCapturesAndJobs) {
 
   ServiceResult<store::Capture> b_capture = UploadAs(b, SmallCaptureFiles());
   ASSERT_TRUE(b_capture.ok());
-  // B reusing A's request id gets neither A's job nor its id.
-  const ServiceStatus reused =
-      service_->CreateJob(b, b_capture->id, R"({"cells": 8})", "a-job").status();
-  EXPECT_EQ(reused.code(), ServiceCode::kAlreadyExists);
-  EXPECT_EQ(reused.message().find(job->id), std::string::npos) << reused.message();
-  ASSERT_TRUE(service_->CreateJob(b, b_capture->id, R"({"cells": 8})", "").ok());
+  // Request ids are per station: B's "a-job" is a job of its own, and A's is untouched.
+  ServiceResult<store::Job> b_job =
+      service_->CreateJob(b, b_capture->id, R"({"cells": 8})", "a-job");
+  ASSERT_TRUE(b_job.ok()) << b_job.status().ToString();
+  EXPECT_NE(b_job->id, job->id);
+  EXPECT_EQ(b_job->owner, b.station);
   ServiceResult<store::JobPage> all = service_->ListJobs(admin, {});
   ASSERT_TRUE(all.ok());
   EXPECT_EQ(all->jobs.size(), 2u);
@@ -427,6 +427,32 @@ TEST_F(JobServiceTest, RetentionRemovesEndedJobsAndUnusedCapturesOlderThanTheAge
   EXPECT_EQ(service_->GetJob(caller_, job->id).status().code(), ServiceCode::kNotFound);
   EXPECT_TRUE(service_->GetJob(caller_, queued->id).ok());
   EXPECT_GT(NumBlobs(), 0);
+}
+
+// A station lists only its own captures, each with its job count; an admin lists all.
+TEST_F(JobServiceTest, CapturesAreListedPerStation) {
+  const Caller lab1{"lab-1", false}, lab2{"lab-2", false}, admin{"operator", true};
+  UploadFiles files = SmallCaptureFiles();
+  ServiceResult<store::Capture> first = UploadAs(lab1, files);
+  ASSERT_TRUE(first.ok()) << first.status().ToString();
+  files.files["extra.bin"] = "another capture, other bytes";
+  ServiceResult<store::Capture> second = UploadAs(lab2, files);
+  ASSERT_TRUE(second.ok()) << second.status().ToString();
+  ASSERT_TRUE(service_->CreateJob(lab1, first->id, R"({"cells": 12})", "").ok());
+
+  ServiceResult<store::CapturePage> mine = service_->ListCaptures(lab1, {});
+  ASSERT_TRUE(mine.ok()) << mine.status().ToString();
+  ASSERT_EQ(mine->captures.size(), 1u);
+  EXPECT_EQ(mine->captures[0].capture.id, first->id);
+  EXPECT_EQ(mine->captures[0].num_jobs, 1);
+  ServiceResult<store::CapturePage> theirs = service_->ListCaptures(lab2, {});
+  ASSERT_TRUE(theirs.ok());
+  ASSERT_EQ(theirs->captures.size(), 1u);
+  EXPECT_EQ(theirs->captures[0].capture.id, second->id);
+  EXPECT_EQ(theirs->captures[0].num_jobs, 0);
+  ServiceResult<store::CapturePage> all = service_->ListCaptures(admin, {});
+  ASSERT_TRUE(all.ok());
+  EXPECT_EQ(all->captures.size(), 2u);
 }
 
 }  // namespace

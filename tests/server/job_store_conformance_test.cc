@@ -601,6 +601,88 @@ TEST_P(JobStoreConformance, InvalidPageTokensAndSizes) {
   EXPECT_EQ(huge->jobs.size(), 3u);
 }
 
+// Request ids are per station: the same key from two stations makes two captures and two jobs;
+// each station's repeat gets its own back.
+TEST_P(JobStoreConformance, RequestIdsArePerStation) {
+  Result<Capture> a = store_->CreateCapture(Manifest("a"), "take-1", "lab-a");
+  Result<Capture> b = store_->CreateCapture(Manifest("b"), "take-1", "lab-b");
+  ASSERT_TRUE(a.ok() && b.ok()) << a.status().ToString() << b.status().ToString();
+  EXPECT_NE(a->id, b->id);
+  EXPECT_EQ(store_->CreateCapture(Manifest("a"), "take-1", "lab-a")->id, a->id);
+  EXPECT_EQ(store_->GetCapture(b->id)->request_id, "take-1");
+
+  Result<Job> job_a = store_->CreateJob(a->id, {{"cells", 8}}, "job-1", "lab-a");
+  Result<Job> job_b = store_->CreateJob(b->id, {{"cells", 8}}, "job-1", "lab-b");
+  ASSERT_TRUE(job_a.ok() && job_b.ok()) << job_a.status().ToString() << job_b.status().ToString();
+  EXPECT_NE(job_a->id, job_b->id);
+  EXPECT_EQ(job_b->request_id, "job-1");
+  EXPECT_EQ(store_->CreateJob(b->id, {{"cells", 8}}, "job-1", "lab-b")->id, job_b->id);
+  EXPECT_TRUE(*store_->HasJobWithRequestId("job-1", "lab-a"));
+  EXPECT_FALSE(*store_->HasJobWithRequestId("job-1", "lab-c"));
+  // Within a station a key still names one job: other arguments are refused.
+  EXPECT_EQ(store_->CreateJob(b->id, {{"cells", 9}}, "job-1", "lab-b").status().code(),
+            StatusCode::kFailedPrecondition);
+}
+
+// Captures list in creation order across pages, all or one station's, each with the number of
+// jobs that use it; a job list's token is refused here.
+TEST_P(JobStoreConformance, CapturesListByStationWithTheirJobCounts) {
+  std::vector<std::string> mine, all;
+  for (int i = 0; i < 5; ++i) {
+    const std::string owner = i % 2 == 0 ? "lab-1" : "lab-2";
+    Result<Capture> capture =
+        store_->CreateCapture(Manifest("capture-" + std::to_string(i)), "", owner);
+    ASSERT_TRUE(capture.ok()) << capture.status().ToString();
+    all.push_back(capture->id);
+    if (owner == "lab-1") mine.push_back(capture->id);
+  }
+  NewJob(all[0]);
+  NewJob(all[0]);
+  NewJob(all[3]);
+
+  const auto list = [&](std::optional<std::string> owner) {
+    std::vector<CaptureListing> listed;
+    ListCapturesRequest request{.owner = owner, .page_size = 2};
+    while (true) {
+      Result<CapturePage> page = store_->ListCaptures(request);
+      EXPECT_TRUE(page.ok()) << page.status().ToString();
+      if (!page.ok()) break;
+      EXPECT_LE(page->captures.size(), 2u);
+      listed.insert(listed.end(), page->captures.begin(), page->captures.end());
+      if (page->next_page_token.empty()) break;
+      request.page_token = page->next_page_token;
+    }
+    return listed;
+  };
+  const std::vector<CaptureListing> everything = list(std::nullopt);
+  ASSERT_EQ(everything.size(), all.size());
+  for (size_t i = 0; i < all.size(); ++i) {
+    EXPECT_EQ(everything[i].capture.id, all[i]);
+    EXPECT_EQ(everything[i].capture.manifest, Manifest("capture-" + std::to_string(i)));
+    EXPECT_EQ(everything[i].num_jobs, i == 0 ? 2 : (i == 3 ? 1 : 0)) << i;
+  }
+  const std::vector<CaptureListing> lab1 = list("lab-1");
+  ASSERT_EQ(lab1.size(), mine.size());
+  for (size_t i = 0; i < mine.size(); ++i) {
+    EXPECT_EQ(lab1[i].capture.id, mine[i]);
+    EXPECT_EQ(lab1[i].capture.owner, "lab-1");
+  }
+  EXPECT_TRUE(list("nobody").empty());
+
+  const Result<JobPage> jobs = store_->ListJobs({.page_size = 1});
+  ASSERT_TRUE(jobs.ok());
+  EXPECT_EQ(store_->ListCaptures({.page_token = jobs->next_page_token}).status().code(),
+            StatusCode::kInvalidArgument);
+  const Result<CapturePage> first = store_->ListCaptures({.page_size = 1});
+  ASSERT_TRUE(first.ok());
+  EXPECT_EQ(store_->ListCaptures({.owner = "lab-1", .page_token = first->next_page_token})
+                .status()
+                .code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(store_->ListCaptures({.page_size = -1}).status().message(),
+            "page_size = -1: must not be negative");
+}
+
 // CountJobs counts per state and in total.
 TEST_P(JobStoreConformance, CountJobs) {
   const Capture capture = NewCapture();

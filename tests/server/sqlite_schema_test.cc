@@ -106,11 +106,17 @@ TEST(SqliteSchema, MigratesVersion1Jobs) {
     Result<SqliteDatabase> db = SqliteDatabase::Open(path);
     ASSERT_TRUE(db.ok());
     ASSERT_TRUE(MigrateSqliteSchema(*db).ok());
-    // Back to the version 1 layout: versions 2 to 4 only added these columns and tables.
+    // Back to the version 1 layout: versions 2 to 5 only added these columns, tables and indexes.
     ASSERT_TRUE(db->Exec("ALTER TABLE jobs DROP COLUMN released_attempts").ok());
     for (const char* column : {"start", "num_starts", "remaining_s"}) {
       ASSERT_TRUE(db->Exec(std::string("ALTER TABLE progress DROP COLUMN ") + column).ok());
     }
+    ASSERT_TRUE(db->Exec("DROP INDEX captures_by_owner").ok());
+    ASSERT_TRUE(db->Exec("DROP INDEX captures_by_creation").ok());
+    ASSERT_TRUE(db->Exec("DROP INDEX captures_by_request").ok());
+    ASSERT_TRUE(db->Exec("DROP INDEX jobs_by_request").ok());
+    ASSERT_TRUE(db->Exec("ALTER TABLE captures DROP COLUMN station_request_id").ok());
+    ASSERT_TRUE(db->Exec("ALTER TABLE jobs DROP COLUMN station_request_id").ok());
     ASSERT_TRUE(db->Exec("DROP INDEX jobs_by_owner").ok());
     ASSERT_TRUE(db->Exec("DROP TABLE tokens").ok());
     ASSERT_TRUE(db->Exec("ALTER TABLE jobs DROP COLUMN owner").ok());
@@ -118,9 +124,9 @@ TEST(SqliteSchema, MigratesVersion1Jobs) {
     ASSERT_TRUE(db->Exec("PRAGMA user_version = 1").ok());
     ASSERT_TRUE(
         db->Exec("INSERT INTO captures VALUES ('cap-0123456789abcdef', NULL, '[]', 0)").ok());
-    ASSERT_TRUE(db->Exec("INSERT INTO jobs (id, capture_id, config, state, attempts, created_at) "
-                         "VALUES ('job-0123456789abcdef', 'cap-0123456789abcdef', '{}', 'QUEUED', "
-                         "2, 0)")
+    ASSERT_TRUE(db->Exec("INSERT INTO jobs (id, request_id, capture_id, config, state, attempts, "
+                         "created_at) VALUES ('job-0123456789abcdef', 'retry-7', "
+                         "'cap-0123456789abcdef', '{}', 'QUEUED', 2, 0)")
                     .ok());
   }
   Result<std::unique_ptr<SqliteJobStore>> store = SqliteJobStore::Open(path);
@@ -130,6 +136,8 @@ TEST(SqliteSchema, MigratesVersion1Jobs) {
   EXPECT_EQ(job->attempts, 2);
   EXPECT_EQ(job->released_attempts, 0);
   EXPECT_EQ(job->owner, "");
+  EXPECT_EQ(job->request_id, "retry-7");  // moved to the per-station key (schema 5)
+  EXPECT_TRUE(*(*store)->HasJobWithRequestId("retry-7", ""));
   ASSERT_TRUE((*store)->Close().ok());
   Result<SqliteDatabase> db = SqliteDatabase::Open(path);
   ASSERT_TRUE(db.ok());
