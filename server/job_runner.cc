@@ -11,6 +11,7 @@
 #include "core/diagnosis/diagnose.h"
 #include "core/diagnosis/report.h"
 #include "core/inverse/fit.h"
+#include "core/inverse/fit_uncertainty.h"
 #include "core/inverse/job_config.h"
 #include "server/materialize_capture.h"
 #include "server/redact_paths.h"
@@ -173,7 +174,9 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   bool lost = false;
   bool cancel_requested = false;
   Result<inverse::FitResult> result = Status::Internal("the fit did not run");
-  nlohmann::json diagnosis_json;  // "diagnose": true only
+  nlohmann::json diagnosis_json;                       // "diagnose": true only
+  std::optional<inverse::FitUncertainty> uncertainty;  // "uncertainty": true (the default)
+  std::string uncertainty_error;
   {
     Heartbeat heartbeat(job, worker_id, context, cancel);
     inverse::FitOptions options;
@@ -217,6 +220,16 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
       }
     };
     result = inverse::Fit(*capture, *config, options);
+    if (result.ok() && !result->cancelled && config->uncertainty) {
+      Result<inverse::FitUncertainty> estimated =
+          inverse::EstimateFitUncertainty(*capture, *config, *result);
+      if (estimated.ok()) {
+        uncertainty = std::move(estimated).value();
+      } else {
+        uncertainty_error = estimated.status().message();
+        log->warn("job {}: no uncertainty: {}", job.id, uncertainty_error);
+      }
+    }
     if (result.ok() && !result->cancelled && config->diagnose) {
       diagnosis_json = RunDiagnosis(job, *capture, *config, *result, cancel, context);
     }
@@ -251,7 +264,8 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
     return JobOutcome::kCancelled;
   }
   if (!result.ok()) return Fail(job, context, result.status().message());
-  nlohmann::json result_json = inverse::ToJson(*result);
+  nlohmann::json result_json =
+      inverse::ToJson(*result, uncertainty ? &*uncertainty : nullptr, uncertainty_error);
   if (!diagnosis_json.is_null()) result_json["diagnosis"] = std::move(diagnosis_json);
   if (Status completed = context.jobs->CompleteJob(job.id, result_json); !completed.ok()) {
     log->error("job {}: cannot record the result: {}", job.id, completed.message());

@@ -44,6 +44,7 @@ constexpr auto kJobConfigKeys = std::to_array<std::string_view>({
     "refine_iterations",
     "cost",
     "diagnose",
+    "uncertainty",
 });
 
 std::string Join(const std::vector<std::string>& names) {
@@ -494,6 +495,12 @@ Result<JobConfig> JobConfigFromJson(const Json& j) {
     }
     config.diagnose = j["diagnose"].get<bool>();
   }
+  if (j.contains("uncertainty")) {
+    if (!j["uncertainty"].is_boolean()) {
+      return json::Invalid("uncertainty", j["uncertainty"], "must be true or false");
+    }
+    config.uncertainty = j["uncertainty"].get<bool>();
+  }
   return config;
 }
 
@@ -565,6 +572,7 @@ Json ToJson(const JobConfig& config) {
         {"truncation_cells", config.cost.truncation_cells},
         {"rest_sdf", cost::ToString(config.cost.rest_sdf)}}},
       {"diagnose", config.diagnose},
+      {"uncertainty", config.uncertainty},
   };
   // 0 means "absent" (use cells); written only when set so the round trip keeps it absent.
   if (config.cell_size != 0.0) j["cell_size"] = config.cell_size;

@@ -29,7 +29,7 @@
 //     "refine_iterations": 0,    // Levenberg-Marquardt iterations after L-BFGS; 0 = none
 //     "cost": {"band_cells": 3, "truncation_cells": 2.0,
 //              "rest_sdf": "surface_fitted"},  // or "exact", "sampled"
-//     "diagnose": false
+//     "diagnose": false, "uncertainty": true
 //   }
 // Malformed input is rejected with InvalidArgument "<field path> = <value>: <reason>", e.g.
 //   fit[1] = "youngs_modulo": unknown parameter (known: youngs_modulus, poisson_ratio, ...)
@@ -194,6 +194,9 @@ struct JobConfig {
   // (issue 5). Honoured by the callers (softid-lab fit/diagnose, the service), which call
   // diagnosis::Diagnose; inverse::Fit itself ignores it.
   bool diagnose = false;
+  // Estimate each fitted value's uncertainty after the fit (fit_uncertainty.h; 2 forward and
+  // adjoint runs per fitted variable). Honoured by the callers that write results, like diagnose.
+  bool uncertainty = true;
 
   // Whether `fittable_name` (canonical) is in `fit`.
   bool IsFitted(std::string_view fittable_name) const;

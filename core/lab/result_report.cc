@@ -80,12 +80,18 @@ void PrintResultTable(const nlohmann::json& result, const std::filesystem::path&
       truth = nullptr;
     }
   }
-  std::printf("%-26s %-32s %-10s %-32s", "parameter", "recovered", "unit", "start");
+  std::printf("%-26s %-32s %-24s %-10s %-32s", "parameter", "recovered", "1-sigma", "unit",
+              "start");
   if (!truth.is_null()) std::printf(" %-32s %s", "truth", "error");
   std::printf("\n");
   for (const auto& [name, entry] : result["parameters"].items()) {
-    std::printf("%-26s %-32s %-10s %-32s", name.c_str(), Compact(entry["value"]).c_str(),
-                entry["unit"].get<std::string>().c_str(), Compact(entry["initial"]).c_str());
+    const std::string sigma = !entry.contains("standard_uncertainty") ? "-"
+                              : entry["standard_uncertainty"].is_null()
+                                  ? "undetermined"
+                                  : Compact(entry["standard_uncertainty"]);
+    std::printf("%-26s %-32s %-24s %-10s %-32s", name.c_str(), Compact(entry["value"]).c_str(),
+                sigma.c_str(), entry["unit"].get<std::string>().c_str(),
+                Compact(entry["initial"]).c_str());
     const std::string key = name == "ground_plane" ? "ground" : name;
     if (!truth.is_null() && truth.contains(key)) {
       std::printf(" %-32s", Compact(truth[key]).c_str());

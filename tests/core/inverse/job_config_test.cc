@@ -147,6 +147,7 @@ TEST(JobConfig, DefaultsFromEmptyObject) {
   EXPECT_EQ(config->cost.truncation_cells, 2.0);
   EXPECT_EQ(config->cost.rest_sdf, cost::RestSdf::kSurfaceFitted);
   EXPECT_FALSE(config->diagnose);
+  EXPECT_TRUE(config->uncertainty);  // every result says how sure it is unless told not to
   EXPECT_TRUE(config->Validate().ok());
 
   // The defaults are written out in full, except the absent cell_size.
@@ -395,6 +396,7 @@ TEST(JobConfigRejects, NumericalSettings) {
                 "must be \"surface_fitted\", \"exact\" or \"sampled\"");
   ExpectInvalid(json::parse(R"({"diagnose": "yes"})"),
                 "diagnose = \"yes\": ", "must be true or false");
+  ExpectInvalid(json::parse(R"({"uncertainty": 0})"), "uncertainty = 0: ", "must be true or false");
   ExpectInvalid(json::parse(R"({"continuation": 1})"),
                 "continuation = 1: ", "must be true or false");
   ExpectInvalid(json::parse(R"({"refine_iterations": -1})"),

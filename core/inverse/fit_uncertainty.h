@@ -1,0 +1,53 @@
+// How sure a fit is, for every result: the identifiability analysis at the best start
+// (identifiability.h: Laplace approximation from the Hessian of the cost, correlations, named
+// undetermined combinations), and each fitted parameter's 1-sigma in its own public form
+// (a number, [x, y, z], the plane's normal and offset), propagated from the covariance of the
+// optimiser's variables through the parameter space's transforms.
+//
+// The statistical uncertainty assumes independent depth residuals; where the model itself is off
+// they are correlated and the figure is a lower bound (identifiability.h). The residual sigma has
+// a floor at the capture's depth quantisation (depth_scale / sqrt(12)), so a noise-free synthetic
+// fit does not claim zero uncertainty.
+#pragma once
+
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "core/capture/capture.h"
+#include "core/common/status.h"
+#include "core/inverse/fit.h"
+#include "core/inverse/identifiability.h"
+#include "core/inverse/job_config.h"
+
+namespace softid::inverse {
+
+struct ParameterUncertainty {
+  std::string name;  // the fitted name ("youngs_modulus", "ground_plane", ...)
+  // One per number of the value's public JSON form, in its order (ParameterValueJson); +inf where
+  // the data do not determine it.
+  std::vector<double> standard_uncertainty;
+};
+
+struct FitUncertainty {
+  IdentifiabilityReport report;
+  std::vector<ParameterUncertainty> parameters;  // in the order of FitResult::fitted
+};
+
+// The analysis of `fit` (its best start). Errors of the analysis (a simulation that diverges at a
+// step of the difference stencil) are returned; callers report them next to the fit rather than
+// failing it.
+Result<FitUncertainty> EstimateFitUncertainty(const capture::Capture& capture,
+                                              const JobConfig& config, const FitResult& fit);
+
+// The residual-sigma floor of a capture [m]: the finest depth quantum / sqrt(12).
+double DepthQuantisationSigma(const capture::Capture& capture);
+
+// ToJson(fit) with "standard_uncertainty" (same shape as "value", null where infinite) and, for
+// scalars, "relative_uncertainty" in each entry of "parameters", and the analysis under
+// "uncertainty" (ToJson(IdentifiabilityReport)). With `uncertainty` null: ToJson(fit), plus
+// "uncertainty": {"error": `error`} when `error` is not empty.
+nlohmann::json ToJson(const FitResult& fit, const FitUncertainty* uncertainty,
+                      const std::string& error = "");
+
+}  // namespace softid::inverse
