@@ -234,8 +234,8 @@ bool PrintAgainstTruth(const nlohmann::json& result, const std::string& truth_fi
     return false;
   }
   const nlohmann::json& parameters = result.value("parameters", nlohmann::json::object());
-  std::printf("%-24s %-20s %-10s %-20s %-20s %s\n", "parameter", "recovered", "unit", "start",
-              "truth", "error");
+  std::printf("%-24s %-20s %-20s %-10s %-20s %-20s %s\n", "parameter", "recovered", "1-sigma",
+              "unit", "start", "truth", "error");
   for (const auto& [name, entry] : parameters.items()) {
     const std::string key = name == "ground_plane" ? "ground" : name;
     const nlohmann::json value = entry.value("value", nlohmann::json());
@@ -249,8 +249,12 @@ bool PrintAgainstTruth(const nlohmann::json& result, const std::string& truth_fi
         error_text = text;
       }
     }
-    std::printf("%-24s %-20s %-10s %-20s %-20s %s\n", name.c_str(), Compact(value).c_str(),
-                entry.value("unit", std::string()).c_str(),
+    const std::string sigma = !entry.contains("standard_uncertainty") ? "-"
+                              : entry["standard_uncertainty"].is_null()
+                                  ? "undetermined"
+                                  : Compact(entry["standard_uncertainty"]);
+    std::printf("%-24s %-20s %-20s %-10s %-20s %-20s %s\n", name.c_str(), Compact(value).c_str(),
+                sigma.c_str(), entry.value("unit", std::string()).c_str(),
                 Compact(entry.value("initial", nlohmann::json())).c_str(),
                 true_value != nullptr ? Compact(*true_value).c_str() : "-", error_text.c_str());
   }
@@ -290,6 +294,66 @@ int WatchUntilDone(ReconstructionClient& client, const std::string& job_id,
   if (!status.ok()) return Report(status, flags);
   if (!flags.json) PrintJob(job, flags);
   return job.state() == v1::SUCCEEDED ? kExitOk : kExitFailure;
+}
+
+// "39526 +- 49.9" or "[0, 0, -9.81] +- [0.01, 0.01, 0.02]": a typed parameter in one line.
+std::string ValueWithSigma(const v1::FittedParameter& parameter) {
+  const auto list = [](const google::protobuf::RepeatedField<double>& numbers) {
+    std::string out;
+    char text[32];
+    for (int i = 0; i < numbers.size(); ++i) {
+      if (std::isfinite(numbers[i])) {
+        std::snprintf(text, sizeof(text), "%.5g", numbers[i]);
+      } else {
+        std::snprintf(text, sizeof(text), "undetermined");
+      }
+      out += (i ? ", " : "") + std::string(text);
+    }
+    return numbers.size() == 1 ? out : "[" + out + "]";
+  };
+  std::string out = list(parameter.value());
+  if (parameter.standard_uncertainty_size() > 0)
+    out += " +- " + list(parameter.standard_uncertainty());
+  return out;
+}
+
+// The result of a job: a table of the typed parameters with their 1-sigma (or, with --json and
+// no -o, result.json itself); -o also writes result.json; --truth compares with a truth.json.
+int ShowResult(ReconstructionClient& client, const std::string& job_id, const std::string& out_file,
+               const std::string& truth_file, const GlobalFlags& flags) {
+  v1::Result r;
+  const grpc::Status s = client.GetResult(job_id, &r);
+  if (!s.ok()) return Report(s, flags);
+  const nlohmann::json parsed = nlohmann::json::parse(r.result_json(), nullptr, false);
+  if (parsed.is_discarded()) {
+    std::fprintf(stderr, "softid: job %s: the server sent a result that is not JSON\n",
+                 job_id.c_str());
+    return kExitFailure;
+  }
+  if (!truth_file.empty()) {
+    std::string error;
+    if (!PrintAgainstTruth(parsed, truth_file, &error)) {
+      std::fprintf(stderr, "softid: --truth %s\n", error.c_str());
+      return kExitInvalidInput;
+    }
+  } else if (flags.json && out_file.empty()) {
+    std::cout << parsed.dump(2) << "\n";
+    return kExitOk;
+  } else if (!flags.json) {
+    for (const v1::FittedParameter& parameter : r.parameters()) {
+      std::printf("%-26s %s %s\n", parameter.name().c_str(), ValueWithSigma(parameter).c_str(),
+                  parameter.unit().c_str());
+    }
+  }
+  if (out_file.empty()) return kExitOk;
+  std::ofstream out(out_file);
+  out << parsed.dump(2) << "\n";
+  if (!out.flush()) {
+    std::fprintf(stderr, "softid: %s: cannot write\n", out_file.c_str());
+    return kExitFailure;
+  }
+  if (!flags.json) std::cout << "result written to " << out_file << "\n";
+  return kExitOk;
 }
 
 // Uploads the capture folder `dir` and sets its id; an exit code.
@@ -333,8 +397,7 @@ int ListCaptures(ReconstructionClient& client, const GlobalFlags& flags) {
       }
       std::printf("%s  %4d files  %8.1f MB  %3d job(s)%s%s\n", capture.id().c_str(),
                   capture.num_files(), capture.total_bytes() / 1e6, capture.num_jobs(),
-                  capture.request_id().empty() ? "" : "  request ",
-                  capture.request_id().c_str());
+                  capture.request_id().empty() ? "" : "  request ", capture.request_id().c_str());
     }
     request.set_page_token(page.next_page_token());
   } while (!request.page_token().empty());
@@ -396,7 +459,7 @@ int main(int argc, char** argv) {
   watch->add_option("job", job_id)->required();
   CLI::App* result = app.add_subcommand("result", "print or save the result of a job");
   result->add_option("job", job_id)->required();
-  result->add_option("-o,--out", out_file, "write result.json here instead of printing it");
+  result->add_option("-o,--out", out_file, "also write result.json here");
   result->add_option("--truth", truth_file,
                      "print the fitted parameters next to this truth.json (softid-lab synth)");
   CLI::App* list = app.add_subcommand("list", "list jobs");
@@ -464,37 +527,7 @@ int main(int argc, char** argv) {
     if (!flags.json) std::cout << (job ? job_id : capture_id) << " deleted\n";
     return kExitOk;
   }
-  if (result->parsed()) {
-    v1::Result r;
-    grpc::Status s = client.GetResult(job_id, &r);
-    if (!s.ok()) return Report(s, flags);
-    const nlohmann::json parsed = nlohmann::json::parse(r.result_json(), nullptr, false);
-    if (parsed.is_discarded()) {
-      std::fprintf(stderr, "softid: job %s: the server sent a result that is not JSON\n",
-                   job_id.c_str());
-      return kExitFailure;
-    }
-    const std::string text = parsed.dump(2) + "\n";
-    if (!truth_file.empty()) {
-      std::string error;
-      if (!PrintAgainstTruth(parsed, truth_file, &error)) {
-        std::fprintf(stderr, "softid: --truth %s\n", error.c_str());
-        return kExitInvalidInput;
-      }
-    }
-    if (out_file.empty()) {
-      if (truth_file.empty()) std::cout << text;
-      return kExitOk;
-    }
-    std::ofstream out(out_file);
-    out << text;
-    if (!out.flush()) {
-      std::fprintf(stderr, "softid: %s: cannot write\n", out_file.c_str());
-      return kExitFailure;
-    }
-    if (!flags.json) std::cout << "result written to " << out_file << "\n";
-    return kExitOk;
-  }
+  if (result->parsed()) return ShowResult(client, job_id, out_file, truth_file, flags);
   if (list->parsed()) {
     v1::ListJobsRequest request;
     if (!state.empty()) {

@@ -225,6 +225,7 @@ grpc::Status GrpcReconstructionService::GetResult(grpc::ServerContext* context,
   response->set_result_json(result->result.dump());
   for (double cost : result->cost_history) response->add_cost_history(cost);
   for (int frame : result->cost_history_last_frame) response->add_cost_history_last_frame(frame);
+  FittedParametersToProto(result->result, response);
   return grpc::Status::OK;
 }
 

@@ -2,6 +2,8 @@
 
 #include <google/protobuf/util/time_util.h>
 
+#include <limits>
+
 namespace softid::server {
 namespace {
 
@@ -56,6 +58,38 @@ void ToProto(const store::CaptureListing& listing, v1::Capture* out) {
   ToProto(listing.capture, out);
   out->clear_files();
   out->set_num_jobs(static_cast<int32_t>(listing.num_jobs));
+}
+
+namespace {
+
+// Every number of a JSON value, depth first (objects in key order); null counts as +inf (the
+// result's way of writing an undetermined uncertainty).
+void AppendNumbers(const nlohmann::json& value, google::protobuf::RepeatedField<double>* out) {
+  if (value.is_number()) {
+    out->Add(value.get<double>());
+  } else if (value.is_null()) {
+    out->Add(std::numeric_limits<double>::infinity());
+  } else if (value.is_array() || value.is_object()) {
+    for (const nlohmann::json& element : value) AppendNumbers(element, out);
+  }
+}
+
+}  // namespace
+
+void FittedParametersToProto(const nlohmann::json& result, v1::Result* out) {
+  const auto parameters = result.find("parameters");
+  if (parameters == result.end() || !parameters->is_object()) return;
+  for (const auto& [name, entry] : parameters->items()) {
+    if (!entry.is_object() || !entry.contains("value")) continue;
+    v1::FittedParameter* parameter = out->add_parameters();
+    parameter->set_name(name);
+    parameter->set_unit(entry.value("unit", std::string()));
+    AppendNumbers(entry["value"], parameter->mutable_value());
+    if (entry.contains("initial")) AppendNumbers(entry["initial"], parameter->mutable_initial());
+    if (entry.contains("standard_uncertainty")) {
+      AppendNumbers(entry["standard_uncertainty"], parameter->mutable_standard_uncertainty());
+    }
+  }
 }
 
 void ToProto(const store::Job& job, v1::Job* out) {

@@ -19,6 +19,9 @@ void ToProto(const store::Capture& capture, v1::Capture* out);
 // As listed: without the file entries, with the number of jobs using it.
 void ToProto(const store::CaptureListing& listing, v1::Capture* out);
 void ToProto(const store::Job& job, v1::Job* out);
+// The typed parameters of a result.json ("parameters": {name: {value, unit, initial,
+// standard_uncertainty}}); entries of another shape are skipped.
+void FittedParametersToProto(const nlohmann::json& result, v1::Result* out);
 // `job` gives the context of the event (max_iterations from its config).
 void ToProto(const store::ProgressEvent& event, const store::Job& job, v1::JobEvent* out);
 UploadManifest FromProto(const v1::CaptureManifest& manifest);
