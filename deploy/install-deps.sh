@@ -21,6 +21,8 @@ packages=(
   libcpp-httplib-dev
   # tests and benchmarks; the Python client example and its test (clients/python)
   libgtest-dev libgmock-dev libbenchmark-dev python3-grpcio python3-protobuf
+  # the independent validation set (tools/validation, tests/validation): CalculiX, numpy, 16-bit PNG
+  calculix-ccx python3-numpy python3-png
   # fuzzing (tests/fuzz): clang with libFuzzer and the sanitizer runtimes; llvm-14 for
   # llvm-symbolizer, which puts file and line into the stack trace of a crash
   clang-14 libclang-rt-14-dev llvm-14

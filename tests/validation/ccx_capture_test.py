@@ -1,0 +1,162 @@
+#!/usr/bin/python3
+"""Usage: ccx_capture_test.py SOURCE_DIR SOFTID_LAB
+
+The CI check of the independent validation set (tools/validation): generates its smallest case
+("tiny-drop", coarse mesh) with CalculiX and checks that
+- the generator runs to the end;
+- softid loads the capture and fits it (one iteration of `softid-lab fit`);
+- every depth frame shows the object at plausible depths, and nothing else;
+- the block's centre of mass in ccx's output falls as 0.5 g t^2 until it touches the floor;
+- truth.json holds the public parameter names and the reference's effective stiffness.
+
+Exit code 77 (CTest: skipped) when ccx, numpy or png (python3-png) is missing.
+"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+
+SKIP = 77
+FIT_CONFIG = {"max_iterations": 1, "cells": 8, "substeps": 2, "starts": 1,
+              "frames": {"first": 0, "last": 5},
+              "fixed": {"poisson_ratio": 0.35, "ground": {"normal": [0, 0, 1], "offset": 0}}}
+PUBLIC_NAMES = ("youngs_modulus", "poisson_ratio", "density", "mass_damping", "stiffness_damping",
+                "gravity", "initial_velocity", "initial_angular_velocity", "ground",
+                "contact_stiffness", "contact_damping", "friction_coefficient", "stiffness_field",
+                "drag_linear", "drag_quadratic")
+
+
+def fail(message):
+    print(f"FAIL: {message}", file=sys.stderr)
+    sys.exit(1)
+
+
+def check(condition, message):
+    if not condition:
+        fail(message)
+
+
+def requirements_or_skip():
+    try:
+        import numpy  # noqa: F401
+        import png  # noqa: F401
+    except ImportError as error:
+        print(f"SKIP: {sys.executable} lacks {error.name} (python3-numpy, python3-png)")
+        sys.exit(SKIP)
+    if shutil.which("ccx") is None:
+        print("SKIP: ccx not found (calculix-ccx)")
+        sys.exit(SKIP)
+
+
+def generate(source_dir, out):
+    tool = os.path.join(source_dir, "tools", "validation", "make_validation_set.py")
+    start = time.monotonic()
+    result = subprocess.run([sys.executable, tool, "--out", out, "--cases", "tiny-drop"],
+                            capture_output=True, text=True, check=False)
+    seconds = time.monotonic() - start
+    check(result.returncode == 0, f"generator exit {result.returncode}:\n{result.stdout}\n{result.stderr}")
+    print(f"generated tiny-drop in {seconds:.1f} s")
+
+
+def check_fit(softid_lab, capture, scratch):
+    config = os.path.join(scratch, "job.json")
+    with open(config, "w") as f:
+        json.dump(FIT_CONFIG, f)
+    out = os.path.join(scratch, "result.json")
+    result = subprocess.run([softid_lab, "fit", capture, "-c", config, "-o", out],
+                            capture_output=True, text=True, check=False)
+    check(result.returncode == 0, f"softid-lab fit exit {result.returncode}:\n{result.stderr[-2000:]}")
+    with open(out) as f:
+        value = json.load(f)["parameters"]["youngs_modulus"]["value"]
+    check(value > 0, f"fitted E = {value}")
+    print(f"softid-lab fit loaded the capture (E after one iteration: {value:.0f} Pa)")
+
+
+def check_frames(capture):
+    import numpy as np
+    import png
+    with open(os.path.join(capture, "capture.json")) as f:
+        meta = json.load(f)
+    check(meta["format"] == "softid-capture/1", "capture format")
+    camera = meta["cameras"][0]
+    pose = np.array(camera["world_from_camera"]).reshape(4, 4)
+    target_distance = np.linalg.norm(pose[:3, 3] - np.array([0.0, 0.0, 0.03]))
+    for name in camera["frames"]:
+        width, height, rows, info = png.Reader(filename=os.path.join(capture, name)).read()
+        check((width, height) == (camera["width"], camera["height"]) and info["bitdepth"] == 16,
+              f"{name}: {width}x{height}, {info['bitdepth']} bit")
+        depth = np.array(list(rows), dtype=float) * camera["depth_scale"]
+        hit = depth[depth > 0]
+        check(hit.size >= 50, f"{name}: {hit.size} object pixels")
+        # The object (6 cm) seen from ~35 cm: every pixel within 10 cm of the target's distance;
+        # a drawn floor would reach far beyond.
+        check(np.all(np.abs(hit - target_distance) < 0.10),
+              f"{name}: depths {hit.min():.3f}..{hit.max():.3f} m, target at {target_distance:.3f} m")
+    print(f"{len(camera['frames'])} frames with object pixels at plausible depths")
+
+
+def check_free_fall(source_dir, out):
+    import numpy as np
+    sys.path.insert(0, os.path.join(source_dir, "tools", "validation"))
+    from softid_validation import cases, ccx_deck
+    case = cases.CASES["tiny-drop"]()
+    model = ccx_deck.build_model(case, case.divisions)
+    positions = np.load(os.path.join(out, "work", "tiny-drop", "motion-x1", "positions_sim.npy"))
+    masses = ccx_deck.node_masses(case, model)
+    com_z = positions[:, :, 2] @ masses / masses.sum()
+    times = np.arange(len(positions)) / case.fps
+    # Frames before contact: the lowest node still above the floor by more than 1 mm.
+    airborne = [k for k in range(1, len(positions)) if positions[k, :, 2].min() > 1e-3
+                and all(positions[j, :, 2].min() > 1e-3 for j in range(k))]
+    check(len(airborne) >= 3, f"only {len(airborne)} frames before contact")
+    for k in airborne:
+        fallen = com_z[0] - com_z[k]
+        expected = 0.5 * cases.GRAVITY * times[k] ** 2
+        check(abs(fallen / expected - 1.0) < 0.01,
+              f"frame {k}: centre of mass fell {fallen * 1e3:.4f} mm, 0.5 g t^2 = {expected * 1e3:.4f} mm")
+    print(f"centre of mass falls as 0.5 g t^2 (within 1 %) over {len(airborne)} frames before contact")
+
+
+def check_truth(capture):
+    with open(os.path.join(capture, "truth.json")) as f:
+        truth = json.load(f)
+    check(truth["format"] == "softid-truth/1", "truth format")
+    missing = [n for n in PUBLIC_NAMES if n not in truth["parameters"]]
+    check(not missing, f"truth.json lacks {missing}")
+    reference = truth["reference"]
+    for key in ("effective_youngs_modulus", "stiffness_scale", "frequency_extrapolated_hz",
+                "frequency_study", "solver"):
+        check(key in reference, f"truth.json reference lacks {key}")
+    scale = reference["stiffness_scale"]
+    check(0.5 < scale < 1.5, f"stiffness scale {scale}")
+    print(f"truth.json complete; effective E of this mesh {reference['effective_youngs_modulus']:.0f} Pa "
+          f"(nominal {truth['parameters']['youngs_modulus']:.0f} Pa)")
+
+
+def main():
+    if len(sys.argv) != 3:
+        print(__doc__.split("\n\n")[0], file=sys.stderr)
+        return 2
+    source_dir, softid_lab = sys.argv[1], sys.argv[2]
+    requirements_or_skip()
+    scratch = tempfile.mkdtemp(prefix="softid-validation.")
+    try:
+        out = os.path.join(scratch, "set")
+        generate(source_dir, out)
+        capture = os.path.join(out, "tiny-drop-coarse")
+        check_truth(capture)
+        check_frames(capture)
+        check_free_fall(source_dir, out)
+        check_fit(softid_lab, capture, scratch)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    print("PASS")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,90 @@
+#!/usr/bin/python3
+"""Generates softid's independent validation set with CalculiX (issue 29).
+
+    tools/validation/make_validation_set.py --out DIR [--cases a,b,...] [--resolution coarse|fine|both]
+
+For each case: CalculiX eigenfrequencies at three meshes (the reference's own discretisation
+error, as an effective Young's modulus), the motion at the chosen resolution(s) with ccx, and an
+ordinary capture folder DIR/<case>-<resolution>/ (capture.json, object.obj, cam0/*.png,
+truth.json). ccx's own files stay in DIR/work/<case>/. See tools/validation/README.md.
+
+Needs: ccx (Debian calculix-ccx), numpy (python3-numpy), png (python3-png). Run with the Debian
+interpreter /usr/bin/python3. ccx runs single-threaded, one run at a time.
+"""
+
+import argparse
+import json
+import os
+import sys
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+from softid_validation import cases, ccx_deck, ccx_run, generate, render  # noqa: E402
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", required=True, help="output folder (kept out of git)")
+    parser.add_argument("--cases", default=",".join(cases.DEFAULT_CASES),
+                        help="comma-separated case names; known: " + ", ".join(cases.CASES))
+    parser.add_argument("--resolution", choices=["coarse", "fine", "both"], default="coarse")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the sensor noise")
+    parser.add_argument("--noiseless", action="store_true",
+                        help="exact depth (still quantised), no dropouts: for debugging")
+    return parser.parse_args(argv)
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    if ccx_run.ccx_binary() is None:
+        print("make_validation_set: ccx not found (apt-get install calculix-ccx)", file=sys.stderr)
+        return 2
+    names = [n for n in args.cases.split(",") if n]
+    unknown = [n for n in names if n not in cases.CASES]
+    if unknown:
+        print(f"make_validation_set: unknown case(s) {unknown}; known: {list(cases.CASES)}",
+              file=sys.stderr)
+        return 2
+    resolutions = ["coarse", "fine"] if args.resolution == "both" else [args.resolution]
+    noise = render.NoiseModel()
+    if args.noiseless:
+        noise = render.NoiseModel(sigma_quadratic=0.0, random_dropout=0.0, grazing_cos_drop=-1.0,
+                                  grazing_cos_keep=0.0)
+    settings = ccx_deck.SolverSettings()
+    os.makedirs(args.out, exist_ok=True)
+    summaries = []
+    started = time.monotonic()
+    for name in names:
+        summary = generate.generate_case(cases.CASES[name](), resolutions, args.out, settings,
+                                         noise, args.seed, log=lambda m: print(m, flush=True))
+        summaries.append(summary)
+        print(_summary_line(summary), flush=True)
+    _merge_summary(os.path.join(args.out, "summary.json"), summaries)
+    print(f"done in {time.monotonic() - started:.0f} s", flush=True)
+    return 0
+
+
+def _merge_summary(path, summaries):
+    """Adds or replaces these cases in OUT/summary.json, so that partial reruns keep the rest."""
+    merged = {}
+    if os.path.exists(path):
+        with open(path) as f:
+            merged = {s["case"]: s for s in json.load(f)["cases"]}
+    merged.update({s["case"]: s for s in summaries})
+    order = list(cases.CASES)
+    with open(path, "w") as f:
+        json.dump({"cases": sorted(merged.values(), key=lambda s: order.index(s["case"]))}, f, indent=1)
+
+
+def _summary_line(summary):
+    parts = [f"{summary['case']}: E nominal {summary['nominal_youngs_modulus']}"]
+    for resolution, record in summary["captures"].items():
+        e_eff = ", ".join(f"{e:.4g}" for e in record["effective_youngs_modulus"])
+        parts.append(f"{resolution}: E_eff {e_eff} Pa, ccx {record['ccx_seconds']} s, "
+                     f"{record['object_pixels_mean']:.0f} object px/frame")
+    return "; ".join(parts) + f" ({summary['seconds']} s)"
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,160 @@
+#!/usr/bin/python3
+"""Fits softid blind to the independent CalculiX captures and prints how close it comes.
+
+    tools/validation/validate_independent.py --lab build/core/lab/softid-lab --out DIR
+        [--cases a,b] [--resolution coarse|fine] [--starts N] [--max-iterations N]
+
+For each case: generates the capture unless DIR/<case>-<resolution>/ exists (make_validation_set.py),
+fits it with the settings a user with a known rig would use (gravity, floor, Poisson ratio and no
+damping given; Young's modulus and the launch velocity fitted, and the friction coefficient or the
+spin where the case has them), and prints per case the fitted modulus against the nominal value
+and against the effective modulus of the reference's own mesh (the truth the capture shows:
+tools/validation/README.md), the reported statistical sigma and discretisation error, whether the
+truth lies in the reported band (value +- (2 sigma + discretisation error)) and the time. Writes
+DIR/validation.json and prints a Markdown table. Use the Debian interpreter /usr/bin/python3.
+"""
+
+import argparse
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+CASES = ("block-drop", "block-launch", "cube-ramp", "cube-ramp-friction", "bar-clamped",
+         "two-material", "tumble-throw")
+
+
+def parse_args(argv):
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--lab", required=True, help="the softid-lab binary")
+    parser.add_argument("--out", required=True, help="folder of the captures and results")
+    parser.add_argument("--cases", default=",".join(CASES))
+    parser.add_argument("--resolution", choices=["coarse", "fine"], default="coarse",
+                        help="the reference mesh whose captures are fitted")
+    parser.add_argument("--starts", type=int, default=2)
+    parser.add_argument("--max-iterations", type=int, default=50)
+    parser.add_argument("--cells", default="auto", help='"auto" (default) or a number')
+    return parser.parse_args(argv)
+
+
+def job_config(truth, args):
+    """What a user who knows the rig but not the material would send."""
+    p = truth["parameters"]
+    fit = ["youngs_modulus", "initial_velocity"]
+    if p["friction_coefficient"] > 0:
+        fit.append("friction_coefficient")
+    if any(abs(w) > 0 for w in p["initial_angular_velocity"]):
+        fit.append("initial_angular_velocity")
+    e = p["youngs_modulus"]
+    fixed = {"poisson_ratio": p["poisson_ratio"], "gravity": p["gravity"], "ground": p["ground"],
+             "mass_damping": 0.0, "stiffness_damping": 0.0, "contact_damping": 0.0}
+    if "friction_coefficient" not in fit:
+        fixed["friction_coefficient"] = 0.0
+    initial = {"youngs_modulus": {"min": 0.3 * e, "max": 3.0 * e}}
+    if "friction_coefficient" in fit:
+        initial["friction_coefficient"] = 0.1
+    cells = args.cells if args.cells == "auto" else int(args.cells)
+    return {"fit": fit, "fixed": fixed, "initial": initial, "starts": args.starts,
+            "max_iterations": args.max_iterations, "cells": cells, "uncertainty": True}
+
+
+def ensure_capture(case, resolution, out):
+    folder = os.path.join(out, f"{case}-{resolution}")
+    if not os.path.exists(os.path.join(folder, "capture.json")):
+        subprocess.run([sys.executable, os.path.join(HERE, "make_validation_set.py"), "--out", out,
+                        "--cases", case, "--resolution", resolution], check=True)
+    return folder
+
+
+def number(entry, *keys):
+    for key in keys:
+        if not isinstance(entry, dict) or entry.get(key) is None:
+            return math.nan
+        entry = entry[key]
+    return entry if isinstance(entry, (int, float)) else math.nan
+
+
+def run_case(case, args):
+    folder = ensure_capture(case, args.resolution, args.out)
+    with open(os.path.join(folder, "truth.json")) as f:
+        truth = json.load(f)
+    config = job_config(truth, args)
+    work = os.path.join(args.out, "fits", f"{case}-{args.resolution}")
+    os.makedirs(work, exist_ok=True)
+    with open(os.path.join(work, "job.json"), "w") as f:
+        json.dump(config, f, indent=1)
+    started = time.monotonic()
+    with open(os.path.join(work, "fit.log"), "w") as log:
+        subprocess.run([args.lab, "fit", folder, "-c", os.path.join(work, "job.json"),
+                        "-o", os.path.join(work, "result.json")], stdout=log, stderr=log,
+                       check=True)
+    seconds = time.monotonic() - started
+    with open(os.path.join(work, "result.json")) as f:
+        result = json.load(f)
+    e = result["parameters"]["youngs_modulus"]
+    e_eff = truth["reference"]["effective_youngs_modulus"]
+    fitted = e["value"]
+    sigma = number(e, "standard_uncertainty")
+    bias = number(e, "discretisation_error", "total")
+    band = 2.0 * (sigma if math.isfinite(sigma) else math.inf) + (bias if math.isfinite(bias) else 0)
+    row = {"case": case, "resolution": args.resolution,
+           "nominal_youngs_modulus": truth["parameters"]["youngs_modulus"],
+           "reference_youngs_modulus": e_eff, "fitted_youngs_modulus": fitted,
+           "error_vs_reference": fitted / e_eff - 1.0,
+           "error_vs_nominal": fitted / truth["parameters"]["youngs_modulus"] - 1.0,
+           "standard_uncertainty": sigma, "discretisation_error": bias,
+           "truth_in_band": abs(fitted - e_eff) <= band,
+           "grid_cells": result["grid"]["cells"], "substeps": result["time_step"]["substeps"],
+           "seconds": round(seconds, 1), "config": config}
+    if "friction_coefficient" in result["parameters"]:
+        row["fitted_friction"] = result["parameters"]["friction_coefficient"]["value"]
+        row["friction"] = truth["parameters"]["friction_coefficient"]
+    velocity = result["parameters"]["initial_velocity"]["value"]
+    row["velocity_error_m_s"] = math.dist(velocity, truth["parameters"]["initial_velocity"])
+    return row
+
+
+def percent(x):
+    return f"{100 * x:+.1f} %" if math.isfinite(x) else "-"
+
+
+def print_table(rows):
+    print("| case | E fitted [kPa] | vs reference mesh | vs nominal | sigma | discretisation "
+          "| truth in band | grid / substeps | launch velocity error [m/s] | friction | time [s] |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for r in rows:
+        e = r["fitted_youngs_modulus"]
+        friction = (f"{r['fitted_friction']:.3f} (truth {r['friction']})" if "friction" in r else "-")
+        print(f"| `{r['case']}` | {e / 1e3:.2f} | {percent(r['error_vs_reference'])} "
+              f"| {percent(r['error_vs_nominal'])} | {percent(r['standard_uncertainty'] / e)} "
+              f"| {percent(r['discretisation_error'] / e)} | {'yes' if r['truth_in_band'] else 'no'} "
+              f"| {r['grid_cells']} / {r['substeps']} | {r['velocity_error_m_s']:.3f} | {friction} "
+              f"| {r['seconds']:.0f} |")
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    names = [c for c in args.cases.split(",") if c]
+    unknown = [c for c in names if c not in CASES]
+    if unknown:
+        print(f"validate_independent: unknown case(s) {unknown}; known: {list(CASES)}",
+              file=sys.stderr)
+        return 2
+    if not os.access(args.lab, os.X_OK):
+        print(f"validate_independent: --lab {args.lab}: not an executable", file=sys.stderr)
+        return 2
+    rows = []
+    for case in names:
+        print(f"{case}: fitting ({args.resolution})", flush=True)
+        rows.append(run_case(case, args))
+        with open(os.path.join(args.out, "validation.json"), "w") as f:
+            json.dump({"rows": rows}, f, indent=1)
+    print_table(rows)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
