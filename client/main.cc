@@ -314,6 +314,8 @@ std::string ValueWithSigma(const v1::FittedParameter& parameter) {
   std::string out = list(parameter.value());
   if (parameter.standard_uncertainty_size() > 0)
     out += " +- " + list(parameter.standard_uncertainty());
+  if (parameter.discretisation_error_size() > 0)
+    out += " (discretisation " + list(parameter.discretisation_error()) + ")";
   return out;
 }
 

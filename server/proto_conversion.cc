@@ -89,6 +89,11 @@ void FittedParametersToProto(const nlohmann::json& result, v1::Result* out) {
     if (entry.contains("standard_uncertainty")) {
       AppendNumbers(entry["standard_uncertainty"], parameter->mutable_standard_uncertainty());
     }
+    const auto discretisation = entry.find("discretisation_error");
+    if (discretisation != entry.end() && discretisation->is_object() &&
+        discretisation->contains("total")) {
+      AppendNumbers((*discretisation)["total"], parameter->mutable_discretisation_error());
+    }
   }
 }
 

@@ -203,9 +203,9 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
   }
   report.base_fit = inverse::ToJson(base);
   const fem::PhysicalParameters p0 = base.Best().final;
-  // Every refit and the likelihood ratios compare models on the base fit's time step: an "auto"
-  // choice redone at other parameters could change the discretisation between the two models.
-  config.substeps = base.substeps;
+  // Every refit and the likelihood ratios compare models on the base fit's grid and time step: an
+  // "auto" choice redone at other parameters could change the discretisation between the models.
+  config = inverse::WithFitDiscretisation(config, base);
 
   Context context;
   SOFTID_ASSIGN_OR_RETURN(context.mesh, capture::LoadCaptureMesh(capture));

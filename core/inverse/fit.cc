@@ -15,6 +15,7 @@
 #include "core/inverse/least_squares_refinement.h"
 #include "core/inverse/objective_settings.h"
 #include "core/inverse/parameter_space.h"
+#include "core/inverse/rest_frame_noise.h"
 #include "core/inverse/trajectory_objective.h"
 
 namespace softid::inverse {
@@ -425,6 +426,46 @@ nlohmann::json CostJson(double initial, double final) {
 
 }  // namespace
 
+namespace {
+
+// The grid of the fit: config.cells, or chosen by refinement (grid_selection.h) against the depth
+// noise of frame 0 (rest_frame_noise.h) when "auto". Sets simulation's grid and result's record.
+Status ChooseGrid(const capture::Capture& capture, const geometry::TriangleMesh& mesh,
+                  const JobConfig& config, const fem::PhysicalParameters& start, int last_frame,
+                  const std::atomic<bool>* cancel, fem::SimulationOptions* simulation,
+                  FitResult* result) {
+  const double length = mesh.Bounds().sizes().maxCoeff();
+  if (config.cell_size > 0.0) {
+    result->cell_size_m = config.cell_size;
+    return Status::Ok();
+  }
+  result->cells = config.cells;
+  if (config.cells == kAutoCells) {
+    // Without points in frame 0 the noise is unknown; the depth quantum is the floor.
+    Result<RestFrameNoise> noise = EstimateRestFrameNoise(capture, mesh);
+    const double sigma = noise.ok() ? noise->sigma_m : DepthQuantisationSigma(capture);
+    GridSelectionOptions grid_options;
+    grid_options.cancel = cancel;
+    if (config.substeps != kAutoSubsteps) grid_options.substeps = config.substeps;
+    SOFTID_ASSIGN_OR_RETURN(GridSelection selection,
+                            SelectGrid(mesh, capture.fixed_region, start, *simulation, capture.fps,
+                                       last_frame, std::max(sigma, 1e-9), grid_options));
+    result->cells = selection.cells;
+    result->grid_selection = std::move(selection);
+  }
+  simulation->cells_along_longest_side = result->cells;
+  result->cell_size_m = length / result->cells;
+  return Status::Ok();
+}
+
+}  // namespace
+
+JobConfig WithFitDiscretisation(JobConfig config, const FitResult& fit) {
+  if (config.cells == kAutoCells && fit.cells > 0) config.cells = fit.cells;
+  if (config.substeps == kAutoSubsteps && fit.substeps > 0) config.substeps = fit.substeps;
+  return config;
+}
+
 Result<fem::PhysicalParameters> BaseParameters(const capture::Capture& capture,
                                                const geometry::TriangleMesh& mesh,
                                                const std::vector<ObservedFrame>& frames,
@@ -494,6 +535,8 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   // steps ~1.6x faster on both (softid-lab bench --threads).
   simulation.threads = std::max(1, cores / threads);
   const cost::SurfaceCostOptions cost_options = CostOptionsFor(config);
+  SOFTID_RETURN_IF_ERROR(ChooseGrid(capture, mesh, config, CentralStart(config, result.base),
+                                    frames->back().frame, options.cancel, &simulation, &result));
   result.substeps = config.substeps;
   if (config.substeps == kAutoSubsteps) {
     SubstepSelectionOptions selection_options;
@@ -624,7 +667,9 @@ nlohmann::json ToJson(const FitResult& result) {
   for (const std::string& name : result.fitted)
     fixed.erase(name == "ground_plane" ? std::string("ground") : name);
   out["fixed"] = fixed;
-  // How finely time was resolved; "selection" only when the job asked for "auto".
+  // How finely space and time were resolved; "selection" only when the job asked for "auto".
+  out["grid"] = {{"cells", result.cells}, {"cell_size_m", result.cell_size_m}};
+  if (result.grid_selection) out["grid"]["selection"] = ToJson(*result.grid_selection);
   out["time_step"] = {{"substeps", result.substeps}};
   if (result.substep_selection) out["time_step"]["selection"] = ToJson(*result.substep_selection);
   int evaluations = 0;

@@ -18,6 +18,7 @@
 //    "cost_history_last_frame": [..],  // the last frame that cost is over (continuation stages
 //                                      // fit a prefix of the frames; see StartResult)
 //    "fixed": {..},                  // every parameter the fit did not change, public JSON
+//    "grid": {"cells": 16, "cell_size_m": .., "selection": {..}},  // selection: when "auto"
 //    "time_step": {"substeps": 4, "selection": {..}},  // selection: when chosen ("auto")
 //    "timing": {"total_seconds": .., "evaluations": .., "ms_per_forward_adjoint_step": .., ..}}
 // Vectors are arrays and the ground plane is {"normal": [..], "offset": ..}.
@@ -34,6 +35,7 @@
 #include "core/common/status.h"
 #include "core/fem/physical_parameters.h"
 #include "core/geometry/triangle_mesh.h"
+#include "core/inverse/grid_selection.h"
 #include "core/inverse/job_config.h"
 #include "core/inverse/observed_frames.h"
 #include "core/inverse/time_step_selection.h"
@@ -125,6 +127,11 @@ struct FitResult {
   double total_seconds = 0.0;
   int substeps = 0;  // simulation steps per frame used (config's, or chosen when "auto")
   std::optional<SubstepSelection> substep_selection;  // when chosen
+  // The grid used: cells along the longest side (config's, or chosen when "auto"; 0 when the
+  // config gave cell_size) and the cell size h [m].
+  int cells = 0;
+  double cell_size_m = 0.0;
+  std::optional<GridSelection> grid_selection;  // when chosen
 
   const StartResult& Best() const { return starts.at(best); }
 };
@@ -144,6 +151,10 @@ Result<fem::PhysicalParameters> BaseParameters(const capture::Capture& capture,
 // fails (FailedPrecondition).
 Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
                       const FitOptions& options = {});
+
+// `config` with the grid and the time step `fit` used in place of "auto": analyses after a fit
+// (uncertainty, the diagnosis' refits) must see the fit's own cost function, not choose again.
+JobConfig WithFitDiscretisation(JobConfig config, const FitResult& fit);
 
 // Public JSON of a parameter value: number, array, {"normal", "offset"} or the stiffness field.
 nlohmann::json ParameterValueJson(const fem::PhysicalParameters& p, const std::string& name);

@@ -5,28 +5,14 @@
 #include <limits>
 
 #include "core/inverse/parameter_space.h"
+#include "core/inverse/public_values.h"
 
 namespace softid::inverse {
 namespace {
 
 constexpr double kInfinity = std::numeric_limits<double>::infinity();
 
-// Every number of a JSON value, depth first (objects in key order).
-void AppendNumbers(const nlohmann::json& value, std::vector<double>* out) {
-  if (value.is_number()) {
-    out->push_back(value.get<double>());
-  } else if (value.is_array() || value.is_object()) {
-    for (const nlohmann::json& element : value) AppendNumbers(element, out);
-  }
-}
-
-std::vector<double> Numbers(const nlohmann::json& value) {
-  std::vector<double> out;
-  AppendNumbers(value, &out);
-  return out;
-}
-
-// `shape` with its numbers replaced by `numbers` in AppendNumbers' order (+inf: null).
+// `shape` with its numbers replaced by `numbers` in PublicNumbers' order (+inf: null).
 nlohmann::json ReplaceNumbers(const nlohmann::json& shape, const std::vector<double>& numbers,
                               size_t* next) {
   if (shape.is_number()) {
@@ -38,28 +24,6 @@ nlohmann::json ReplaceNumbers(const nlohmann::json& shape, const std::vector<dou
     for (auto it = out.begin(); it != out.end(); ++it) *it = ReplaceNumbers(*it, numbers, next);
   }
   return out;
-}
-
-// d (public numbers of `name`) / d x at x, by central differences of the parameter space.
-Eigen::MatrixXd PublicJacobian(const ParameterSpace& space, const std::vector<double>& x,
-                               const fem::PhysicalParameters& base, const std::string& name) {
-  const size_t rows = Numbers(ParameterValueJson(base, name)).size();
-  Eigen::MatrixXd jacobian =
-      Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(rows), space.NumVariables());
-  for (int j = 0; j < space.NumVariables(); ++j) {
-    const double h = 1e-6 * std::max(1.0, std::abs(x[j]));
-    std::vector<double> plus = x, minus = x;
-    plus[j] += h;
-    minus[j] -= h;
-    const std::vector<double> up =
-        Numbers(ParameterValueJson(space.ToParameters(plus.data(), base), name));
-    const std::vector<double> down =
-        Numbers(ParameterValueJson(space.ToParameters(minus.data(), base), name));
-    for (size_t k = 0; k < std::min({rows, up.size(), down.size()}); ++k) {
-      jacobian(static_cast<Eigen::Index>(k), j) = (up[k] - down[k]) / (2.0 * h);
-    }
-  }
-  return jacobian;
 }
 
 // sqrt(diag(J Cov J^T)); +inf for an entry that moves with a variable of infinite variance.
@@ -86,15 +50,33 @@ std::vector<double> PropagatedSigma(const Eigen::MatrixXd& jacobian,
   return sigma;
 }
 
-}  // namespace
-
-double DepthQuantisationSigma(const capture::Capture& capture) {
-  double quantum = kInfinity;
-  for (const capture::CameraRecording& camera : capture.cameras) {
-    quantum = std::min(quantum, camera.depth_scale);
+// Each parameter's "discretisation_error" {"grid", "time_step", "total"} in its value's shape (null
+// where undetermined or not estimated) and, for scalars, "relative_discretisation_error"; the
+// method under "discretisation".
+void AddDiscretisationErrors(const DiscretisationError& error, nlohmann::json* json) {
+  for (const ParameterDiscretisationError& parameter : error.parameters) {
+    if (!(*json)["parameters"].contains(parameter.name)) continue;
+    nlohmann::json& entry = (*json)["parameters"][parameter.name];
+    nlohmann::json errors;
+    for (const auto& [key, numbers] :
+         {std::pair{"grid", &parameter.grid}, std::pair{"time_step", &parameter.time_step},
+          std::pair{"total", &parameter.total}}) {
+      size_t next = 0;
+      errors[key] = ReplaceNumbers(entry["value"], *numbers, &next);
+    }
+    entry["discretisation_error"] = errors;
+    if (entry["value"].is_number() && parameter.total.size() == 1) {
+      const double value = std::abs(entry["value"].get<double>());
+      const double total = parameter.total[0];
+      entry["relative_discretisation_error"] = value > 0.0 && std::isfinite(total)
+                                                   ? nlohmann::json(total / value)
+                                                   : nlohmann::json(nullptr);
+    }
   }
-  return std::isfinite(quantum) ? quantum / std::sqrt(12.0) : 0.0;
+  (*json)["discretisation"] = ToJson(error);
 }
+
+}  // namespace
 
 Result<FitUncertainty> EstimateFitUncertainty(const capture::Capture& capture,
                                               const JobConfig& config, const FitResult& fit) {
@@ -113,6 +95,13 @@ Result<FitUncertainty> EstimateFitUncertainty(const capture::Capture& capture,
   for (const std::string& name : fit.fitted) {
     const Eigen::MatrixXd jacobian = PublicJacobian(space, x, optimum, name);
     out.parameters.push_back({name, PropagatedSigma(jacobian, out.report.covariance)});
+  }
+  Result<DiscretisationError> discretisation =
+      EstimateDiscretisationError(capture, config, fit, out.report);
+  if (discretisation.ok()) {
+    out.discretisation = std::move(*discretisation);
+  } else {
+    out.discretisation_failure = std::string(discretisation.status().message());
   }
   return out;
 }
@@ -139,6 +128,11 @@ nlohmann::json ToJson(const FitResult& fit, const FitUncertainty* uncertainty,
     }
   }
   json["uncertainty"] = ToJson(uncertainty->report);
+  if (uncertainty->discretisation) {
+    AddDiscretisationErrors(*uncertainty->discretisation, &json);
+  } else if (!uncertainty->discretisation_failure.empty()) {
+    json["discretisation"] = {{"error", uncertainty->discretisation_failure}};
+  }
   return json;
 }
 

@@ -11,14 +11,17 @@
 #pragma once
 
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "core/capture/capture.h"
 #include "core/common/status.h"
+#include "core/inverse/discretisation_error.h"
 #include "core/inverse/fit.h"
 #include "core/inverse/identifiability.h"
 #include "core/inverse/job_config.h"
+#include "core/inverse/rest_frame_noise.h"  // DepthQuantisationSigma
 
 namespace softid::inverse {
 
@@ -32,6 +35,9 @@ struct ParameterUncertainty {
 struct FitUncertainty {
   IdentifiabilityReport report;
   std::vector<ParameterUncertainty> parameters;  // in the order of FitResult::fitted
+  // The discretisation error of each fitted value (discretisation_error.h), or why it is missing.
+  std::optional<DiscretisationError> discretisation;
+  std::string discretisation_failure;
 };
 
 // The analysis of `fit` (its best start). Errors of the analysis (a simulation that diverges at a
@@ -39,9 +45,6 @@ struct FitUncertainty {
 // failing it.
 Result<FitUncertainty> EstimateFitUncertainty(const capture::Capture& capture,
                                               const JobConfig& config, const FitResult& fit);
-
-// The residual-sigma floor of a capture [m]: the finest depth quantum / sqrt(12).
-double DepthQuantisationSigma(const capture::Capture& capture);
 
 // ToJson(fit) with "standard_uncertainty" (same shape as "value", null where infinite) and, for
 // scalars, "relative_uncertainty" in each entry of "parameters", and the analysis under

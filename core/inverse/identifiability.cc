@@ -427,13 +427,14 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const capture::Capture& cap
   SOFTID_ASSIGN_OR_RETURN(ParameterSpace space,
                           ParameterSpace::Create(fit.fitted, fit.base, length));
   const fem::PhysicalParameters& optimum = fit.Best().final;
-  const fem::SimulationOptions simulation = SimulationOptionsFor(config);
-  const cost::SurfaceCostOptions cost_options = CostOptionsFor(config);
-  // The fit's time step (config.substeps may say "auto"; the fit resolved it).
-  const int substeps = fit.substeps > 0 ? fit.substeps : config.substeps;
-  if (substeps < 1) {
+  // The fit's grid and time step (config may say "auto"; the fit resolved them).
+  const JobConfig resolved_config = WithFitDiscretisation(config, fit);
+  const fem::SimulationOptions simulation = SimulationOptionsFor(resolved_config);
+  const cost::SurfaceCostOptions cost_options = CostOptionsFor(resolved_config);
+  const int substeps = resolved_config.substeps;
+  if (substeps < 1 || (resolved_config.cells == kAutoCells && resolved_config.cell_size <= 0.0)) {
     return Status::InvalidArgument(
-        "fit.substeps: the fit result does not say which time step it used");
+        "fit: the fit result does not say which grid and time step it used");
   }
   IdentifiabilityOptions resolved = options;
   if (resolved.threads == 0) resolved.threads = config.threads;

@@ -413,7 +413,12 @@ Result<JobConfig> JobConfigFromJson(const Json& j) {
   }
 
   if (j.contains("cells")) {
-    SOFTID_ASSIGN_OR_RETURN(config.cells, ReadIntAtLeast(j["cells"], "cells", 2));
+    if (j["cells"] == Json("auto")) {
+      config.cells = kAutoCells;
+    } else {
+      SOFTID_ASSIGN_OR_RETURN(
+          config.cells, ReadInt(j["cells"], "cells", 2, "must be \"auto\" or an integer >= 2"));
+    }
   }
   if (j.contains("cell_size")) {
     SOFTID_ASSIGN_OR_RETURN(config.cell_size, ReadPositive(j["cell_size"], "cell_size"));
@@ -552,7 +557,7 @@ Json ToJson(const JobConfig& config) {
       {"fit", config.fit},
       {"initial", initial},
       {"fixed", config.fixed},
-      {"cells", config.cells},
+      {"cells", config.cells == kAutoCells ? Json("auto") : Json(config.cells)},
       {"substeps", config.substeps == kAutoSubsteps ? Json("auto") : Json(config.substeps)},
       {"frames", {{"first", config.frames.first}, {"last", config.frames.last}}},
       {"heldout_every", config.heldout_every},

@@ -13,7 +13,8 @@
 //       "ground_plane": {"normal": [0, 0.2, 1], "offset": 0.0}  // any non-zero normal
 //     },
 //     "fixed": {"density": 950, "gravity": [0, 0, -9.81]},  // PhysicalParameters public keys
-//     "cells": 16,               // cells along the longest side of the mesh, >= 2
+//     "cells": "auto",           // cells along the longest side of the mesh, >= 2, or "auto"
+//                                // (refinement until the surface moves less than the noise)
 //     "cell_size": 0.005,        // [m] > 0; overrides "cells" when present
 //     "substeps": "auto",        // steps per camera frame, >= 1, or "auto" (step doubling)
 //     "rho_infinity": 0.8,       // generalized-alpha time stepping with this high-frequency
@@ -57,6 +58,8 @@ namespace softid::inverse {
 
 // JobConfig::substeps value meaning "choose by step doubling" ("auto" in JSON).
 inline constexpr int kAutoSubsteps = 0;
+// JobConfig::cells value meaning "choose by refinement" ("auto" in JSON).
+inline constexpr int kAutoCells = 0;
 
 // The parameters a job can fit are those of fem::ParameterRegistry(), under their `name`; the
 // PhysicalParameters key "ground" is an alias of "ground_plane".
@@ -136,8 +139,12 @@ struct JobConfig {
   // key names a fitted parameter. Parameters neither fitted nor fixed keep the base values.
   nlohmann::json fixed = nlohmann::json::object();
 
-  // Grid resolution: cells along the longest side of the rest mesh's bounds, unless cell_size > 0.
-  int cells = 16;          // [-], >= 2
+  // Grid resolution: cells along the longest side of the rest mesh's bounds, unless cell_size > 0,
+  // or kAutoCells ("auto" in JSON, the default): chosen per capture by refinement at the starting
+  // parameters until a finer grid moves the simulated surface by less than half the depth noise
+  // (grid_selection.h), because the grid's discretisation error becomes a parameter error.
+  int cells = kAutoCells;  // [-], >= 2 or kAutoCells
+
   double cell_size = 0.0;  // h [m]; > 0 overrides `cells`, 0 = absent (not written to JSON)
   // Simulation steps per camera frame: dt = 1 / (fps * substeps), or kAutoSubsteps ("auto" in
   // JSON, the default): chosen per capture by step doubling at the starting parameters (see

@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/inverse/grid_selection.h"
+#include "core/inverse/objective_settings.h"
 #include "core/inverse/time_step_selection.h"
 
 namespace softid::inverse {
@@ -45,6 +47,7 @@ std::string MemoryCulprit(const JobConfig& config) {
   if (config.substeps != kAutoSubsteps && config.substeps > 64) {
     return fmt::format("substeps = {}", config.substeps);
   }
+  if (config.cells == kAutoCells) return std::string("cells = \"auto\"");
   return fmt::format("cells = {}", config.cells);
 }
 
@@ -53,6 +56,22 @@ std::string TimeCulprit(const JobConfig& config) {
   if (config.max_iterations > 200) return fmt::format("max_iterations = {}", config.max_iterations);
   if (config.starts > 16) return fmt::format("starts = {}", config.starts);
   return MemoryCulprit(config);
+}
+
+// Nodes of a grid of cell size h over a box. In doubles: a tiny cell size must not overflow.
+double BoxNodes(const Eigen::Vector3d& size, double h) {
+  double nodes = 1.0;
+  for (int a = 0; a < 3; ++a) nodes *= std::ceil(size[a] / h) + 1.0;
+  return nodes;
+}
+
+// "auto" cells: the finest candidate the grid selection may simulate within its node budget.
+int FinestAffordableCandidate(const Eigen::Vector3d& size, int padding) {
+  const GridSelectionOptions selection;
+  for (auto it = selection.candidates.rbegin(); it != selection.candidates.rend(); ++it) {
+    if (GridNodeEstimate(size, *it, padding) <= selection.max_grid_nodes) return *it;
+  }
+  return selection.candidates.front();
 }
 
 }  // namespace
@@ -91,11 +110,13 @@ Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
 
   JobResourceEstimate estimate;
   const Eigen::Vector3d size = extent.mesh_bounds.sizes();
+  const int cells =
+      config.cell_size <= 0.0 && config.cells == kAutoCells
+          ? FinestAffordableCandidate(size, SimulationOptionsFor(config).padding_cells)
+          : config.cells;
   estimate.cell_size_m =
-      config.cell_size > 0.0 ? config.cell_size : size.maxCoeff() / std::max(1, config.cells);
-  // In doubles: a tiny cell size must not overflow the count.
-  double nodes = 1.0;
-  for (int a = 0; a < 3; ++a) nodes *= std::ceil(size[a] / estimate.cell_size_m) + 1.0;
+      config.cell_size > 0.0 ? config.cell_size : size.maxCoeff() / std::max(1, cells);
+  const double nodes = BoxNodes(size, estimate.cell_size_m);
   const int substeps =
       config.substeps == kAutoSubsteps ? SubstepSelectionOptions{}.max_substeps : config.substeps;
   const double steps = static_cast<double>(fitted_last) * substeps;

@@ -47,7 +47,8 @@ struct JobResourceLimits {
 //   cells = 300: the job would need about 41 GiB of memory (grid 301 x 301 x 108 nodes, 960
 //   steps per run); at most 4 GiB is accepted: use fewer cells, substeps or frames
 //   max_iterations = 5000: the job could run for about 31 h (...); at most 24 h is accepted
-// "auto" substeps count as their largest candidate (SubstepSelectionOptions::max_substeps).
+// "auto" substeps count as their largest candidate (SubstepSelectionOptions::max_substeps), "auto"
+// cells as the finest grid candidate whose padded grid fits GridSelectionOptions::max_grid_nodes.
 Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
                                                  const CaptureExtent& extent,
                                                  const JobResourceLimits& limits);

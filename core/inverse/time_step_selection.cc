@@ -7,35 +7,13 @@
 #include <stdexcept>
 #include <string>
 
-#include "core/fem/simulator.h"
+#include "core/inverse/surface_trajectory.h"
 
 namespace softid::inverse {
 namespace {
 
 bool Cancelled(const std::atomic<bool>* cancel) {
   return cancel != nullptr && cancel->load(std::memory_order_relaxed);
-}
-
-// Surface vertex positions at every frame 0..last_frame; empty when the run diverges or is
-// cancelled.
-std::vector<std::vector<Eigen::Vector3d>> SurfaceTrajectory(
-    const geometry::TriangleMesh& rest_mesh, const std::optional<Eigen::AlignedBox3d>& fixed_region,
-    const fem::PhysicalParameters& parameters, fem::SimulationOptions simulation, double fps,
-    int last_frame, int substeps, const std::atomic<bool>* cancel) {
-  simulation.time_step = 1.0 / (fps * substeps);
-  fem::Simulator sim(rest_mesh, parameters, simulation, fixed_region);
-  std::vector<std::vector<Eigen::Vector3d>> frames;
-  frames.reserve(last_frame + 1);
-  frames.push_back(sim.SurfacePositions());
-  for (int frame = 1; frame <= last_frame; ++frame) {
-    for (int s = 0; s < substeps; ++s) {
-      if (Cancelled(cancel)) return {};
-      const fem::StepSummary step = sim.Step();
-      if (step.diverged || !sim.state().u.allFinite()) return {};
-    }
-    frames.push_back(sim.SurfacePositions());
-  }
-  return frames;
 }
 
 }  // namespace
@@ -66,8 +44,10 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
   selection.tolerance_m = options.tolerance_fraction * rest_mesh.Bounds().sizes().maxCoeff();
   try {
     int substeps = options.min_substeps;
-    auto coarse = SurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps,
-                                    last_frame, substeps, options.cancel);
+    SurfaceTrajectory coarse =
+        SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps, last_frame,
+                                  substeps, options.cancel)
+            .frames;
     if (Cancelled(options.cancel)) return Status::Cancelled("the time-step choice was cancelled");
     while (true) {
       if (substeps >= options.max_substeps) {
@@ -75,8 +55,10 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
         break;
       }
       const int finer = std::min(2 * substeps, options.max_substeps);
-      auto fine = SurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps,
-                                    last_frame, finer, options.cancel);
+      SurfaceTrajectory fine =
+          SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps,
+                                    last_frame, finer, options.cancel)
+              .frames;
       if (Cancelled(options.cancel)) {
         return Status::Cancelled("the time-step choice was cancelled");
       }
@@ -84,16 +66,9 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
       trial.substeps = substeps;
       trial.diverged = coarse.empty() || fine.empty();
       if (!trial.diverged) {
-        for (int frame = 0; frame <= last_frame; ++frame) {
-          double sum = 0.0;
-          for (size_t i = 0; i < coarse[frame].size(); ++i)
-            sum += (coarse[frame][i] - fine[frame][i]).squaredNorm();
-          const double rms = std::sqrt(sum / static_cast<double>(coarse[frame].size()));
-          if (rms > trial.difference_m) {
-            trial.difference_m = rms;
-            trial.worst_frame = frame;
-          }
-        }
+        const TrajectoryDifference difference = CompareTrajectories(coarse, fine);
+        trial.difference_m = difference.difference_m;
+        trial.worst_frame = difference.worst_frame;
       }
       selection.trials.push_back(trial);
       spdlog::info("time step: {} vs {} substeps per frame: surface differs by {:.3g} mm{}",

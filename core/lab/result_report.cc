@@ -80,8 +80,8 @@ void PrintResultTable(const nlohmann::json& result, const std::filesystem::path&
       truth = nullptr;
     }
   }
-  std::printf("%-26s %-32s %-24s %-10s %-32s", "parameter", "recovered", "1-sigma", "unit",
-              "start");
+  std::printf("%-26s %-32s %-24s %-24s %-10s %-32s", "parameter", "recovered", "1-sigma",
+              "discretisation", "unit", "start");
   if (!truth.is_null()) std::printf(" %-32s %s", "truth", "error");
   std::printf("\n");
   for (const auto& [name, entry] : result["parameters"].items()) {
@@ -89,9 +89,14 @@ void PrintResultTable(const nlohmann::json& result, const std::filesystem::path&
                               : entry["standard_uncertainty"].is_null()
                                   ? "undetermined"
                                   : Compact(entry["standard_uncertainty"]);
-    std::printf("%-26s %-32s %-24s %-10s %-32s", name.c_str(), Compact(entry["value"]).c_str(),
-                sigma.c_str(), entry["unit"].get<std::string>().c_str(),
-                Compact(entry["initial"]).c_str());
+    // The estimated bias of the grid and time step (docs/results.md), beside the noise's sigma.
+    const std::string bias = !entry.contains("discretisation_error") ? "-"
+                             : entry["discretisation_error"]["total"].is_null()
+                                 ? "undetermined"
+                                 : Compact(entry["discretisation_error"]["total"]);
+    std::printf("%-26s %-32s %-24s %-24s %-10s %-32s", name.c_str(),
+                Compact(entry["value"]).c_str(), sigma.c_str(), bias.c_str(),
+                entry["unit"].get<std::string>().c_str(), Compact(entry["initial"]).c_str());
     const std::string key = name == "ground_plane" ? "ground" : name;
     if (!truth.is_null() && truth.contains(key)) {
       std::printf(" %-32s", Compact(truth[key]).c_str());

@@ -213,5 +213,43 @@ TEST(Fit, AutoSubstepsChoosesAndReportsTheTimeStep) {
   EXPECT_FALSE(ToJson(*result)["time_step"].contains("selection"));
 }
 
+TEST(Fit, AutoCellsChoosesAndReportsTheGrid) {
+  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.25);
+  ASSERT_TRUE(small.ok) << small.error;
+  JobConfig config = YoungsModulusConfig(small.truth);
+  config.cells = kAutoCells;
+  config.starts = 1;
+  config.max_iterations = 2;
+  Result<FitResult> result = Fit(small.capture, config);
+  ASSERT_TRUE(result.ok()) << result.status().ToString();
+  ASSERT_TRUE(result->grid_selection.has_value());
+  const GridSelection& selection = *result->grid_selection;
+  EXPECT_EQ(result->cells, selection.cells);
+  const std::vector<int>& candidates = GridSelectionOptions{}.candidates;
+  EXPECT_NE(std::find(candidates.begin(), candidates.end(), result->cells), candidates.end());
+  // The noise-free capture's noise is its depth quantum; the tolerance has the length floor.
+  EXPECT_GT(selection.depth_noise_m, 0.0);
+  EXPECT_LT(selection.depth_noise_m, 1e-3);
+  ASSERT_FALSE(selection.trials.empty());
+  if (selection.within_tolerance) {
+    EXPECT_LE(selection.trials.back().difference_m, selection.tolerance_m);
+  }
+  const double length = small.mesh.Bounds().sizes().maxCoeff();
+  EXPECT_NEAR(result->cell_size_m, length / result->cells, 1e-12);
+  const nlohmann::json json = ToJson(*result);
+  EXPECT_EQ(json["grid"]["cells"], result->cells);
+  EXPECT_EQ(json["grid"]["selection"]["trials"].size(), selection.trials.size());
+  // Analyses after the fit use the fit's grid, not "auto".
+  EXPECT_EQ(WithFitDiscretisation(config, *result).cells, result->cells);
+
+  // An explicit grid is used as given, with no selection.
+  config.cells = 6;
+  result = Fit(small.capture, config);
+  ASSERT_TRUE(result.ok()) << result.status().ToString();
+  EXPECT_EQ(result->cells, 6);
+  EXPECT_FALSE(result->grid_selection.has_value());
+  EXPECT_FALSE(ToJson(*result)["grid"].contains("selection"));
+}
+
 }  // namespace
 }  // namespace softid::inverse

@@ -31,9 +31,9 @@ struct SmallCapture {
 };
 
 // Scene `name` simulated for `duration` seconds at 60 fps with 2 substeps on an 8-cell grid, seen
-// by 2 noise-free 40x40 cameras.
+// by 2 40x40 cameras, noise-free unless `depth_noise_m` (sigma, depth-independent) is given.
 inline SmallCapture MakeSmallCapture(const std::string& name, double duration, int cameras = 2,
-                                     int cells = 8) {
+                                     int cells = 8, double depth_noise_m = 0.0) {
   SmallCapture out;
   Result<scenes::Scene> scene = scenes::MakeBuiltinScene(name);
   if (!scene.ok()) {
@@ -43,7 +43,8 @@ inline SmallCapture MakeSmallCapture(const std::string& name, double duration, i
   const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
   out.directory = std::filesystem::temp_directory_path() /
                   ("softid_inverse_" + std::string(info ? info->name() : "none") + "_" +
-                   std::to_string(::getpid()));
+                   std::to_string(::getpid()) + "_" +
+                   std::to_string(static_cast<long long>(depth_noise_m * 1e9)));
   std::filesystem::remove_all(out.directory);
   scenes::SynthesisOptions options;
   options.run.duration = duration;
@@ -52,6 +53,8 @@ inline SmallCapture MakeSmallCapture(const std::string& name, double duration, i
   options.cameras.count = cameras;
   options.cameras.width = 40;
   options.cameras.height = 40;
+  options.noise.sigma_constant = depth_noise_m;
+  options.noise.seed = 7;
   Result<scenes::SynthesisSummary> summary = scenes::Synthesize(*scene, options, out.directory);
   if (!summary.ok()) {
     out.error = summary.status().ToString();

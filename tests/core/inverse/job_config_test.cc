@@ -124,7 +124,7 @@ TEST(JobConfig, DefaultsFromEmptyObject) {
   EXPECT_EQ(config->fit, std::vector<std::string>{"youngs_modulus"});
   EXPECT_TRUE(config->initial.empty());
   EXPECT_EQ(config->fixed, json::object());
-  EXPECT_EQ(config->cells, 16);
+  EXPECT_EQ(config->cells, kAutoCells);
   EXPECT_EQ(config->cell_size, 0.0);
   EXPECT_EQ(config->substeps, kAutoSubsteps);
   EXPECT_EQ(config->rho_infinity, JobConfig::kNewmark);
@@ -356,11 +356,13 @@ TEST(JobConfigRejects, FixedValues) {
 TEST(JobConfigRejects, NumericalSettings) {
   const Result<JobConfig> cells = JobConfigFromJson(json::parse(R"({"cells": 1})"));
   ASSERT_FALSE(cells.ok());
-  EXPECT_EQ(cells.status().message(), "cells = 1: must be an integer >= 2");
-  ExpectInvalid(json::parse(R"({"cells": "ten"})"), "cells = \"ten\": ", "must be an integer >= 2");
-  ExpectInvalid(json::parse(R"({"cells": 2.5})"), "cells = 2.5: ", "must be an integer >= 2");
+  EXPECT_EQ(cells.status().message(), "cells = 1: must be \"auto\" or an integer >= 2");
+  ExpectInvalid(json::parse(R"({"cells": "ten"})"),
+                "cells = \"ten\": ", "must be \"auto\" or an integer >= 2");
+  ExpectInvalid(json::parse(R"({"cells": 2.5})"),
+                "cells = 2.5: ", "must be \"auto\" or an integer >= 2");
   ExpectInvalid(json::parse(R"({"cells": 10000000000})"),
-                "cells = 10000000000: ", "must be an integer >= 2");
+                "cells = 10000000000: ", "must be \"auto\" or an integer >= 2");
   ExpectInvalid(json::parse(R"({"cell_size": 0})"),
                 "cell_size = 0: ", "must be a finite number > 0");
   ExpectInvalid(json::parse(R"({"substeps": 0})"),
@@ -446,7 +448,7 @@ TEST(JobConfig, ValidateCodeBuiltConfigs) {
   };
   JobConfig config;
   config.cells = 1;
-  expect_invalid(config, "cells = 1: ", "must be an integer >= 2");
+  expect_invalid(config, "cells = 1: ", "must be \"auto\" or an integer >= 2");
   config = JobConfig{};
   config.frames = {5, 3};
   expect_invalid(config, "frames.last = 3: ", "frames.first (5)");
@@ -611,6 +613,18 @@ TEST(JobConfig, SubstepsAutoIsTheDefaultAndRoundTrips) {
   const Result<JobConfig> explicit_steps = JobConfigFromJson(json::parse(R"({"substeps": 5})"));
   ASSERT_TRUE(explicit_steps.ok());
   EXPECT_EQ(ToJson(*explicit_steps)["substeps"], 5);
+}
+
+TEST(JobConfig, CellsAutoIsTheDefaultAndRoundTrips) {
+  const Result<JobConfig> automatic = JobConfigFromJson(json::parse(R"({"cells": "auto"})"));
+  ASSERT_TRUE(automatic.ok()) << automatic.status().ToString();
+  EXPECT_EQ(automatic->cells, kAutoCells);
+  EXPECT_EQ(ToJson(*automatic)["cells"], "auto");
+  EXPECT_EQ(ToJson(JobConfig{})["cells"], "auto");
+  EXPECT_TRUE(JobConfig{}.Validate().ok());
+  const Result<JobConfig> explicit_cells = JobConfigFromJson(json::parse(R"({"cells": 12})"));
+  ASSERT_TRUE(explicit_cells.ok());
+  EXPECT_EQ(ToJson(*explicit_cells)["cells"], 12);
 }
 
 }  // namespace

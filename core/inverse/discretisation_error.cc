@@ -1,0 +1,208 @@
+#include "core/inverse/discretisation_error.h"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <memory>
+#include <stdexcept>
+#include <thread>
+
+#include "core/inverse/objective_settings.h"
+#include "core/inverse/public_values.h"
+#include "core/inverse/trajectory_objective.h"
+
+namespace softid::inverse {
+namespace {
+
+constexpr double kInfinity = std::numeric_limits<double>::infinity();
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+// Refinement ratio of the grid level compared with: the step of GridSelectionOptions' candidates.
+constexpr double kGridRatio = 1.5;
+// Assumed order of convergence in h and dt (see the header).
+constexpr double kOrder = 1.0;
+
+// What the fit saw: its mesh, frames and variables.
+struct FitSetting {
+  geometry::TriangleMesh mesh;
+  std::shared_ptr<const std::vector<ObservedFrame>> frames;
+};
+
+Result<FitSetting> LoadFitSetting(const capture::Capture& capture, const JobConfig& config) {
+  FitSetting setting;
+  SOFTID_ASSIGN_OR_RETURN(setting.mesh, capture::LoadCaptureMesh(capture));
+  SOFTID_ASSIGN_OR_RETURN(std::vector<ObservedFrame> loaded,
+                          LoadObservedFrames(capture, config.frames.first, config.frames.last));
+  for (ObservedFrame& frame : loaded) frame.heldout = config.IsHeldOut(frame.frame);
+  setting.frames = std::make_shared<const std::vector<ObservedFrame>>(std::move(loaded));
+  return setting;
+}
+
+// d cost / d x at x* with the given simulation and time step; an error when the run diverges.
+Result<Eigen::VectorXd> GradientAt(const FitSetting& setting, const capture::Capture& capture,
+                                   const JobConfig& config,
+                                   const fem::SimulationOptions& simulation, int substeps,
+                                   const ParameterSpace& space,
+                                   const fem::PhysicalParameters& optimum) {
+  std::unique_ptr<TrajectoryObjective> objective;
+  try {
+    objective = std::make_unique<TrajectoryObjective>(setting.mesh, capture.fixed_region, optimum,
+                                                      simulation, CostOptionsFor(config),
+                                                      setting.frames, capture.fps, substeps);
+  } catch (const std::invalid_argument& e) {
+    return Status::InvalidArgument(e.what());
+  }
+  SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation, objective->Evaluate(optimum, true));
+  if (evaluation.diverged) return Status::FailedPrecondition("the simulation diverged");
+  Eigen::VectorXd gradient(space.NumVariables());
+  const std::vector<double> x = space.ToVariables(optimum);
+  space.ChainGradient(evaluation.gradient, x.data(), gradient.data());
+  return gradient;
+}
+
+// dx = -H^-1 (g_coarse - g), through the analysis' pseudo-inverse: +inf for unbounded variables.
+Eigen::VectorXd NewtonShift(const IdentifiabilityReport& report, const Eigen::VectorXd& coarse) {
+  const HessianCovariance inverse = CovarianceFromHessian(report.hessian, 1.0);
+  const Eigen::VectorXd difference = coarse - report.gradient;
+  Eigen::VectorXd shift = Eigen::VectorXd::Zero(difference.size());
+  for (Eigen::Index i = 0; i < shift.size(); ++i) {
+    if (!std::isfinite(inverse.covariance(i, i))) {
+      shift[i] = kInfinity;
+      continue;
+    }
+    for (Eigen::Index j = 0; j < shift.size(); ++j) {
+      if (std::isfinite(inverse.covariance(i, j)))
+        shift[i] -= inverse.covariance(i, j) * difference[j];
+    }
+  }
+  return shift;
+}
+
+// |J dx| scaled by the level's error factor; NaN when the shift is missing, +inf where unbounded.
+std::vector<double> PublicError(const Eigen::MatrixXd& jacobian, const DiscretisationShift& shift) {
+  std::vector<double> out(static_cast<size_t>(jacobian.rows()), kNaN);
+  if (!shift.error.empty() || shift.variables.size() != jacobian.cols()) return out;
+  for (Eigen::Index k = 0; k < jacobian.rows(); ++k) {
+    const double scale = std::max(1e-300, jacobian.row(k).cwiseAbs().maxCoeff());
+    double sum = 0.0;
+    for (Eigen::Index j = 0; j < jacobian.cols(); ++j) {
+      if (std::abs(jacobian(k, j)) <= 1e-9 * scale) continue;
+      sum += jacobian(k, j) * shift.variables[j];
+    }
+    out[static_cast<size_t>(k)] = std::abs(sum) * shift.error_factor;
+  }
+  return out;
+}
+
+}  // namespace
+
+Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& capture,
+                                                        const JobConfig& config_in,
+                                                        const FitResult& fit,
+                                                        const IdentifiabilityReport& report) {
+  const auto begin = std::chrono::steady_clock::now();
+  if (fit.best < 0 || fit.best >= static_cast<int>(fit.starts.size()))
+    return Status::FailedPrecondition("discretisation error: the fit has no usable start");
+  const JobConfig config = WithFitDiscretisation(config_in, fit);
+  SOFTID_ASSIGN_OR_RETURN(FitSetting setting, LoadFitSetting(capture, config));
+  SOFTID_ASSIGN_OR_RETURN(
+      const ParameterSpace space,
+      ParameterSpace::Create(fit.fitted, fit.base, setting.mesh.Bounds().sizes().maxCoeff()));
+  const int n = space.NumVariables();
+  if (report.hessian.rows() != n || report.gradient.size() != n) {
+    return Status::InvalidArgument(
+        fmt::format("report: Hessian of {} variables for a fit of {}", report.hessian.rows(), n));
+  }
+  const fem::PhysicalParameters& optimum = fit.Best().final;
+  fem::SimulationOptions simulation = SimulationOptionsFor(config);
+  // The two estimates run side by side when there are two cores, one simulation thread each.
+  const int cores =
+      config.threads > 0 ? config.threads : static_cast<int>(std::thread::hardware_concurrency());
+  simulation.threads = std::max(1, cores / 2);
+  DiscretisationError out;
+
+  auto estimate = [&](DiscretisationShift* shift, const fem::SimulationOptions& coarse_simulation,
+                      int coarse_substeps) {
+    shift->error_factor = 1.0 / (std::pow(shift->ratio, kOrder) - 1.0);
+    Result<Eigen::VectorXd> gradient =
+        GradientAt(setting, capture, config, coarse_simulation, coarse_substeps, space, optimum);
+    if (!gradient.ok()) {
+      shift->error = std::string(gradient.status().message());
+      return;
+    }
+    shift->variables = NewtonShift(report, *gradient);
+  };
+
+  // The grid 1.5 x coarser.
+  DiscretisationShift& grid = out.grid;
+  grid.chosen = config.cell_size > 0.0 ? 0 : config.cells;
+  fem::SimulationOptions coarse_grid = simulation;
+  if (config.cell_size > 0.0) {
+    coarse_grid.cell_size = kGridRatio * config.cell_size;
+    grid.ratio = kGridRatio;
+  } else {
+    grid.compared = static_cast<int>(std::lround(config.cells / kGridRatio));
+    coarse_grid.cells_along_longest_side = grid.compared;
+    grid.ratio = static_cast<double>(config.cells) / std::max(1, grid.compared);
+  }
+  // Half the time steps.
+  DiscretisationShift& time = out.time_step;
+  time.chosen = config.substeps;
+  time.compared = config.substeps / 2;
+  time.ratio = static_cast<double>(time.chosen) / std::max(1, time.compared);
+  {
+    std::jthread time_worker;
+    if (time.compared < 1) {
+      time.error = "no coarser time step than 1 substep per frame";
+    } else if (cores >= 2) {
+      time_worker = std::jthread([&] { estimate(&time, simulation, time.compared); });
+    } else {
+      estimate(&time, simulation, time.compared);
+    }
+    if (config.cell_size <= 0.0 && (grid.compared < 2 || grid.compared >= config.cells)) {
+      grid.error = fmt::format("no coarser grid than {} cells", config.cells);
+    } else {
+      estimate(&grid, coarse_grid, config.substeps);
+    }
+  }
+
+  const std::vector<double> x = space.ToVariables(optimum);
+  for (const std::string& name : fit.fitted) {
+    const Eigen::MatrixXd jacobian = PublicJacobian(space, x, optimum, name);
+    ParameterDiscretisationError entry{
+        name, PublicError(jacobian, grid), PublicError(jacobian, time), {}};
+    for (size_t k = 0; k < entry.grid.size(); ++k) {
+      // A missing level counts as 0 in the sum only if the other is there; both missing: NaN.
+      const double g = entry.grid[k], t = entry.time_step[k];
+      entry.total.push_back(std::isnan(g) && std::isnan(t)
+                                ? kNaN
+                                : (std::isnan(g) ? 0.0 : g) + (std::isnan(t) ? 0.0 : t));
+    }
+    out.parameters.push_back(std::move(entry));
+  }
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
+  spdlog::info("discretisation error: grid {} vs {} cells, time step {} vs {} substeps, {:.1f} s",
+               grid.chosen, grid.compared, time.chosen, time.compared, out.seconds);
+  return out;
+}
+
+nlohmann::json ToJson(const DiscretisationError& error) {
+  auto shift_json = [](const DiscretisationShift& shift, const char* level, const char* compared) {
+    nlohmann::json out = {{level, shift.chosen},
+                          {compared, shift.compared},
+                          {"ratio", shift.ratio},
+                          {"error_factor", shift.error_factor}};
+    if (!shift.error.empty()) out["error"] = shift.error;
+    return out;
+  };
+  return {{"method",
+           "one Newton step of the optimum onto the next coarser grid (1.5 x h) and time step "
+           "(2 x dt), error = shift / (ratio - 1) (first order)"},
+          {"grid", shift_json(error.grid, "cells", "compared_cells")},
+          {"time_step", shift_json(error.time_step, "substeps", "compared_substeps")},
+          {"seconds", error.seconds}};
+}
+
+}  // namespace softid::inverse

@@ -1,0 +1,66 @@
+// How much of a fitted value is owed to the discretisation, reported beside its statistical
+// uncertainty (fit_uncertainty.h).
+//
+// A fit on a finite grid and time step returns the parameters that make the *discrete* model
+// match the recording; the continuum's would differ. The change of the optimum from the chosen
+// level to the next coarser one (the grid 1.5 x coarser, half the time steps) is estimated at the
+// optimum x* without refitting, by one Newton step from x* on the coarser model:
+//   dx = -H^-1 (g_coarse(x*) - g(x*)),
+// with H the cost's Hessian from the identifiability analysis and g the adjoint gradient: two
+// forward and adjoint runs in all. For a method of order p, refining by the ratio r reduces the
+// error by r^p, so the chosen level's own error is about |dx| / (r^p - 1) (Richardson). p = 1 is
+// taken for both: Newmark with gamma 0.6 is first order in time, and the cut cells represent the
+// boundary to first order in h (the elements' interior converges faster, so this is an upper
+// estimate). Each fitted value gets the two estimates and their sum.
+#pragma once
+
+#include <Eigen/Core>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/capture/capture.h"
+#include "core/common/status.h"
+#include "core/inverse/fit.h"
+#include "core/inverse/identifiability.h"
+#include "core/inverse/job_config.h"
+
+namespace softid::inverse {
+
+// The change of the optimum between the fit's level and a coarser one.
+struct DiscretisationShift {
+  double ratio = 0.0;         // coarser h / chosen h, or chosen substeps / coarser substeps [-]
+  int chosen = 0;             // cells along the longest side (0: config's cell_size), or substeps
+  int compared = 0;           // the same for the coarser level
+  Eigen::VectorXd variables;  // dx, the optimiser's variables [-]; +inf where unbounded
+  double error_factor = 0.0;  // 1 / (ratio^p - 1), p = 1: shift -> the chosen level's error
+  std::string error;          // why no shift could be estimated (the coarser run diverged, ...)
+};
+
+struct ParameterDiscretisationError {
+  std::string name;  // the fitted name
+  // One per number of the value's public form (as ParameterUncertainty), the estimated error of
+  // the chosen level [the parameter's unit], >= 0; +inf where undetermined, NaN when that level's
+  // estimate is missing.
+  std::vector<double> grid, time_step, total;
+};
+
+struct DiscretisationError {
+  DiscretisationShift grid, time_step;
+  std::vector<ParameterDiscretisationError> parameters;  // in the order of FitResult::fitted
+  double seconds = 0.0;
+};
+
+// The estimate for `fit` (its best start) with `report` from AnalyzeIdentifiability of the same
+// fit. A coarser level that cannot be simulated (fewer than 2 cells, 1 substep, a divergent run)
+// leaves its shift's `error` set and its numbers NaN; the other is still estimated.
+Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& capture,
+                                                        const JobConfig& config,
+                                                        const FitResult& fit,
+                                                        const IdentifiabilityReport& report);
+
+// result.json's "discretisation" object: {"method", "grid": {"cells", "compared_cells", "ratio",
+// "error_factor", "error"?}, "time_step": {"substeps", "compared_substeps", ...}, "seconds"}.
+nlohmann::json ToJson(const DiscretisationError& error);
+
+}  // namespace softid::inverse

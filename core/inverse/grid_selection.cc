@@ -1,0 +1,151 @@
+#include "core/inverse/grid_selection.h"
+
+#include <fmt/format.h>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <cmath>
+#include <stdexcept>
+
+#include "core/inverse/surface_trajectory.h"
+
+namespace softid::inverse {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+bool Cancelled(const std::atomic<bool>* cancel) {
+  return cancel != nullptr && cancel->load(std::memory_order_relaxed);
+}
+
+fem::SimulationOptions WithCells(fem::SimulationOptions simulation, int cells) {
+  simulation.cells_along_longest_side = cells;
+  simulation.cell_size = 0.0;
+  return simulation;
+}
+
+}  // namespace
+
+Status GridSelectionOptions::Validate() const {
+  if (candidates.empty()) return Status::InvalidArgument("candidates: must not be empty");
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    if (candidates[i] < 2 || (i > 0 && candidates[i] <= candidates[i - 1])) {
+      return Status::InvalidArgument(fmt::format(
+          "candidates[{}] = {}: must be >= 2 and above the one before", i, candidates[i]));
+    }
+  }
+  if (!(noise_fraction > 0.0) || !std::isfinite(noise_fraction))
+    return Status::InvalidArgument(fmt::format("noise_fraction = {}: must be > 0", noise_fraction));
+  if (!(min_tolerance_fraction >= 0.0) || !std::isfinite(min_tolerance_fraction)) {
+    return Status::InvalidArgument(
+        fmt::format("min_tolerance_fraction = {}: must be >= 0", min_tolerance_fraction));
+  }
+  if (max_grid_nodes < 1)
+    return Status::InvalidArgument(
+        fmt::format("max_grid_nodes = {}: must be >= 1", max_grid_nodes));
+  if (substeps < 1)
+    return Status::InvalidArgument(fmt::format("substeps = {}: must be >= 1", substeps));
+  return Status::Ok();
+}
+
+Result<GridSelection> SelectGrid(const geometry::TriangleMesh& rest_mesh,
+                                 const std::optional<Eigen::AlignedBox3d>& fixed_region,
+                                 const fem::PhysicalParameters& parameters,
+                                 const fem::SimulationOptions& simulation, double fps,
+                                 int last_frame, double depth_noise_m,
+                                 const GridSelectionOptions& options) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  if (!(depth_noise_m > 0.0) || !std::isfinite(depth_noise_m))
+    return Status::InvalidArgument(fmt::format("depth_noise_m = {}: must be > 0", depth_noise_m));
+  if (!(fps > 0.0)) return Status::InvalidArgument(fmt::format("fps = {}: must be > 0", fps));
+  if (last_frame < 1) {
+    return Status::InvalidArgument(
+        fmt::format("last_frame = {}: need at least one frame after the first", last_frame));
+  }
+  GridSelection selection;
+  selection.depth_noise_m = depth_noise_m;
+  selection.tolerance_m =
+      std::max(options.noise_fraction * depth_noise_m,
+               options.min_tolerance_fraction * rest_mesh.Bounds().sizes().maxCoeff());
+  auto run = [&](int cells) {
+    return SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters,
+                                     WithCells(simulation, cells), fps, last_frame,
+                                     options.substeps, options.cancel);
+  };
+  const Eigen::Vector3d size = rest_mesh.Bounds().sizes();
+  auto affordable = [&](int cells) {
+    return GridNodeEstimate(size, cells, simulation.padding_cells) <= options.max_grid_nodes;
+  };
+  try {
+    auto started = Clock::now();
+    selection.cells = options.candidates.front();
+    SurfaceRun coarse = run(selection.cells);
+    for (size_t i = 1; i < options.candidates.size() && affordable(options.candidates[i]); ++i) {
+      const int finer_cells = options.candidates[i];
+      SurfaceRun fine = run(finer_cells);
+      if (Cancelled(options.cancel)) return Status::Cancelled("the grid choice was cancelled");
+      GridTrial trial{selection.cells, finer_cells, coarse.grid_nodes};
+      trial.diverged = coarse.frames.empty() || fine.frames.empty();
+      if (!trial.diverged) {
+        const TrajectoryDifference difference = CompareTrajectories(
+            coarse.frames, fine.frames, static_cast<int>(rest_mesh.vertices.size()));
+        trial.difference_m = difference.difference_m;
+        trial.worst_frame = difference.worst_frame;
+      }
+      trial.seconds = std::chrono::duration<double>(Clock::now() - started).count();
+      started = Clock::now();
+      selection.trials.push_back(trial);
+      spdlog::info("grid: {} vs {} cells along the longest side: surface differs by {:.3g} mm{}",
+                   trial.cells, trial.finer_cells, 1e3 * trial.difference_m,
+                   trial.diverged ? " (a run diverged)" : "");
+      if (!trial.diverged && trial.difference_m <= selection.tolerance_m) {
+        selection.within_tolerance = true;
+        break;
+      }
+      selection.cells = finer_cells;
+      coarse = std::move(fine);
+    }
+    if (Cancelled(options.cancel)) return Status::Cancelled("the grid choice was cancelled");
+  } catch (const std::invalid_argument& error) {
+    return Status::InvalidArgument(error.what());
+  }
+  if (!selection.within_tolerance) {
+    spdlog::warn(
+        "grid: {} cells along the longest side leave the surface {:.3g} mm from the next finer "
+        "grid (tolerance {:.3g} mm: {} x the depth noise {:.3g} mm), and no finer candidate is "
+        "tried (up to {} cells, at most {} nodes); the fit may be biased by the grid: see the "
+        "result's discretisation_error",
+        selection.cells,
+        selection.trials.empty() ? 0.0 : 1e3 * selection.trials.back().difference_m,
+        1e3 * selection.tolerance_m, options.noise_fraction, 1e3 * depth_noise_m,
+        options.candidates.back(), options.max_grid_nodes);
+  }
+  return selection;
+}
+
+double GridNodeEstimate(const Eigen::Vector3d& size, int cells, int padding) {
+  const double h = size.maxCoeff() / std::max(1, cells);
+  double nodes = 1.0;  // in doubles: no overflow for absurd inputs
+  for (int a = 0; a < 3; ++a) nodes *= std::ceil(size[a] / h) + 1.0 + 2.0 * padding;
+  return nodes;
+}
+
+nlohmann::json ToJson(const GridSelection& selection) {
+  nlohmann::json trials = nlohmann::json::array();
+  for (const GridTrial& t : selection.trials) {
+    trials.push_back({{"cells", t.cells},
+                      {"finer_cells", t.finer_cells},
+                      {"grid_nodes", t.grid_nodes},
+                      {"difference_m", t.difference_m},
+                      {"worst_frame", t.worst_frame},
+                      {"diverged", t.diverged},
+                      {"seconds", t.seconds}});
+  }
+  return {{"cells", selection.cells},
+          {"depth_noise_m", selection.depth_noise_m},
+          {"tolerance_m", selection.tolerance_m},
+          {"within_tolerance", selection.within_tolerance},
+          {"trials", trials}};
+}
+
+}  // namespace softid::inverse

@@ -1,0 +1,89 @@
+// Choosing the simulation grid of a fit from the capture itself (refinement), the spatial
+// analogue of time_step_selection.h.
+//
+// A coarse grid makes the simulated object stiffer or softer than the continuum, and a fit then
+// moves Young's modulus to make up for it: the grid's discretisation error becomes a parameter
+// error. The selection simulates the object at its starting parameters on grids of increasing
+// resolution and takes the coarsest whose surface trajectory agrees with the next finer one to
+// within a fraction of the capture's depth noise (rest_frame_noise.h): finer grids would change
+// the simulated surface by less than the camera can see. Grids above a node budget are not tried,
+// so that the choice never makes a job unaffordable; the result then says the tolerance was not
+// met.
+#pragma once
+
+#include <Eigen/Geometry>
+#include <atomic>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/fem/physical_parameters.h"
+#include "core/fem/simulation_options.h"
+#include "core/geometry/triangle_mesh.h"
+
+namespace softid::inverse {
+
+struct GridSelectionOptions {
+  // Candidate resolutions, cells along the longest side of the mesh, ascending, each >= 2. Steps of
+  // about 1.5 x: each costs ~3.4 x the nodes of the one before.
+  std::vector<int> candidates = {8, 12, 16, 24};
+  // Accepted difference between a grid and the next finer: max over frames of the RMS distance
+  // over surface vertices, as a fraction of the depth noise sigma [-], > 0. 0.5: a systematic
+  // change of half the noise is visible in a fit over thousands of points, but smaller than the
+  // spread of any one pixel.
+  double noise_fraction = 0.5;
+  // Floor of the accepted difference, as a fraction of the mesh's longest side [-], >= 0, for
+  // noise-free captures whose sigma is the depth quantum.
+  double min_tolerance_fraction = 1e-3;
+  // Candidates whose grid would have more nodes (GridNodeEstimate) are not simulated [-], >= 1:
+  // a fit's time grows a little faster than its node count (docs/benchmarks.md). 8000 admits the
+  // torus-drop benchmark's 16 cells (6877), the default before grids were chosen, so "auto"
+  // never costs much more than that did.
+  int max_grid_nodes = 8000;
+  // Steps per camera frame of the comparison runs [-], >= 1: fine enough that the time step does
+  // not hide the grid's error.
+  int substeps = 8;
+  // Checked every simulation step; when set, selection stops with StatusCode::kCancelled.
+  const std::atomic<bool>* cancel = nullptr;
+
+  // InvalidArgument naming the field and value.
+  Status Validate() const;
+};
+
+struct GridTrial {
+  int cells = 0;              // this grid
+  int finer_cells = 0;        // compared with
+  int grid_nodes = 0;         // of this grid
+  double difference_m = 0.0;  // max over frames of the RMS surface distance [m]
+  int worst_frame = 0;
+  bool diverged = false;  // either run failed
+  double seconds = 0.0;   // both runs
+};
+
+struct GridSelection {
+  int cells = 0;  // the choice, cells along the longest side
+  double depth_noise_m = 0.0;
+  double tolerance_m = 0.0;
+  bool within_tolerance = false;  // false: the finest affordable candidate, tolerance not met
+  std::vector<GridTrial> trials;
+};
+
+// @param depth_noise_m the capture's depth noise sigma [m], > 0 (EstimateRestFrameNoise).
+// @param last_frame the last frame the fit compares (frames 0..last_frame are simulated), >= 1.
+// `simulation`'s grid fields are replaced by each candidate's.
+Result<GridSelection> SelectGrid(const geometry::TriangleMesh& rest_mesh,
+                                 const std::optional<Eigen::AlignedBox3d>& fixed_region,
+                                 const fem::PhysicalParameters& parameters,
+                                 const fem::SimulationOptions& simulation, double fps,
+                                 int last_frame, double depth_noise_m,
+                                 const GridSelectionOptions& options = {});
+
+nlohmann::json ToJson(const GridSelection& selection);
+
+// The nodes of a grid with `cells` along the longest side of a body of bounding-box `size` [m]
+// and `padding` cells around it: the box's nodes, an upper estimate of the simulation's (which
+// keeps only cells the body or the cost's band touches), computed without building the grid.
+double GridNodeEstimate(const Eigen::Vector3d& size, int cells, int padding);
+
+}  // namespace softid::inverse

@@ -1,0 +1,85 @@
+// The discretisation error of a fitted value, estimated at the optimum by one Newton step onto the
+// next coarser grid and time step, against the change of a real refit on those levels.
+#include "core/inverse/discretisation_error.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/inverse/fit_uncertainty.h"
+#include "tests/core/inverse/inverse_test_util.h"
+
+namespace softid::inverse {
+namespace {
+
+// Young's modulus of a ball bouncing once, the rest of the truth fixed, one start at the truth.
+JobConfig BounceConfig(const fem::PhysicalParameters& truth, int cells, int substeps) {
+  JobConfig config;
+  config.fit = {"youngs_modulus"};
+  config.initial["youngs_modulus"] = InitialValue{.value = truth.youngs_modulus, .range = {}};
+  config.fixed = fem::ToJson(truth);
+  config.fixed.erase("youngs_modulus");
+  config.fixed.erase("density");  // from the capture's mass
+  config.cells = cells;
+  config.substeps = substeps;
+  config.starts = 1;
+  config.threads = 2;
+  config.max_iterations = 30;
+  config.function_tolerance = 1e-10;
+  return config;
+}
+
+double FittedLogModulus(const testing::SmallCapture& capture, const JobConfig& config) {
+  const Result<FitResult> fit = Fit(capture.capture, config);
+  EXPECT_TRUE(fit.ok()) << fit.status().ToString();
+  return fit.ok() ? std::log(fit->Best().final.youngs_modulus) : 0.0;
+}
+
+TEST(DiscretisationError, PredictsTheRefitOnTheCoarserGridAndTimeStep) {
+  // Made on a finer grid and time step than any fit below uses.
+  const testing::SmallCapture capture = testing::MakeSmallCapture("ball-bounce", 0.4, 2, 14);
+  ASSERT_TRUE(capture.ok) << capture.error;
+  const JobConfig config = BounceConfig(capture.truth, 9, 4);
+  const Result<FitResult> fit = Fit(capture.capture, config);
+  ASSERT_TRUE(fit.ok()) << fit.status().ToString();
+  const Result<FitUncertainty> analysis = EstimateFitUncertainty(capture.capture, config, *fit);
+  ASSERT_TRUE(analysis.ok()) << analysis.status().ToString();
+  ASSERT_TRUE(analysis->discretisation.has_value()) << analysis->discretisation_failure;
+  const DiscretisationError& error = *analysis->discretisation;
+  ASSERT_TRUE(error.grid.error.empty()) << error.grid.error;
+  ASSERT_TRUE(error.time_step.error.empty()) << error.time_step.error;
+  EXPECT_EQ(error.grid.compared, 6);
+  EXPECT_EQ(error.time_step.compared, 2);
+
+  // The refits the estimate stands in for.
+  const double x = std::log(fit->Best().final.youngs_modulus);
+  const double grid_change = FittedLogModulus(capture, BounceConfig(capture.truth, 6, 4)) - x;
+  const double time_change = FittedLogModulus(capture, BounceConfig(capture.truth, 9, 2)) - x;
+  for (const auto& [name, predicted, actual] :
+       {std::tuple{"grid", error.grid.variables[0], grid_change},
+        std::tuple{"time step", error.time_step.variables[0], time_change}}) {
+    SCOPED_TRACE(name);
+    // Large enough to mean something (a change of 0.2 % or more), and predicted with its sign
+    // and within a factor of two.
+    std::printf("%s: predicted change of log E %.5f, refit %.5f\n", name, predicted, actual);
+    ASSERT_GT(std::abs(actual), 2e-3);
+    EXPECT_GT(predicted / actual, 0.5) << "predicted " << predicted << ", refit " << actual;
+    EXPECT_LT(predicted / actual, 2.0) << "predicted " << predicted << ", refit " << actual;
+  }
+
+  // Each value's error in its own unit: |shift| x E / (ratio - 1), summed over the two levels.
+  ASSERT_EQ(error.parameters.size(), 1u);
+  const ParameterDiscretisationError& e = error.parameters[0];
+  const double modulus = fit->Best().final.youngs_modulus;
+  EXPECT_NEAR(e.grid[0], std::abs(error.grid.variables[0]) * modulus * error.grid.error_factor,
+              1e-3 * e.grid[0]);
+  EXPECT_NEAR(e.total[0], e.grid[0] + e.time_step[0], 1e-9 * e.total[0]);
+  const nlohmann::json json = ToJson(*fit, &*analysis);
+  const nlohmann::json& entry = json["parameters"]["youngs_modulus"];
+  EXPECT_DOUBLE_EQ(entry["discretisation_error"]["total"].get<double>(), e.total[0]);
+  EXPECT_NEAR(entry["relative_discretisation_error"].get<double>(), e.total[0] / modulus, 1e-12);
+  EXPECT_EQ(json["discretisation"]["grid"]["compared_cells"], 6);
+}
+
+}  // namespace
+}  // namespace softid::inverse

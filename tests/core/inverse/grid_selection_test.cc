@@ -1,0 +1,108 @@
+// Choosing the grid by refinement against the depth noise.
+#include "core/inverse/grid_selection.h"
+
+#include <gtest/gtest.h>
+
+#include "core/scenes/scene.h"
+
+namespace softid::inverse {
+namespace {
+
+// A soft ball landing: the grid sets how much it squashes.
+class SelectGridTest : public ::testing::Test {
+ protected:
+  void SetUp() override { ASSERT_TRUE(scene.ok()) << scene.status().ToString(); }
+  Result<GridSelection> Select(double depth_noise_m, const GridSelectionOptions& options) {
+    return SelectGrid(scene->mesh, scene->fixed_region, scene->parameters, {}, 60.0, kLastFrame,
+                      depth_noise_m, options);
+  }
+  static GridSelectionOptions SmallGrids() {
+    GridSelectionOptions options;
+    options.candidates = {4, 6, 9};
+    options.substeps = 2;
+    options.min_tolerance_fraction = 0.0;
+    return options;
+  }
+  static constexpr int kLastFrame = 24;  // past the first impact
+  const Result<scenes::Scene> scene = scenes::MakeBuiltinScene("ball-bounce");
+};
+
+TEST_F(SelectGridTest, RefinesUntilTheSurfaceMovesLessThanTheNoise) {
+  // Noise no grid can match: every candidate is compared with the next, the finest is taken.
+  const Result<GridSelection> all = Select(1e-9, SmallGrids());
+  ASSERT_TRUE(all.ok()) << all.status().ToString();
+  ASSERT_EQ(all->trials.size(), 2u);  // 4 vs 6, 6 vs 9
+  EXPECT_FALSE(all->within_tolerance);
+  EXPECT_EQ(all->cells, 9);
+  for (const GridTrial& trial : all->trials) {
+    EXPECT_FALSE(trial.diverged);
+    EXPECT_GT(trial.difference_m, 0.0);
+    EXPECT_GT(trial.grid_nodes, 0);
+  }
+  EXPECT_LT(all->trials[0].grid_nodes, all->trials[1].grid_nodes);
+
+  // Noise between the two differences (tolerance = half the noise): the middle grid is enough
+  // when it moves the surface less than the coarse one did.
+  const double d0 = all->trials[0].difference_m, d1 = all->trials[1].difference_m;
+  ASSERT_NE(d0, d1);
+  const double noise = (d0 + d1);  // tolerance (d0 + d1) / 2 lies between them
+  const Result<GridSelection> chosen = Select(noise, SmallGrids());
+  ASSERT_TRUE(chosen.ok());
+  EXPECT_TRUE(chosen->within_tolerance);
+  EXPECT_DOUBLE_EQ(chosen->tolerance_m, 0.5 * noise);
+  EXPECT_EQ(chosen->cells, d0 > d1 ? 6 : 4);
+  EXPECT_LE(chosen->trials.back().difference_m, chosen->tolerance_m);
+
+  // Noise far above any difference: the coarsest grid, after one comparison.
+  const Result<GridSelection> coarse = Select(1.0, SmallGrids());
+  ASSERT_TRUE(coarse.ok());
+  EXPECT_EQ(coarse->cells, 4);
+  EXPECT_EQ(coarse->trials.size(), 1u);
+  EXPECT_TRUE(coarse->within_tolerance);
+}
+
+TEST_F(SelectGridTest, NeverSimulatesAGridAboveTheNodeBudget) {
+  GridSelectionOptions options = SmallGrids();
+  // A budget that admits the 6-cell grid and not the 9-cell one: 9 is never run.
+  const Eigen::Vector3d size = scene->mesh.Bounds().sizes();
+  const int padding = fem::SimulationOptions{}.padding_cells;
+  options.max_grid_nodes = static_cast<int>(GridNodeEstimate(size, 6, padding));
+  ASSERT_GT(GridNodeEstimate(size, 9, padding), options.max_grid_nodes);
+  const Result<GridSelection> capped = Select(1e-9, options);
+  ASSERT_TRUE(capped.ok());
+  EXPECT_EQ(capped->cells, 6);
+  EXPECT_FALSE(capped->within_tolerance);
+  ASSERT_EQ(capped->trials.size(), 1u);
+  EXPECT_EQ(capped->trials[0].finer_cells, 6);
+  EXPECT_EQ(ToJson(*capped)["cells"], 6);
+  // The estimate bounds the simulation's own grid, which keeps only the cells it needs.
+  EXPECT_LE(capped->trials[0].grid_nodes, GridNodeEstimate(size, 4, padding));
+}
+
+TEST_F(SelectGridTest, RefusesBadOptionsNamingTheField) {
+  GridSelectionOptions options = SmallGrids();
+  options.candidates = {6, 4};
+  Result<GridSelection> result = Select(1e-3, options);
+  ASSERT_FALSE(result.ok());
+  EXPECT_NE(result.status().message().find("candidates[1] = 4"), std::string::npos);
+  result = Select(0.0, SmallGrids());
+  ASSERT_FALSE(result.ok());
+  EXPECT_NE(result.status().message().find("depth_noise_m = 0"), std::string::npos);
+  options = SmallGrids();
+  options.max_grid_nodes = 0;
+  result = Select(1e-3, options);
+  ASSERT_FALSE(result.ok());
+  EXPECT_NE(result.status().message().find("max_grid_nodes"), std::string::npos);
+}
+
+TEST_F(SelectGridTest, StopsWhenCancelled) {
+  std::atomic<bool> cancel{true};
+  GridSelectionOptions options = SmallGrids();
+  options.cancel = &cancel;
+  const Result<GridSelection> result = Select(1e-3, options);
+  ASSERT_FALSE(result.ok());
+  EXPECT_EQ(result.status().code(), StatusCode::kCancelled);
+}
+
+}  // namespace
+}  // namespace softid::inverse
