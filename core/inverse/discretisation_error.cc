@@ -62,10 +62,10 @@ Result<Eigen::VectorXd> GradientAt(const FitSetting& setting, const capture::Cap
   return gradient;
 }
 
-// dx = -H^-1 (g_coarse - g), through the analysis' pseudo-inverse: +inf for unbounded variables.
-Eigen::VectorXd NewtonShift(const IdentifiabilityReport& report, const Eigen::VectorXd& coarse) {
+// dx = -H^-1 (g_finer - g), through the analysis' pseudo-inverse: +inf for unbounded variables.
+Eigen::VectorXd NewtonShift(const IdentifiabilityReport& report, const Eigen::VectorXd& finer) {
   const HessianCovariance inverse = CovarianceFromHessian(report.hessian, 1.0);
-  const Eigen::VectorXd difference = coarse - report.gradient;
+  const Eigen::VectorXd difference = finer - report.gradient;
   Eigen::VectorXd shift = Eigen::VectorXd::Zero(difference.size());
   for (Eigen::Index i = 0; i < shift.size(); ++i) {
     if (!std::isfinite(inverse.covariance(i, i))) {
@@ -123,11 +123,13 @@ Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& 
   simulation.threads = std::max(1, cores / 2);
   DiscretisationError out;
 
-  auto estimate = [&](DiscretisationShift* shift, const fem::SimulationOptions& coarse_simulation,
-                      int coarse_substeps) {
-    shift->error_factor = 1.0 / (std::pow(shift->ratio, kOrder) - 1.0);
+  auto estimate = [&](DiscretisationShift* shift, const fem::SimulationOptions& finer_simulation,
+                      int finer_substeps) {
+    // Richardson: x_h - x_exact ~ (x_h - x_{h/r}) r^p / (r^p - 1).
+    const double gain = std::pow(shift->ratio, kOrder);
+    shift->error_factor = gain / (gain - 1.0);
     Result<Eigen::VectorXd> gradient =
-        GradientAt(setting, capture, config, coarse_simulation, coarse_substeps, space, optimum);
+        GradientAt(setting, capture, config, finer_simulation, finer_substeps, space, optimum);
     if (!gradient.ok()) {
       shift->error = std::string(gradient.status().message());
       return;
@@ -135,37 +137,31 @@ Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& 
     shift->variables = NewtonShift(report, *gradient);
   };
 
-  // The grid 1.5 x coarser.
+  // The grid 1.5 x finer.
   DiscretisationShift& grid = out.grid;
   grid.chosen = config.cell_size > 0.0 ? 0 : config.cells;
-  fem::SimulationOptions coarse_grid = simulation;
+  fem::SimulationOptions finer_grid = simulation;
   if (config.cell_size > 0.0) {
-    coarse_grid.cell_size = kGridRatio * config.cell_size;
+    finer_grid.cell_size = config.cell_size / kGridRatio;
     grid.ratio = kGridRatio;
   } else {
-    grid.compared = static_cast<int>(std::lround(config.cells / kGridRatio));
-    coarse_grid.cells_along_longest_side = grid.compared;
-    grid.ratio = static_cast<double>(config.cells) / std::max(1, grid.compared);
+    grid.compared = static_cast<int>(std::lround(config.cells * kGridRatio));
+    finer_grid.cells_along_longest_side = grid.compared;
+    grid.ratio = static_cast<double>(grid.compared) / config.cells;
   }
-  // Half the time steps.
+  // Twice the time steps.
   DiscretisationShift& time = out.time_step;
   time.chosen = config.substeps;
-  time.compared = config.substeps / 2;
-  time.ratio = static_cast<double>(time.chosen) / std::max(1, time.compared);
+  time.compared = 2 * config.substeps;
+  time.ratio = 2.0;
   {
     std::jthread time_worker;
-    if (time.compared < 1) {
-      time.error = "no coarser time step than 1 substep per frame";
-    } else if (cores >= 2) {
+    if (cores >= 2) {
       time_worker = std::jthread([&] { estimate(&time, simulation, time.compared); });
     } else {
       estimate(&time, simulation, time.compared);
     }
-    if (config.cell_size <= 0.0 && (grid.compared < 2 || grid.compared >= config.cells)) {
-      grid.error = fmt::format("no coarser grid than {} cells", config.cells);
-    } else {
-      estimate(&grid, coarse_grid, config.substeps);
-    }
+    estimate(&grid, finer_grid, config.substeps);
   }
 
   const std::vector<double> x = space.ToVariables(optimum);
@@ -198,8 +194,8 @@ nlohmann::json ToJson(const DiscretisationError& error) {
     return out;
   };
   return {{"method",
-           "one Newton step of the optimum onto the next coarser grid (1.5 x h) and time step "
-           "(2 x dt), error = shift / (ratio - 1) (first order)"},
+           "one Newton step of the optimum onto a finer grid (h / 1.5) and time step (dt / 2); "
+           "error = shift r / (r - 1) (Richardson, first order)"},
           {"grid", shift_json(error.grid, "cells", "compared_cells")},
           {"time_step", shift_json(error.time_step, "substeps", "compared_substeps")},
           {"seconds", error.seconds}};

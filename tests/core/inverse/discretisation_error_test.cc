@@ -1,5 +1,5 @@
-// The discretisation error of a fitted value, estimated at the optimum by one Newton step onto the
-// next coarser grid and time step, against the change of a real refit on those levels.
+// The discretisation error of a fitted value, estimated at the optimum by one Newton step onto a
+// finer grid and time step, against the change of a real refit on those levels.
 #include "core/inverse/discretisation_error.h"
 
 #include <gtest/gtest.h>
@@ -35,11 +35,10 @@ double FittedLogModulus(const testing::SmallCapture& capture, const JobConfig& c
   return fit.ok() ? std::log(fit->Best().final.youngs_modulus) : 0.0;
 }
 
-TEST(DiscretisationError, PredictsTheRefitOnTheCoarserGridAndTimeStep) {
-  // Made on a finer grid and time step than any fit below uses.
+TEST(DiscretisationError, PredictsTheRefitOnTheFinerGridAndTimeStep) {
   const testing::SmallCapture capture = testing::MakeSmallCapture("ball-bounce", 0.4, 2, 14);
   ASSERT_TRUE(capture.ok) << capture.error;
-  const JobConfig config = BounceConfig(capture.truth, 9, 4);
+  const JobConfig config = BounceConfig(capture.truth, 6, 2);
   const Result<FitResult> fit = Fit(capture.capture, config);
   ASSERT_TRUE(fit.ok()) << fit.status().ToString();
   const Result<FitUncertainty> analysis = EstimateFitUncertainty(capture.capture, config, *fit);
@@ -48,13 +47,13 @@ TEST(DiscretisationError, PredictsTheRefitOnTheCoarserGridAndTimeStep) {
   const DiscretisationError& error = *analysis->discretisation;
   ASSERT_TRUE(error.grid.error.empty()) << error.grid.error;
   ASSERT_TRUE(error.time_step.error.empty()) << error.time_step.error;
-  EXPECT_EQ(error.grid.compared, 6);
-  EXPECT_EQ(error.time_step.compared, 2);
+  EXPECT_EQ(error.grid.compared, 9);
+  EXPECT_EQ(error.time_step.compared, 4);
 
   // The refits the estimate stands in for.
   const double x = std::log(fit->Best().final.youngs_modulus);
-  const double grid_change = FittedLogModulus(capture, BounceConfig(capture.truth, 6, 4)) - x;
-  const double time_change = FittedLogModulus(capture, BounceConfig(capture.truth, 9, 2)) - x;
+  const double grid_change = FittedLogModulus(capture, BounceConfig(capture.truth, 9, 2)) - x;
+  const double time_change = FittedLogModulus(capture, BounceConfig(capture.truth, 6, 4)) - x;
   for (const auto& [name, predicted, actual] :
        {std::tuple{"grid", error.grid.variables[0], grid_change},
         std::tuple{"time step", error.time_step.variables[0], time_change}}) {
@@ -67,7 +66,7 @@ TEST(DiscretisationError, PredictsTheRefitOnTheCoarserGridAndTimeStep) {
     EXPECT_LT(predicted / actual, 2.0) << "predicted " << predicted << ", refit " << actual;
   }
 
-  // Each value's error in its own unit: |shift| x E / (ratio - 1), summed over the two levels.
+  // Each value's error in its own unit: |shift| x E x r / (r - 1), summed over the two levels.
   ASSERT_EQ(error.parameters.size(), 1u);
   const ParameterDiscretisationError& e = error.parameters[0];
   const double modulus = fit->Best().final.youngs_modulus;
@@ -78,7 +77,7 @@ TEST(DiscretisationError, PredictsTheRefitOnTheCoarserGridAndTimeStep) {
   const nlohmann::json& entry = json["parameters"]["youngs_modulus"];
   EXPECT_DOUBLE_EQ(entry["discretisation_error"]["total"].get<double>(), e.total[0]);
   EXPECT_NEAR(entry["relative_discretisation_error"].get<double>(), e.total[0] / modulus, 1e-12);
-  EXPECT_EQ(json["discretisation"]["grid"]["compared_cells"], 6);
+  EXPECT_EQ(json["discretisation"]["grid"]["compared_cells"], 9);
 }
 
 }  // namespace
