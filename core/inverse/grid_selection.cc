@@ -74,7 +74,7 @@ Result<GridSelection> SelectGrid(const geometry::TriangleMesh& rest_mesh,
   };
   const Eigen::Vector3d size = rest_mesh.Bounds().sizes();
   auto affordable = [&](int cells) {
-    return GridNodeEstimate(size, cells, simulation.padding_cells) <= options.max_grid_nodes;
+    return GridNodeEstimate(size, cells) <= options.max_grid_nodes;
   };
   try {
     auto started = Clock::now();
@@ -123,10 +123,10 @@ Result<GridSelection> SelectGrid(const geometry::TriangleMesh& rest_mesh,
   return selection;
 }
 
-double GridNodeEstimate(const Eigen::Vector3d& size, int cells, int padding) {
+double GridNodeEstimate(const Eigen::Vector3d& size, int cells) {
   const double h = size.maxCoeff() / std::max(1, cells);
   double nodes = 1.0;  // in doubles: no overflow for absurd inputs
-  for (int a = 0; a < 3; ++a) nodes *= std::ceil(size[a] / h) + 1.0 + 2.0 * padding;
+  for (int a = 0; a < 3; ++a) nodes *= std::ceil(size[a] / h) + 1.0;
   return nodes;
 }
 

@@ -37,10 +37,10 @@ struct GridSelectionOptions {
   // noise-free captures whose sigma is the depth quantum.
   double min_tolerance_fraction = 1e-3;
   // Candidates whose grid would have more nodes (GridNodeEstimate) are not simulated [-], >= 1:
-  // a fit's time grows a little faster than its node count (docs/benchmarks.md). 8000 admits the
-  // torus-drop benchmark's 16 cells (6877), the default before grids were chosen, so "auto"
-  // never costs much more than that did.
-  int max_grid_nodes = 8000;
+  // a fit's time grows a little faster than its node count (docs/benchmarks.md). 6000 admits 16
+  // cells for the torus-drop benchmark (2023; 24 cells would be 6250), the default before grids
+  // were chosen, 16 for a cube (4913) and 24 for slimmer bodies.
+  int max_grid_nodes = 6000;
   // Steps per camera frame of the comparison runs [-], >= 1: fine enough that the time step does
   // not hide the grid's error.
   int substeps = 8;
@@ -81,9 +81,9 @@ Result<GridSelection> SelectGrid(const geometry::TriangleMesh& rest_mesh,
 
 nlohmann::json ToJson(const GridSelection& selection);
 
-// The nodes of a grid with `cells` along the longest side of a body of bounding-box `size` [m]
-// and `padding` cells around it: the box's nodes, an upper estimate of the simulation's (which
-// keeps only cells the body or the cost's band touches), computed without building the grid.
-double GridNodeEstimate(const Eigen::Vector3d& size, int cells, int padding);
+// The nodes of a grid with `cells` along the longest side over a body's bounding box of `size`
+// [m], computed without building the grid: a measure of its cost (the simulation keeps the cells
+// the body cuts, which for a box is about this many nodes).
+double GridNodeEstimate(const Eigen::Vector3d& size, int cells);
 
 }  // namespace softid::inverse

@@ -6,7 +6,6 @@
 #include <cmath>
 
 #include "core/inverse/grid_selection.h"
-#include "core/inverse/objective_settings.h"
 #include "core/inverse/time_step_selection.h"
 
 namespace softid::inverse {
@@ -66,10 +65,10 @@ double BoxNodes(const Eigen::Vector3d& size, double h) {
 }
 
 // "auto" cells: the finest candidate the grid selection may simulate within its node budget.
-int FinestAffordableCandidate(const Eigen::Vector3d& size, int padding) {
+int FinestAffordableCandidate(const Eigen::Vector3d& size) {
   const GridSelectionOptions selection;
   for (auto it = selection.candidates.rbegin(); it != selection.candidates.rend(); ++it) {
-    if (GridNodeEstimate(size, *it, padding) <= selection.max_grid_nodes) return *it;
+    if (GridNodeEstimate(size, *it) <= selection.max_grid_nodes) return *it;
   }
   return selection.candidates.front();
 }
@@ -110,10 +109,9 @@ Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
 
   JobResourceEstimate estimate;
   const Eigen::Vector3d size = extent.mesh_bounds.sizes();
-  const int cells =
-      config.cell_size <= 0.0 && config.cells == kAutoCells
-          ? FinestAffordableCandidate(size, SimulationOptionsFor(config).padding_cells)
-          : config.cells;
+  const int cells = config.cell_size <= 0.0 && config.cells == kAutoCells
+                        ? FinestAffordableCandidate(size)
+                        : config.cells;
   estimate.cell_size_m =
       config.cell_size > 0.0 ? config.cell_size : size.maxCoeff() / std::max(1, cells);
   const double nodes = BoxNodes(size, estimate.cell_size_m);

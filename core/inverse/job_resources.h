@@ -48,7 +48,7 @@ struct JobResourceLimits {
 //   steps per run); at most 4 GiB is accepted: use fewer cells, substeps or frames
 //   max_iterations = 5000: the job could run for about 31 h (...); at most 24 h is accepted
 // "auto" substeps count as their largest candidate (SubstepSelectionOptions::max_substeps), "auto"
-// cells as the finest grid candidate whose padded grid fits GridSelectionOptions::max_grid_nodes.
+// cells as the finest grid candidate within GridSelectionOptions::max_grid_nodes.
 Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
                                                  const CaptureExtent& extent,
                                                  const JobResourceLimits& limits);

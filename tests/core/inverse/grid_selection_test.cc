@@ -65,9 +65,8 @@ TEST_F(SelectGridTest, NeverSimulatesAGridAboveTheNodeBudget) {
   GridSelectionOptions options = SmallGrids();
   // A budget that admits the 6-cell grid and not the 9-cell one: 9 is never run.
   const Eigen::Vector3d size = scene->mesh.Bounds().sizes();
-  const int padding = fem::SimulationOptions{}.padding_cells;
-  options.max_grid_nodes = static_cast<int>(GridNodeEstimate(size, 6, padding));
-  ASSERT_GT(GridNodeEstimate(size, 9, padding), options.max_grid_nodes);
+  options.max_grid_nodes = static_cast<int>(GridNodeEstimate(size, 6));
+  ASSERT_GT(GridNodeEstimate(size, 9), options.max_grid_nodes);
   const Result<GridSelection> capped = Select(1e-9, options);
   ASSERT_TRUE(capped.ok());
   EXPECT_EQ(capped->cells, 6);
@@ -75,8 +74,8 @@ TEST_F(SelectGridTest, NeverSimulatesAGridAboveTheNodeBudget) {
   ASSERT_EQ(capped->trials.size(), 1u);
   EXPECT_EQ(capped->trials[0].finer_cells, 6);
   EXPECT_EQ(ToJson(*capped)["cells"], 6);
-  // The estimate bounds the simulation's own grid, which keeps only the cells it needs.
-  EXPECT_LE(capped->trials[0].grid_nodes, GridNodeEstimate(size, 4, padding));
+  // A ball's grid keeps fewer nodes than its bounding box has.
+  EXPECT_LE(capped->trials[0].grid_nodes, GridNodeEstimate(size, 4));
 }
 
 TEST_F(SelectGridTest, RefusesBadOptionsNamingTheField) {

@@ -31,9 +31,9 @@ TEST(JobResources, DefaultConfigFitsWithRoom) {
   limits.cores = 2;
   const Result<JobResourceEstimate> estimate = EstimateJobResources({}, TorusSized(), limits);
   ASSERT_TRUE(estimate.ok()) << estimate.status().ToString();
-  // "auto" cells: the finest candidate the selection may simulate. With 3 cells of padding on
-  // every side, 24 cells make 31 x 31 x 16 nodes, over the 8000-node budget; 16 make 23 x 23 x 13.
-  ASSERT_EQ(GridSelectionOptions{}.max_grid_nodes, 8000);
+  // "auto" cells: the finest candidate the selection may simulate. 24 cells make 25 x 25 x 10
+  // nodes, over the 6000-node budget; 16 make 17 x 17 x 7.
+  ASSERT_EQ(GridSelectionOptions{}.max_grid_nodes, 6000);
   EXPECT_DOUBLE_EQ(estimate->cell_size_m, 0.28 / 16);
   EXPECT_EQ(estimate->grid_nodes, 17 * 17 * 7);
   EXPECT_EQ(estimate->steps_per_run, 60 * 16);  // "auto": its largest candidate
