@@ -27,7 +27,7 @@ namespace softid::inverse {
 struct GridSelectionOptions {
   // Candidate resolutions, cells along the longest side of the mesh, ascending, each >= 2. Steps of
   // about 1.5 x: each costs ~3.4 x the nodes of the one before.
-  std::vector<int> candidates = {8, 12, 16, 24};
+  std::vector<int> candidates = {8, 12, 16, 24, 32, 48};
   // Accepted difference between a grid and the next finer: max over frames of the RMS distance
   // over surface vertices, as a fraction of the depth noise sigma [-], > 0. 0.5: a systematic
   // change of half the noise is visible in a fit over thousands of points, but smaller than the
