@@ -80,8 +80,10 @@ Eigen::VectorXd NewtonShift(const IdentifiabilityReport& report, const Eigen::Ve
   return shift;
 }
 
-// |J dx| scaled by the level's error factor; NaN when the shift is missing, +inf where unbounded.
-std::vector<double> PublicError(const Eigen::MatrixXd& jacobian, const DiscretisationShift& shift) {
+// J dx scaled by the level's error factor: the signed correction of each public number towards
+// the continuum; NaN when the shift is missing, +-inf where unbounded.
+std::vector<double> PublicCorrection(const Eigen::MatrixXd& jacobian,
+                                     const DiscretisationShift& shift) {
   std::vector<double> out(static_cast<size_t>(jacobian.rows()), kNaN);
   if (!shift.error.empty() || shift.variables.size() != jacobian.cols()) return out;
   for (Eigen::Index k = 0; k < jacobian.rows(); ++k) {
@@ -91,9 +93,29 @@ std::vector<double> PublicError(const Eigen::MatrixXd& jacobian, const Discretis
       if (std::abs(jacobian(k, j)) <= 1e-9 * scale) continue;
       sum += jacobian(k, j) * shift.variables[j];
     }
-    out[static_cast<size_t>(k)] = std::abs(sum) * shift.error_factor;
+    out[static_cast<size_t>(k)] = sum * shift.error_factor;
   }
   return out;
+}
+
+// The estimates of one fitted parameter from the two signed corrections.
+ParameterDiscretisationError ParameterError(const std::string& name,
+                                            const std::vector<double>& value,
+                                            const std::vector<double>& grid,
+                                            const std::vector<double>& time) {
+  ParameterDiscretisationError entry{name, {}, {}, {}, {}};
+  for (size_t k = 0; k < grid.size(); ++k) {
+    const double g = grid[k], t = time[k];
+    entry.grid.push_back(std::abs(g));
+    entry.time_step.push_back(std::abs(t));
+    // A missing level counts as 0 in the sum only if the other is there; both missing: NaN.
+    entry.total.push_back(std::isnan(g) && std::isnan(t) ? kNaN
+                                                         : (std::isnan(g) ? 0.0 : std::abs(g)) +
+                                                               (std::isnan(t) ? 0.0 : std::abs(t)));
+    const double corrected = k < value.size() ? value[k] + g + t : kNaN;
+    entry.corrected.push_back(std::isfinite(corrected) ? corrected : kNaN);
+  }
+  return entry;
 }
 
 }  // namespace
@@ -167,15 +189,9 @@ Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& 
   const std::vector<double> x = space.ToVariables(optimum);
   for (const std::string& name : fit.fitted) {
     const Eigen::MatrixXd jacobian = PublicJacobian(space, x, optimum, name);
-    ParameterDiscretisationError entry{
-        name, PublicError(jacobian, grid), PublicError(jacobian, time), {}};
-    for (size_t k = 0; k < entry.grid.size(); ++k) {
-      // A missing level counts as 0 in the sum only if the other is there; both missing: NaN.
-      const double g = entry.grid[k], t = entry.time_step[k];
-      entry.total.push_back(std::isnan(g) && std::isnan(t)
-                                ? kNaN
-                                : (std::isnan(g) ? 0.0 : g) + (std::isnan(t) ? 0.0 : t));
-    }
+    const std::vector<double> value = PublicNumbers(ParameterValueJson(optimum, name));
+    ParameterDiscretisationError entry = ParameterError(
+        name, value, PublicCorrection(jacobian, grid), PublicCorrection(jacobian, time));
     out.parameters.push_back(std::move(entry));
   }
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();

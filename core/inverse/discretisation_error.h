@@ -46,6 +46,10 @@ struct ParameterDiscretisationError {
   // the chosen level [the parameter's unit], >= 0; +inf where undetermined, NaN when that level's
   // estimate is missing.
   std::vector<double> grid, time_step, total;
+  // The value moved by both signed estimates: a Richardson extrapolation towards the continuum
+  // (first order) [the parameter's unit]; NaN where an estimate is missing or undetermined.
+  // docs/benchmarks.md shows how close it comes on independent captures.
+  std::vector<double> corrected;
 };
 
 struct DiscretisationError {

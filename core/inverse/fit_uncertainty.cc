@@ -50,7 +50,8 @@ std::vector<double> PropagatedSigma(const Eigen::MatrixXd& jacobian,
   return sigma;
 }
 
-// Each parameter's "discretisation_error" {"grid", "time_step", "total"} in its value's shape (null
+// Each parameter's "discretisation_error" {"grid", "time_step", "total", "corrected"} in its
+// value's shape (null
 // where undetermined or not estimated) and, for scalars, "relative_discretisation_error"; the
 // method under "discretisation".
 void AddDiscretisationErrors(const DiscretisationError& error, nlohmann::json* json) {
@@ -60,7 +61,7 @@ void AddDiscretisationErrors(const DiscretisationError& error, nlohmann::json* j
     nlohmann::json errors;
     for (const auto& [key, numbers] :
          {std::pair{"grid", &parameter.grid}, std::pair{"time_step", &parameter.time_step},
-          std::pair{"total", &parameter.total}}) {
+          std::pair{"total", &parameter.total}, std::pair{"corrected", &parameter.corrected}}) {
       size_t next = 0;
       errors[key] = ReplaceNumbers(entry["value"], *numbers, &next);
     }

@@ -73,11 +73,16 @@ TEST(DiscretisationError, PredictsTheRefitOnTheFinerGridAndTimeStep) {
   EXPECT_NEAR(e.grid[0], std::abs(error.grid.variables[0]) * modulus * error.grid.error_factor,
               1e-3 * e.grid[0]);
   EXPECT_NEAR(e.total[0], e.grid[0] + e.time_step[0], 1e-9 * e.total[0]);
+  // The corrected value moves with the signs of the shifts: towards the finer levels' optima.
+  const double grid_signed = (error.grid.variables[0] > 0 ? 1 : -1) * e.grid[0];
+  const double time_signed = (error.time_step.variables[0] > 0 ? 1 : -1) * e.time_step[0];
+  EXPECT_NEAR(e.corrected[0], modulus + grid_signed + time_signed, 1e-3 * e.total[0]);
   const nlohmann::json json = ToJson(*fit, &*analysis);
   const nlohmann::json& entry = json["parameters"]["youngs_modulus"];
   EXPECT_DOUBLE_EQ(entry["discretisation_error"]["total"].get<double>(), e.total[0]);
   EXPECT_NEAR(entry["relative_discretisation_error"].get<double>(), e.total[0] / modulus, 1e-12);
   EXPECT_EQ(json["discretisation"]["grid"]["compared_cells"], 9);
+  EXPECT_DOUBLE_EQ(entry["discretisation_error"]["corrected"].get<double>(), e.corrected[0]);
 }
 
 }  // namespace
