@@ -110,7 +110,8 @@ def run_case(case, args):
            "standard_uncertainty": sigma, "discretisation_error": bias,
            "corrected_youngs_modulus": corrected,
            "corrected_error_vs_reference": corrected / e_eff - 1.0,
-           "truth_in_band": abs(fitted - e_eff) <= band,
+           # None: the result reports no finite band (an undetermined sigma), which is no success.
+           "truth_in_band": abs(fitted - e_eff) <= band if math.isfinite(band) else None,
            "grid_cells": result["grid"]["cells"], "substeps": result["time_step"]["substeps"],
            "seconds": round(seconds, 1), "config": config}
     if "friction_coefficient" in result["parameters"]:
@@ -119,6 +120,13 @@ def run_case(case, args):
     velocity = result["parameters"]["initial_velocity"]["value"]
     row["velocity_error_m_s"] = math.dist(velocity, truth["parameters"]["initial_velocity"])
     return row
+
+
+BAND_WORDS = {True: "yes", False: "no", None: "undetermined"}
+
+
+def magnitude(x):
+    return f"{100 * x:.2g} %" if math.isfinite(x) else "undetermined"
 
 
 def percent(x):
@@ -134,8 +142,8 @@ def print_table(rows):
         e = r["fitted_youngs_modulus"]
         friction = (f"{r['fitted_friction']:.3f} (truth {r['friction']})" if "friction" in r else "-")
         print(f"| `{r['case']}` | {e / 1e3:.2f} | {percent(r['error_vs_reference'])} "
-              f"| {percent(r['error_vs_nominal'])} | {percent(r['standard_uncertainty'] / e)} "
-              f"| {percent(r['discretisation_error'] / e)} | {'yes' if r['truth_in_band'] else 'no'} "
+              f"| {percent(r['error_vs_nominal'])} | {magnitude(r['standard_uncertainty'] / e)} "
+              f"| {magnitude(r['discretisation_error'] / e)} | {BAND_WORDS[r['truth_in_band']]} "
               f"| {percent(r['corrected_error_vs_reference'])} "
               f"| {r['grid_cells']} / {r['substeps']} | {r['velocity_error_m_s']:.3f} | {friction} "
               f"| {r['seconds']:.0f} |")
