@@ -234,8 +234,8 @@ bool PrintAgainstTruth(const nlohmann::json& result, const std::string& truth_fi
     return false;
   }
   const nlohmann::json& parameters = result.value("parameters", nlohmann::json::object());
-  std::printf("%-24s %-20s %-20s %-10s %-20s %-20s %s\n", "parameter", "recovered", "1-sigma",
-              "unit", "start", "truth", "error");
+  std::printf("%-24s %-20s %-20s %-20s %-10s %-20s %-20s %s\n", "parameter", "recovered", "1-sigma",
+              "discretisation", "unit", "start", "truth", "error");
   for (const auto& [name, entry] : parameters.items()) {
     const std::string key = name == "ground_plane" ? "ground" : name;
     const nlohmann::json value = entry.value("value", nlohmann::json());
@@ -253,8 +253,16 @@ bool PrintAgainstTruth(const nlohmann::json& result, const std::string& truth_fi
                               : entry["standard_uncertainty"].is_null()
                                   ? "undetermined"
                                   : Compact(entry["standard_uncertainty"]);
-    std::printf("%-24s %-20s %-20s %-10s %-20s %-20s %s\n", name.c_str(), Compact(value).c_str(),
-                sigma.c_str(), entry.value("unit", std::string()).c_str(),
+    // The grid and time step's estimated bias (docs/results.md), beside the noise's sigma.
+    const auto discretisation = entry.find("discretisation_error");
+    const std::string bias =
+        discretisation == entry.end() || !discretisation->is_object() ? "-"
+        : !discretisation->contains("total") || (*discretisation)["total"].is_null()
+            ? "undetermined"
+            : Compact((*discretisation)["total"]);
+    std::printf("%-24s %-20s %-20s %-20s %-10s %-20s %-20s %s\n", name.c_str(),
+                Compact(value).c_str(), sigma.c_str(), bias.c_str(),
+                entry.value("unit", std::string()).c_str(),
                 Compact(entry.value("initial", nlohmann::json())).c_str(),
                 true_value != nullptr ? Compact(*true_value).c_str() : "-", error_text.c_str());
   }
