@@ -33,10 +33,7 @@ struct FitSetting {
 Result<FitSetting> LoadFitSetting(const capture::Capture& capture, const JobConfig& config) {
   FitSetting setting;
   SOFTID_ASSIGN_OR_RETURN(setting.mesh, capture::LoadCaptureMesh(capture));
-  SOFTID_ASSIGN_OR_RETURN(std::vector<ObservedFrame> loaded,
-                          LoadObservedFrames(capture, config.frames.first, config.frames.last));
-  for (ObservedFrame& frame : loaded) frame.heldout = config.IsHeldOut(frame.frame);
-  setting.frames = std::make_shared<const std::vector<ObservedFrame>>(std::move(loaded));
+  SOFTID_ASSIGN_OR_RETURN(setting.frames, LoadFittedFrames(capture, config));
   return setting;
 }
 

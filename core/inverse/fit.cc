@@ -512,10 +512,7 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   SOFTID_RETURN_IF_ERROR(config.Validate());
   // config.diagnose is for the callers (core/diagnosis runs after the fit); the fit ignores it.
   SOFTID_ASSIGN_OR_RETURN(geometry::TriangleMesh mesh, capture::LoadCaptureMesh(capture));
-  SOFTID_ASSIGN_OR_RETURN(std::vector<ObservedFrame> loaded,
-                          LoadObservedFrames(capture, config.frames.first, config.frames.last));
-  for (ObservedFrame& frame : loaded) frame.heldout = config.IsHeldOut(frame.frame);
-  auto frames = std::make_shared<const std::vector<ObservedFrame>>(std::move(loaded));
+  SOFTID_ASSIGN_OR_RETURN(auto frames, LoadFittedFrames(capture, config));
 
   FitResult result;
   result.fitted = config.fit;

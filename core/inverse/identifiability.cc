@@ -417,10 +417,7 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const capture::Capture& cap
   if (fit.best < 0 || fit.best >= static_cast<int>(fit.starts.size()))
     return Status::FailedPrecondition("identifiability: the fit has no usable start");
   SOFTID_ASSIGN_OR_RETURN(geometry::TriangleMesh mesh, capture::LoadCaptureMesh(capture));
-  SOFTID_ASSIGN_OR_RETURN(std::vector<ObservedFrame> loaded,
-                          LoadObservedFrames(capture, config.frames.first, config.frames.last));
-  for (ObservedFrame& frame : loaded) frame.heldout = config.IsHeldOut(frame.frame);
-  auto frames = std::make_shared<const std::vector<ObservedFrame>>(std::move(loaded));
+  SOFTID_ASSIGN_OR_RETURN(auto frames, LoadFittedFrames(capture, config));
   const double length = mesh.Bounds().sizes().maxCoeff();
   // The fit's own variables: the same reference (the base parameters) fixes the ground plane's
   // tangent basis.

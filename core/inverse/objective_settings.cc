@@ -26,4 +26,12 @@ cost::SurfaceCostOptions CostOptionsFor(const JobConfig& config) {
   return options;
 }
 
+Result<std::shared_ptr<const std::vector<ObservedFrame>>> LoadFittedFrames(
+    const capture::Capture& capture, const JobConfig& config) {
+  SOFTID_ASSIGN_OR_RETURN(std::vector<ObservedFrame> frames,
+                          LoadObservedFrames(capture, config.frames.first, config.frames.last));
+  for (ObservedFrame& frame : frames) frame.heldout = config.IsHeldOut(frame.frame);
+  return std::make_shared<const std::vector<ObservedFrame>>(std::move(frames));
+}
+
 }  // namespace softid::inverse

@@ -3,9 +3,15 @@
 // from here, so that all of them see the same cost function.
 #pragma once
 
+#include <memory>
+#include <vector>
+
+#include "core/capture/capture.h"
+#include "core/common/status.h"
 #include "core/cost/sparse_surface_cost.h"
 #include "core/fem/simulation_options.h"
 #include "core/inverse/job_config.h"
+#include "core/inverse/observed_frames.h"
 
 namespace softid::inverse {
 
@@ -16,5 +22,11 @@ fem::SimulationOptions SimulationOptionsFor(const JobConfig& config);
 
 // config.cost as the cost's options.
 cost::SurfaceCostOptions CostOptionsFor(const JobConfig& config);
+
+// The capture frames config.frames selects, with config.heldout_every's frames marked held out,
+// shared read-only by objectives (the fit's starts, the analyses after it). Errors as
+// LoadObservedFrames.
+Result<std::shared_ptr<const std::vector<ObservedFrame>>> LoadFittedFrames(
+    const capture::Capture& capture, const JobConfig& config);
 
 }  // namespace softid::inverse
