@@ -43,6 +43,7 @@ ServiceResult<inverse::CaptureExtent> ReadCaptureExtent(const store::Capture& st
   extent.mesh_bounds = mesh->Bounds();
   extent.num_frames = capture->NumFrames();
   extent.num_cameras = capture->NumCameras();
+  for (const double t : capture->frame_times) extent.frame_periods.push_back(t * capture->fps);
   return extent;
 }
 

@@ -19,6 +19,10 @@ namespace softid::capture {
 
 using nlohmann::json;
 
+double Capture::FrameTime(int frame) const {
+  return frame_times.empty() ? frame / fps : frame_times[frame];
+}
+
 int Capture::NumFrames() const {
   return cameras.empty() ? 0 : static_cast<int>(cameras.front().frames.size());
 }
@@ -220,6 +224,39 @@ Result<CameraRecording> ParseCamera(const JsonReader& reader, const json& value,
   return recording;
 }
 
+// "frame_times": one time per frame [s], finite, >= 0, strictly increasing and within
+// kMaxFramePeriods.
+Result<std::vector<double>> ParseFrameTimes(const JsonReader& reader, const json& value,
+                                            int num_frames, double fps) {
+  SOFTID_RETURN_IF_ERROR(reader.CheckArray("frame_times", value));
+  if (value.size() != static_cast<size_t>(num_frames)) {
+    return reader.Error("frame_times", fmt::format("has {} times but the cameras have {} frames: "
+                                                   "one time per frame",
+                                                   value.size(), num_frames));
+  }
+  std::vector<double> times;
+  times.reserve(value.size());
+  for (size_t k = 0; k < value.size(); ++k) {
+    const std::string path = IndexPath("frame_times", k);
+    SOFTID_ASSIGN_OR_RETURN(const double t, reader.Number(path, value[k]));
+    if (t < 0.0) return reader.Error(path, value[k], "must be >= 0 (the rest pose is at t = 0)");
+    if (t * fps > kMaxFramePeriods) {
+      return reader.Error(path, value[k],
+                          fmt::format("more than {} frame periods (1 / fps = {:g} s) after t = 0: "
+                                      "the simulation would be too long",
+                                      kMaxFramePeriods, 1.0 / fps));
+    }
+    if (k > 0 && !(t > times.back())) {
+      return reader.Error(path, value[k],
+                          fmt::format("must be greater than frame_times[{}] = {} (strictly "
+                                      "increasing)",
+                                      k - 1, times.back()));
+    }
+    times.push_back(t);
+  }
+  return times;
+}
+
 // Whether `target` resolves (following symlinks) to a location inside `root`.
 bool StaysInside(const std::filesystem::path& root, const std::filesystem::path& target) {
   std::error_code error;
@@ -336,6 +373,7 @@ json ToJson(const Capture& capture) {
                        {"frames", recording.frames}});
   }
   out["cameras"] = std::move(cameras);
+  if (!capture.frame_times.empty()) out["frame_times"] = capture.frame_times;
   return out;
 }
 
@@ -410,6 +448,10 @@ Result<Capture> CaptureFromJson(const json& root, std::string_view source) {
                       recording.frames.size(), capture.cameras.front().frames.size()));
     }
     capture.cameras.push_back(std::move(recording));
+  }
+  if (const auto it = root.find("frame_times"); it != root.end()) {
+    SOFTID_ASSIGN_OR_RETURN(capture.frame_times,
+                            ParseFrameTimes(reader, *it, capture.NumFrames(), capture.fps));
   }
   return capture;
 }

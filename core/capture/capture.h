@@ -14,7 +14,8 @@
 //       "depth_scale": 0.001,             // metres per unit of the 16-bit PNG, > 0
 //       "world_from_camera": [16 numbers, row-major 4x4],    // X_WC, rigid; OpenCV camera axes
 //       "frames": ["cam0/000000.png", "cam0/000001.png"]     // frame k shows time k / fps
-//     }]
+//     }],
+//     "frame_times": [0.0, 0.0171]        // optional [s]: time of frame k instead of k / fps
 //   }
 // Gravity is -z in the world frame. Every camera has the same number of frames (>= 1). Frames are
 // 16-bit single-channel PNGs of depth along the camera z axis (value * depth_scale metres), 0 = no
@@ -52,6 +53,9 @@ inline constexpr std::string_view kCaptureFileName = "capture.json";
 inline constexpr int64_t kMaxImagePixels = 4096LL * 4096LL;
 inline constexpr int kMaxCameras = 16;
 inline constexpr int kMaxFramesPerCamera = 20000;
+// Latest frame time accepted in frame_times, in nominal frame periods (1 / fps): the simulation
+// runs up to the last frame's time whatever the number of frames.
+inline constexpr int kMaxFramePeriods = 2 * kMaxFramesPerCamera;
 // The mesh's longest side must lie in this range [m] (a mesh in millimetres declared as metres
 // is 1000x too large), and it must enclose a volume (not flat).
 inline constexpr double kMinMeshExtent_m = 1e-3;
@@ -74,7 +78,12 @@ struct Capture {
   std::filesystem::path directory;
   // Rest-pose mesh at t = 0 (world frame, metres), relative to the capture folder.
   std::string mesh_file = "object.obj";
-  double fps = 0.0;                                 // frames per second [1/s], > 0
+  // Nominal frames per second [1/s], > 0: frame k shows time k / fps unless frame_times is given;
+  // the simulation's time step is 1 / (fps * substeps) either way.
+  double fps = 0.0;
+  // Optional time of every frame [s] (one per frame, >= 0, strictly increasing), for recordings
+  // whose frames are not evenly spaced (device-clock jitter, dropped frames). Empty: k / fps.
+  std::vector<double> frame_times;
   std::optional<double> mass_kg;                    // [kg], > 0 when present
   std::optional<Eigen::AlignedBox3d> fixed_region;  // world frame [m]: nodes inside are clamped
   std::vector<CameraRecording> cameras;
@@ -82,8 +91,8 @@ struct Capture {
   // Number of frames per camera (all cameras have the same); 0 without cameras.
   int NumFrames() const;
   int NumCameras() const { return static_cast<int>(cameras.size()); }
-  // Time shown by frame k [s].
-  double FrameTime(int frame) const { return frame / fps; }
+  // Time shown by frame k [s]: frame_times[k], or k / fps without frame_times.
+  double FrameTime(int frame) const;
 };
 
 struct ReadCaptureOptions {

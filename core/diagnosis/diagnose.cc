@@ -29,7 +29,7 @@ struct Context {
   Eigen::AlignedBox3d rest_bounds;
   Patches patches;
   double truncation = 0.0;
-  std::vector<int> frame_indices;
+  std::vector<FrameAt> frame_times;
 };
 
 struct ModelResiduals {
@@ -228,7 +228,7 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
   context.patches =
       MakePatches(context.objective->simulator().rest_surface(), options.patches, -p0.gravity);
   for (const auto& f : context.observations.frames) {
-    context.frame_indices.push_back(f.frame);
+    context.frame_times.push_back({f.frame, f.time});
     report.frames.push_back(f.frame);
     report.heldout.push_back(f.heldout);
   }
@@ -240,9 +240,8 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
   report.base_heldout = r0.heldout;
   SOFTID_ASSIGN_OR_RETURN(report.noise_floor, EstimateNoiseFloor(r0.map, options.noise_floor));
   const double sigma = report.noise_floor.sigma;
-  SOFTID_ASSIGN_OR_RETURN(
-      report.motion, SplitMotionPhases(context.objective->simulator(), p0, context.frame_indices,
-                                       capture.fps, config.substeps, options.phases));
+  SOFTID_ASSIGN_OR_RETURN(report.motion, SplitMotionPhases(context.objective->simulator(), p0,
+                                                           context.frame_times, options.phases));
   const DecisionOptions& rule = options.decision;
   report.before = Locate(r0.map, report.motion, sigma, rule.misfit_threshold, rule.min_phase_frames,
                          rule.min_patch_points);

@@ -29,8 +29,7 @@ Status MotionPhaseOptions::Validate() const {
 
 Result<std::vector<FrameMotion>> SplitMotionPhases(fem::Simulator& sim,
                                                    const fem::PhysicalParameters& parameters,
-                                                   const std::vector<int>& frames, double fps,
-                                                   int substeps,
+                                                   const std::vector<FrameAt>& frames,
                                                    const MotionPhaseOptions& options) {
   SOFTID_RETURN_IF_ERROR(options.Validate());
   try {
@@ -42,19 +41,21 @@ Result<std::vector<FrameMotion>> SplitMotionPhases(fem::Simulator& sim,
   const double still = options.rest_speed_fraction *
                        std::sqrt(parameters.gravity.norm() * sim.characteristic_length());
   std::vector<FrameMotion> out;
-  int step = 0;
+  int64_t step = 0;
   bool was_in_contact = false;
   bool contact_seen = false;
-  for (int frame : frames) {
-    for (; step < frame * substeps; ++step) {
+  const double time_step = sim.options().time_step;
+  for (const FrameAt& frame : frames) {
+    const int64_t frame_step = std::llround(frame.time_s / time_step);
+    for (; step < frame_step; ++step) {
       if (sim.Step().diverged || !sim.state().u.allFinite()) {
         return Status::FailedPrecondition("the simulation diverged at step " +
                                           std::to_string(step + 1) + ": no motion phases");
       }
     }
     FrameMotion m;
-    m.frame = frame;
-    m.time = frame / fps;
+    m.frame = frame.frame;
+    m.time = frame.time_s;
     const Eigen::Vector3d v = sim.CentreOfMassVelocity();
     m.speed = v.norm();
     m.ground_distance = std::numeric_limits<double>::infinity();

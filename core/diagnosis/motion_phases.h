@@ -47,13 +47,18 @@ struct FrameMotion {
   Phase phase = Phase::kFlight;
 };
 
-// Simulates `parameters` on `simulator` (which it resets) up to the last of `frames` (capture
-// frame indices, ascending) with `substeps` steps per frame, and classifies each frame.
-// FailedPrecondition when the simulation diverges.
+// A capture frame and the time it shows [s].
+struct FrameAt {
+  int frame = 0;
+  double time_s = 0.0;
+};
+
+// Simulates `parameters` on `simulator` (which it resets) up to the last of `frames` (ascending
+// times; each classified at the simulation step nearest its time, with the simulator's own time
+// step), and classifies each frame. FailedPrecondition when the simulation diverges.
 Result<std::vector<FrameMotion>> SplitMotionPhases(fem::Simulator& simulator,
                                                    const fem::PhysicalParameters& parameters,
-                                                   const std::vector<int>& frames, double fps,
-                                                   int substeps,
+                                                   const std::vector<FrameAt>& frames,
                                                    const MotionPhaseOptions& options = {});
 
 }  // namespace softid::diagnosis

@@ -428,6 +428,12 @@ nlohmann::json CostJson(double initial, double final) {
 
 namespace {
 
+// The nominal frame (a multiple of 1 / fps) at or after the last observed frame's time: how far
+// the grid and time-step choices simulate (the frame index itself when frames are evenly spaced).
+int LastNominalFrame(const std::vector<ObservedFrame>& frames, double fps) {
+  return static_cast<int>(std::ceil(frames.back().time * fps - 1e-9));
+}
+
 // The grid of the fit: config.cells, or chosen by refinement (grid_selection.h) against the depth
 // noise of frame 0 (rest_frame_noise.h) when "auto". Sets simulation's grid and result's record.
 Status ChooseGrid(const capture::Capture& capture, const geometry::TriangleMesh& mesh,
@@ -533,7 +539,8 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   simulation.threads = std::max(1, cores / threads);
   const cost::SurfaceCostOptions cost_options = CostOptionsFor(config);
   SOFTID_RETURN_IF_ERROR(ChooseGrid(capture, mesh, config, CentralStart(config, result.base),
-                                    frames->back().frame, options.cancel, &simulation, &result));
+                                    LastNominalFrame(*frames, capture.fps), options.cancel,
+                                    &simulation, &result));
   result.substeps = config.substeps;
   if (config.substeps == kAutoSubsteps) {
     SubstepSelectionOptions selection_options;
@@ -541,7 +548,7 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
     SOFTID_ASSIGN_OR_RETURN(
         SubstepSelection selection,
         SelectSubsteps(mesh, capture.fixed_region, CentralStart(config, result.base), simulation,
-                       capture.fps, frames->back().frame, selection_options));
+                       capture.fps, LastNominalFrame(*frames, capture.fps), selection_options));
     result.substeps = selection.substeps;
     result.substep_selection = std::move(selection);
   }

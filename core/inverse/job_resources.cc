@@ -95,6 +95,10 @@ Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
   if (extent.num_frames < 1 || extent.mesh_bounds.isEmpty()) {
     return Status::InvalidArgument("capture: no frames or an empty mesh");
   }
+  if (!extent.frame_periods.empty() &&
+      extent.frame_periods.size() != static_cast<size_t>(extent.num_frames)) {
+    return Status::InvalidArgument("capture: frame_times and frames differ in number");
+  }
   const int last_frame = extent.num_frames - 1;
   if (config.frames.first > last_frame) {
     return Status::InvalidArgument(
@@ -117,7 +121,10 @@ Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
   const double nodes = BoxNodes(size, estimate.cell_size_m);
   const int substeps =
       config.substeps == kAutoSubsteps ? SubstepSelectionOptions{}.max_substeps : config.substeps;
-  const double steps = static_cast<double>(fitted_last) * substeps;
+  const double fitted_periods = extent.frame_periods.empty()
+                                    ? static_cast<double>(fitted_last)
+                                    : std::ceil(extent.frame_periods.at(fitted_last));
+  const double steps = fitted_periods * substeps;
   const int cores = config.threads > 0 ? config.threads : limits.cores;
   estimate.concurrent_starts = std::max(1, std::min(config.starts, cores));
   const double per_start = nodes * (kBytesPerNode + kBytesPerNodeStep * (steps + 1.0));

@@ -6,6 +6,7 @@
 
 #include <Eigen/Geometry>
 #include <cstdint>
+#include <vector>
 
 #include "core/common/status.h"
 #include "core/inverse/job_config.h"
@@ -17,6 +18,9 @@ struct CaptureExtent {
   Eigen::AlignedBox3d mesh_bounds;  // rest mesh [m], non-empty
   int num_frames = 0;               // per camera, >= 1
   int num_cameras = 0;              // >= 1
+  // Time of frame k in nominal frame periods (t_k * fps) when the capture has frame_times;
+  // empty: evenly spaced (k). Sizes the simulation's steps: dropped frames still cost steps.
+  std::vector<double> frame_periods;
 };
 
 struct JobResourceEstimate {

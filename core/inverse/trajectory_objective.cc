@@ -13,6 +13,10 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
 
+// Times this close to a step (in steps) count as on it: k / fps in floating point lands within
+// 1e-12 steps of k * substeps, and an interpolation weight of 1e-9 changes nothing measurable.
+constexpr double kOnStepTolerance = 1e-9;
+
 }  // namespace
 
 TrajectoryObjective::TrajectoryObjective(const geometry::TriangleMesh& rest_mesh,
@@ -28,6 +32,23 @@ TrajectoryObjective::TrajectoryObjective(const geometry::TriangleMesh& rest_mesh
   SOFTID_THROW_UNLESS(frames_ != nullptr && !frames_->empty(), "no observed frames");
   active_frames_ = static_cast<int>(frames_->size());
   options.time_step = 1.0 / (fps * substeps);
+  observation_steps_.reserve(frames_->size());
+  for (const ObservedFrame& frame : *frames_) {
+    SOFTID_THROW_UNLESS(std::isfinite(frame.time) && frame.time >= 0.0,
+                        "observed frame times must be finite and >= 0");
+    const double steps = frame.time / options.time_step;
+    const double nearest = std::round(steps);
+    if (std::abs(steps - nearest) <= kOnStepTolerance) {
+      observation_steps_.push_back({static_cast<int>(nearest), 1.0});
+    } else {
+      const double upper = std::ceil(steps);
+      observation_steps_.push_back({static_cast<int>(upper), 1.0 - (upper - steps)});
+    }
+    SOFTID_THROW_UNLESS(
+        observation_steps_.size() < 2 || observation_steps_.back().step >=
+                                             observation_steps_[observation_steps_.size() - 2].step,
+        "observed frames must be in ascending time");
+  }
   simulator_ =
       std::make_unique<fem::Simulator>(rest_mesh, initial_parameters, options, fixed_region);
   // The rest surface the simulator renders (and cameras see) is what the cost's rest SDF values
@@ -55,7 +76,7 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
     return Status::InvalidArgument(error.what());
   }
   const std::span<const ObservedFrame> frames(frames_->data(), active_frames_);
-  const int last_step = frames.back().frame * substeps_;
+  const int last_step = observation_steps_[active_frames_ - 1].step;
   states_.resize(last_step + 1);
   states_[0] = sim.state();
   for (int step = 1; step <= last_step; ++step) {
@@ -89,7 +110,7 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
   if (!with_gradient) {
     for (size_t k = 0; k < frames.size(); ++k) {
       out.frame_costs[k] =
-          cost_->Evaluate(states_[frames[k].frame * substeps_].u, frames[k].points, nullptr);
+          cost_->Evaluate(ObservedDisplacement(static_cast<int>(k)), frames[k].points, nullptr);
     }
     sum_frame_costs();
     out.forward_seconds = SecondsSince(forward_start);
@@ -97,34 +118,41 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
   }
   out.forward_seconds = SecondsSince(forward_start);
 
-  // Backward: the cost's gradient enters at the state of each fitted frame. Each frame's cost
-  // comes with its gradient here rather than from a second evaluation in the forward pass (at
-  // one step per frame that evaluation was a large share of the forward time).
+  // Backward: the cost's gradient enters at the state of each fitted frame (split between the two
+  // steps around it when its time falls between them; `carry` holds the earlier step's share).
+  // Each frame's cost comes with its gradient here rather than from a second evaluation in the
+  // forward pass (at one step per frame that evaluation was a large share of the forward time).
   const auto backward_start = std::chrono::steady_clock::now();
   const int size = static_cast<int>(states_[0].u.size());
   fem::StateAdjoint adjoint{Eigen::VectorXd::Zero(size), Eigen::VectorXd::Zero(size),
                             Eigen::VectorXd::Zero(size)};
+  Eigen::VectorXd carry = Eigen::VectorXd::Zero(size);
   int next_frame = static_cast<int>(frames.size()) - 1;
-  auto add_frame_gradient = [&](int step) {
-    while (next_frame >= 0 && frames[next_frame].frame * substeps_ > step) --next_frame;
-    if (next_frame < 0 || frames[next_frame].frame * substeps_ != step) return;
-    const ObservedFrame& frame = frames[next_frame];
-    if (frame.heldout) {
-      out.frame_costs[next_frame] = cost_->Evaluate(states_[step].u, frame.points, nullptr);
-      return;
+  auto add_frame_gradients = [&](int step) {
+    adjoint.u += carry;
+    carry.setZero();
+    for (; next_frame >= 0 && observation_steps_[next_frame].step == step; --next_frame) {
+      const ObservedFrame& frame = frames[next_frame];
+      const Eigen::VectorXd& u = ObservedDisplacement(next_frame);
+      if (frame.heldout) {
+        out.frame_costs[next_frame] = cost_->Evaluate(u, frame.points, nullptr);
+        continue;
+      }
+      out.frame_costs[next_frame] = cost_->Evaluate(u, frame.points, &frame_gradient_);
+      const double weight = observation_steps_[next_frame].weight;
+      adjoint.u += (weight / fitted) * frame_gradient_;
+      if (weight < 1.0) carry += ((1.0 - weight) / fitted) * frame_gradient_;
     }
-    out.frame_costs[next_frame] = cost_->Evaluate(states_[step].u, frame.points, &frame_gradient_);
-    adjoint.u += frame_gradient_ / fitted;
   };
   for (int step = last_step; step >= 1; --step) {
     if (cancel_ != nullptr && cancel_->load(std::memory_order_relaxed)) {
       return Status::Cancelled("the adjoint pass was cancelled");
     }
-    add_frame_gradient(step);
+    add_frame_gradients(step);
     SOFTID_RETURN_IF_ERROR(
         sim.BackpropagateStep(states_[step - 1], states_[step], &adjoint, &out.gradient));
   }
-  add_frame_gradient(0);
+  add_frame_gradients(0);
   sim.BackpropagateInitialState(states_[0], adjoint, &out.gradient);
   sum_frame_costs();
   out.backward_seconds = SecondsSince(backward_start);
@@ -151,7 +179,7 @@ Result<ObjectiveEvaluation> TrajectoryObjective::EvaluateResiduals(
   for (int k = 0; k < active_frames_; ++k) {
     const ObservedFrame& frame = (*frames_)[k];
     if (frame.heldout || frame.points.empty()) continue;
-    cost_->Evaluate(states_[frame.frame * substeps_].u, frame.points, nullptr, &matches_);
+    cost_->Evaluate(ObservedDisplacement(k), frame.points, nullptr, &matches_);
     const double weight = 2.0 / (static_cast<double>(fitted) * frame.points.size());
     for (const cost::PointMatch& match : matches_) {
       const double magnitude = std::sqrt(weight * match.cost);
@@ -168,9 +196,16 @@ Result<std::vector<std::vector<cost::PointMatch>>> TrajectoryObjective::MatchPoi
   std::vector<std::vector<cost::PointMatch>> matches(active_frames_);
   for (int k = 0; k < active_frames_; ++k) {
     const ObservedFrame& frame = (*frames_)[k];
-    cost_->Evaluate(states_[frame.frame * substeps_].u, frame.points, nullptr, &matches[k]);
+    cost_->Evaluate(ObservedDisplacement(k), frame.points, nullptr, &matches[k]);
   }
   return matches;
+}
+
+const Eigen::VectorXd& TrajectoryObjective::ObservedDisplacement(int k) {
+  const ObservationStep& at = observation_steps_[k];
+  if (at.weight == 1.0) return states_[at.step].u;
+  observed_u_ = at.weight * states_[at.step].u + (1.0 - at.weight) * states_[at.step - 1].u;
+  return observed_u_;
 }
 
 }  // namespace softid::inverse

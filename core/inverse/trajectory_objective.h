@@ -5,7 +5,9 @@
 //   cost = (1 / F) sum over the F fitted frames k of C_k(u(t_k))   [m^2]
 //
 // C_k is the per-frame SSC cost (mean truncated squared distance of the frame's points); frame k
-// is compared with the state after k * substeps steps. Held-out frames are evaluated (for
+// is compared with the state at its time t_k (k / fps, or the capture's frame_times): the state
+// after t_k / dt steps when t_k falls on a step, else the linear interpolation of the two steps
+// around it (jittered or dropped frames). Held-out frames are evaluated (for
 // validation) but do not enter the cost or the gradient. Only the active frames (a prefix, by
 // default all) are simulated and compared.
 //
@@ -98,7 +100,18 @@ class TrajectoryObjective {
   std::shared_ptr<const std::vector<ObservedFrame>> frames_;
   int substeps_ = 1;
   int active_frames_ = 0;
-  std::vector<fem::SimulationState> states_;  // per step, reused across evaluations
+  // Where observed frame k meets the simulation: the state weight * u[step] + (1 - weight) *
+  // u[step - 1], weight in (0, 1]; weight 1 when t_k falls on step `step`.
+  struct ObservationStep {
+    int step = 0;
+    double weight = 1.0;
+  };
+  // The simulated displacement at observed frame k (a state, or `observed_u_` interpolated).
+  const Eigen::VectorXd& ObservedDisplacement(int k);
+
+  std::vector<ObservationStep> observation_steps_;  // per observed frame
+  std::vector<fem::SimulationState> states_;        // per step, reused across evaluations
+  Eigen::VectorXd observed_u_;                      // scratch of ObservedDisplacement
   Eigen::VectorXd frame_gradient_;
   std::vector<cost::PointMatch> matches_;  // scratch of EvaluateResiduals
   const std::atomic<bool>* cancel_ = nullptr;

@@ -646,5 +646,51 @@ TEST(Capture, FailedRewriteLeavesNoCaptureJson) {
   EXPECT_EQ(ReadCapture(dir.path()).status().code(), StatusCode::kNotFound);
 }
 
+// Frame times (jittered or dropped frames) round-trip and replace k / fps; without them frame k
+// shows k / fps.
+TEST(Capture, FrameTimesReplaceTheNominalRate) {
+  const CaptureDir dir;
+  const Result<Capture> plain = ReadCapture(dir.path());
+  ASSERT_TRUE(plain.ok()) << plain.status().ToString();
+  EXPECT_TRUE(plain->frame_times.empty());
+  EXPECT_DOUBLE_EQ(plain->FrameTime(2), 2.0 / 60.0);
+  const Result<Capture> timed = dir.ReadEdited([](json& j) {
+    j["frame_times"] = {0.0, 0.0171, 0.0502};
+  });
+  ASSERT_TRUE(timed.ok()) << timed.status().ToString();
+  EXPECT_EQ(timed->frame_times, (std::vector<double>{0.0, 0.0171, 0.0502}));
+  EXPECT_EQ(timed->FrameTime(1), 0.0171);
+  const Result<Capture> again = CaptureFromJson(ToJson(*timed));
+  ASSERT_TRUE(again.ok()) << again.status().ToString();
+  EXPECT_EQ(again->frame_times, timed->frame_times);
+  EXPECT_FALSE(ToJson(*plain).contains("frame_times"));
+}
+
+TEST(CaptureRejects, BadFrameTimes) {
+  const CaptureDir dir;
+  ExpectInvalid(dir.ReadEdited([](json& j) {
+    j["frame_times"] = {0.0, 0.02};
+  }),
+                {"frame_times", "has 2 times but the cameras have 3 frames"});
+  ExpectInvalid(dir.ReadEdited([](json& j) {
+    j["frame_times"] = {0.0, 0.02, 0.02};
+  }),
+                {"frame_times[2] = 0.02", "strictly increasing"});
+  ExpectInvalid(dir.ReadEdited([](json& j) {
+    j["frame_times"] = {-0.01, 0.02, 0.03};
+  }),
+                {"frame_times[0] = -0.01", ">= 0"});
+  ExpectInvalid(dir.ReadEdited([](json& j) {
+    j["frame_times"] = {0.0, "0.02", 0.03};
+  }),
+                {"frame_times[1] = \"0.02\"", "must be a number"});
+  ExpectInvalid(dir.ReadEdited([](json& j) {
+    j["frame_times"] = {0.0, 0.02, 1e6};
+  }),
+                {"frame_times[2] = 1000000", "frame periods", "too long"});
+  ExpectInvalid(dir.ReadEdited([](json& j) { j["frame_times"] = "0 0.02 0.03"; }),
+                {"frame_times", "must be a JSON array"});
+}
+
 }  // namespace
 }  // namespace softid::capture

@@ -16,10 +16,9 @@ std::vector<Phase> PhasesOf(const std::string& scene_name, double duration, int 
   options.cells_along_longest_side = cells;
   options.time_step = 1.0 / 120.0;
   fem::Simulator sim(scene->scene.mesh, scene->scene.parameters, options);
-  std::vector<int> frames;
-  for (int k = 0; k <= static_cast<int>(duration * 60); ++k) frames.push_back(k);
-  Result<std::vector<FrameMotion>> motion =
-      SplitMotionPhases(sim, scene->scene.parameters, frames, 60.0, /*substeps=*/2);
+  std::vector<FrameAt> frames;
+  for (int k = 0; k <= static_cast<int>(duration * 60); ++k) frames.push_back({k, k / 60.0});
+  Result<std::vector<FrameMotion>> motion = SplitMotionPhases(sim, scene->scene.parameters, frames);
   EXPECT_TRUE(motion.ok()) << motion.status().ToString();
   std::vector<Phase> out;
   for (const FrameMotion& m : *motion) out.push_back(m.phase);

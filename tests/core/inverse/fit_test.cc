@@ -4,6 +4,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdio>
+#include <fstream>
+
 #include "tests/core/inverse/inverse_test_util.h"
 
 namespace softid::inverse {
@@ -249,6 +252,88 @@ TEST(Fit, AutoCellsChoosesAndReportsTheGrid) {
   EXPECT_EQ(result->cells, 6);
   EXPECT_FALSE(result->grid_selection.has_value());
   EXPECT_FALSE(ToJson(*result)["grid"].contains("selection"));
+}
+
+// A torus drop synthesised at 120 fps (8 steps per frame) and delivered as a 60 fps station with a
+// jittery clock would: frame k taken from 2k - 1, 2k or 2k + 1 (up to one 120-fps period early or
+// late), every fifth frame dropped. With `time_stamped`, capture.json carries each frame's time in
+// frame_times; without, the frames claim k / 60 as a capture without time stamps would.
+testing::SmallCapture JitteredCapture(bool time_stamped) {
+  testing::SmallCapture out;
+  Result<scenes::Scene> scene = scenes::MakeBuiltinScene("torus-drop");
+  if (!scene.ok()) return out;
+  out.directory = std::filesystem::temp_directory_path() /
+                  ("softid_jittered_" + std::to_string(::getpid()) + (time_stamped ? "_t" : ""));
+  std::filesystem::remove_all(out.directory);
+  scenes::SynthesisOptions options;
+  options.run.duration = 0.35;
+  options.run.fps = 120.0;
+  options.run.substeps_per_frame = 8;  // converged in time (the fit's steps are not these)
+  options.run.simulation.cells_along_longest_side = 8;
+  options.cameras.count = 2;
+  options.cameras.width = 40;
+  options.cameras.height = 40;
+  if (Result<scenes::SynthesisSummary> summary = scenes::Synthesize(*scene, options, out.directory);
+      !summary.ok()) {
+    out.error = summary.status().ToString();
+    return out;
+  }
+  Result<capture::Capture> dense = capture::ReadCapture(out.directory);
+  if (!dense.ok()) {
+    out.error = dense.status().ToString();
+    return out;
+  }
+  capture::Capture sparse = *dense;
+  sparse.fps = 60.0;
+  const int jitter[] = {0, 1, 0, -1, -1, 0, 1};  // never +1 then -1: times increase
+  std::vector<int> picked;
+  for (int k = 0; 2 * k + 1 < dense->NumFrames(); ++k) {
+    if (k % 5 == 4) continue;
+    picked.push_back(k == 0 ? 0 : 2 * k + jitter[k % 7]);
+  }
+  for (size_t c = 0; c < sparse.cameras.size(); ++c) {
+    sparse.cameras[c].frames.clear();
+    for (const int index : picked)
+      sparse.cameras[c].frames.push_back(dense->cameras[c].frames[index]);
+  }
+  for (size_t i = 0; i < picked.size(); ++i) {
+    sparse.frame_times.push_back(time_stamped ? picked[i] / 120.0 : i / 60.0);
+  }
+  std::ofstream(out.directory / "capture.json") << capture::ToJson(sparse).dump();
+  Result<capture::Capture> read = capture::ReadCapture(out.directory);
+  if (!read.ok()) {
+    out.error = read.status().ToString();
+    return out;
+  }
+  out.capture = *read;
+  out.truth = scene->parameters;
+  out.ok = true;
+  return out;
+}
+
+// Time stamps from a jittery clock with dropped frames: the fit compares every frame at its own
+// time (between simulation steps for half of them) and finds the modulus as on evenly spaced
+// frames; the same frames taken to be evenly spaced fit far worse.
+TEST(Fit, FramesAtTheirTimeStampsWithJitterAndDrops) {
+  testing::SmallCapture timed = JitteredCapture(true);
+  testing::SmallCapture untimed = JitteredCapture(false);
+  ASSERT_TRUE(timed.ok) << timed.error;
+  ASSERT_TRUE(untimed.ok) << untimed.error;
+  JobConfig config = YoungsModulusConfig(timed.truth);
+  config.substeps = 5;  // steps of 1/300 s: odd 120-fps frames fall between two steps
+  config.starts = 1;
+  Result<FitResult> with_times = Fit(timed.capture, config);
+  Result<FitResult> without_times = Fit(untimed.capture, config);
+  ASSERT_TRUE(with_times.ok()) << with_times.status().ToString();
+  ASSERT_TRUE(without_times.ok()) << without_times.status().ToString();
+  const double truth = timed.truth.youngs_modulus;
+  const double e_timed = with_times->Best().final.youngs_modulus;
+  const double e_untimed = without_times->Best().final.youngs_modulus;
+  std::printf("E with time stamps %.4g (%.2f %%), without %.4g (%.2f %%); cost %.3g vs %.3g\n",
+              e_timed, 100 * (e_timed / truth - 1), e_untimed, 100 * (e_untimed / truth - 1),
+              with_times->Best().final_cost, without_times->Best().final_cost);
+  EXPECT_NEAR(e_timed, truth, 0.02 * truth);
+  EXPECT_LT(with_times->Best().final_cost, 0.5 * without_times->Best().final_cost);
 }
 
 }  // namespace

@@ -119,5 +119,21 @@ TEST(JobResources, EstimateGrowsWithFramesAndConcurrentStarts) {
   EXPECT_FALSE(EstimateJobResources({}, TorusSized(), limits).ok());
 }
 
+// Steps follow the frames' times, not their count: frames dropped from a capture with frame_times
+// still cost their simulation steps.
+TEST(JobResources, StepsFollowTheFrameTimes) {
+  JobResourceLimits limits;
+  CaptureExtent even = TorusSized();
+  CaptureExtent sparse = TorusSized();
+  for (int k = 0; k < sparse.num_frames; ++k) sparse.frame_periods.push_back(2.0 * k + 0.3);
+  const auto a = EstimateJobResources({}, even, limits);
+  const auto b = EstimateJobResources({}, sparse, limits);
+  ASSERT_TRUE(a.ok() && b.ok());
+  // The last frame is frame 60 (60 periods) in one and at 120.3 periods in the other.
+  EXPECT_EQ(b->steps_per_run * 60, a->steps_per_run * 121);
+  sparse.frame_periods.pop_back();
+  EXPECT_FALSE(EstimateJobResources({}, sparse, limits).ok());
+}
+
 }  // namespace
 }  // namespace softid::inverse
