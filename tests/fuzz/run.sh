@@ -14,7 +14,7 @@ if ! [[ $seconds =~ ^[1-9][0-9]*$ ]]; then
   exit 2
 fi
 build_dir=${SOFTID_FUZZ_BUILD_DIR:-build-fuzz}
-targets=(capture_json_fuzzer job_config_fuzzer manifest_fuzzer)
+targets=(capture_json_fuzzer recording_json_fuzzer job_config_fuzzer manifest_fuzzer)
 
 # clang-14 and its libFuzzer runtime are in the dependency list, with everything the configure
 # below needs; the script returns at once when all is installed.
