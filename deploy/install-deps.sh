@@ -11,8 +11,10 @@ packages=(
   libeigen3-dev libsuitesparse-dev libopenblas0-pthread libceres-dev
   # geometry: Embree (BVH ray casting, closest-point queries), assimp (OBJ/PLY/STL input)
   libembree-dev libassimp-dev
-  # images: 16-bit PNG depth frames and plots
-  libopencv-core-dev libopencv-imgcodecs-dev libopencv-imgproc-dev
+  # images: 16-bit PNG depth frames and plots; lens distortion (calib3d)
+  libopencv-core-dev libopencv-imgcodecs-dev libopencv-imgproc-dev libopencv-calib3d-dev
+  # point-cloud geometry of raw recordings: plane fitting, FPFH + RANSAC registration, ICP
+  libopen3d-dev
   # service: gRPC, Protobuf, SQLite
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libsqlite3-dev libssl-dev
   # utilities

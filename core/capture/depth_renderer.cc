@@ -57,6 +57,20 @@ DepthRenderer& DepthRenderer::operator=(DepthRenderer&&) noexcept = default;
 
 DepthImage DepthRenderer::Render(const geometry::TriangleMesh& mesh_W,
                                  const PinholeCamera& camera) const {
+  return RenderRays(mesh_W, camera, nullptr);
+}
+
+DepthImage DepthRenderer::Render(const geometry::TriangleMesh& mesh_W, const PinholeCamera& camera,
+                                 const PixelRays& rays) const {
+  SOFTID_THROW_UNLESS(rays.width == camera.width && rays.height == camera.height &&
+                          rays.xy.size() == static_cast<size_t>(camera.width) * camera.height,
+                      "DepthRenderer::Render: the pixel rays must have the camera's size");
+  return RenderRays(mesh_W, camera, &rays);
+}
+
+DepthImage DepthRenderer::RenderRays(const geometry::TriangleMesh& mesh_W,
+                                     const PinholeCamera& camera,
+                                     const PixelRays* lens_rays) const {
   SOFTID_THROW_UNLESS(impl_ != nullptr, "DepthRenderer::Render on a moved-from renderer");
   const Status camera_valid = camera.Validate();
   SOFTID_THROW_UNLESS(camera_valid.ok(), camera_valid.message());
@@ -116,7 +130,10 @@ DepthImage DepthRenderer::Render(const geometry::TriangleMesh& mesh_W,
     for (int col = 0; col < camera.width; ++col) {
       // Ray from the camera centre with direction (x, y, 1) in C: the hit distance t (in units of
       // the direction) is then the depth along the camera z axis.
-      const Eigen::Vector3d dir_C = camera.RayDirection_C(col, row);
+      const Eigen::Vector3d dir_C =
+          lens_rays == nullptr
+              ? camera.RayDirection_C(col, row)
+              : Eigen::Vector3d(lens_rays->at(col, row).x(), lens_rays->at(col, row).y(), 1.0);
       RTCRayHit& ray_hit = rays[col];
       ray_hit.ray.org_x = ray_hit.ray.org_y = ray_hit.ray.org_z = 0.0f;
       ray_hit.ray.dir_x = static_cast<float>(dir_C.x());

@@ -5,6 +5,7 @@
 
 #include "core/capture/camera.h"
 #include "core/capture/depth_image.h"
+#include "core/capture/pixel_rays.h"
 #include "core/geometry/triangle_mesh.h"
 
 namespace softid::capture {
@@ -30,7 +31,17 @@ class DepthRenderer {
   // range or a vertex is not finite.
   DepthImage Render(const geometry::TriangleMesh& mesh_W, const PinholeCamera& camera) const;
 
+  // As above through a real lens: the ray of pixel (col, row) has direction (x, y, 1) in the
+  // camera frame for rays.at(col, row) = (x, y) (pixel_rays.h). Renders what a camera with lens
+  // distortion records. Throws std::invalid_argument when `rays` is not of the camera's size.
+  DepthImage Render(const geometry::TriangleMesh& mesh_W, const PinholeCamera& camera,
+                    const PixelRays& rays) const;
+
  private:
+  // Render's implementation: pinhole rays when `lens_rays` is null.
+  DepthImage RenderRays(const geometry::TriangleMesh& mesh_W, const PinholeCamera& camera,
+                        const PixelRays* lens_rays) const;
+
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
