@@ -1,0 +1,48 @@
+// Which pixels of a raw depth frame show the object: those nearer than the static scene by well
+// more than its noise, grouped into connected regions so that isolated noise does not count.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <vector>
+
+#include "core/capture/depth_image.h"
+#include "core/capture/pixel_rays.h"
+#include "core/common/status.h"
+#include "core/ingest/static_scene.h"
+
+namespace softid::ingest {
+
+struct ForegroundOptions {
+  // A pixel is foreground when it is nearer than the static scene by more than noise_sigmas of
+  // that pixel's noise and by more than min_margin_m (sigma from few frames can be tiny).
+  double noise_sigmas = 4.0;
+  double min_margin_m = 0.004;
+  // Connected regions (8-neighbourhood) of fewer pixels are noise, not objects.
+  int min_region_pixels = 12;
+
+  Status Validate() const;
+};
+
+// A connected region of foreground pixels.
+struct ForegroundRegion {
+  std::vector<int> pixels;              // row-major pixel indices
+  Eigen::Vector3d centroid_C{0, 0, 0};  // mean of the pixels' points in the camera frame [m]
+};
+
+struct Foreground {
+  int width = 0;
+  int height = 0;
+  std::vector<uint8_t> mask;              // 1 = foreground (in a kept region), row-major
+  std::vector<ForegroundRegion> regions;  // largest first
+};
+
+// The foreground of `frame` against `scene` (same size): pixels with data that are nearer than the
+// static scene by the margin above, or that have data where the scene has none; regions smaller
+// than min_region_pixels are dropped. Points are unprojected along `rays` (the camera's lens).
+// InvalidArgument when the sizes differ.
+Result<Foreground> SegmentForeground(const capture::DepthImage& frame, const StaticScene& scene,
+                                     const capture::PixelRays& rays,
+                                     const ForegroundOptions& options = {});
+
+}  // namespace softid::ingest

@@ -1,0 +1,79 @@
+#include "core/ingest/static_scene.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+
+namespace softid::ingest {
+namespace {
+
+float Median(std::vector<float>& values) {
+  const size_t mid = values.size() / 2;
+  std::nth_element(values.begin(), values.begin() + mid, values.end());
+  return values[mid];
+}
+
+}  // namespace
+
+Status StaticSceneOptions::Validate() const {
+  if (!(cluster_width_m > 0.0) || !std::isfinite(cluster_width_m)) {
+    return Status::InvalidArgument(
+        fmt::format("cluster_width_m = {}: must be positive", cluster_width_m));
+  }
+  if (!(min_share > 0.0 && min_share <= 1.0)) {
+    return Status::InvalidArgument(fmt::format("min_share = {}: must lie in (0, 1]", min_share));
+  }
+  return Status::Ok();
+}
+
+Result<StaticScene> EstimateStaticScene(const std::vector<capture::DepthImage>& images,
+                                        const StaticSceneOptions& options) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  if (images.empty()) return Status::InvalidArgument("static scene: no images");
+  StaticScene scene;
+  scene.width = images.front().width;
+  scene.height = images.front().height;
+  const size_t pixels = static_cast<size_t>(scene.width) * scene.height;
+  for (size_t i = 0; i < images.size(); ++i) {
+    if (images[i].width != scene.width || images[i].height != scene.height ||
+        images[i].depth.size() != pixels) {
+      return Status::InvalidArgument(
+          fmt::format("static scene: image {} is {}x{}, image 0 is {}x{}", i, images[i].width,
+                      images[i].height, scene.width, scene.height));
+    }
+  }
+  scene.depth_m.assign(pixels, 0.0f);
+  scene.sigma_m.assign(pixels, 0.0f);
+  const size_t min_count =
+      std::max<size_t>(1, static_cast<size_t>(std::ceil(options.min_share * images.size())));
+  std::vector<float> readings, cluster;
+  readings.reserve(images.size());
+  cluster.reserve(images.size());
+  for (size_t p = 0; p < pixels; ++p) {
+    readings.clear();
+    for (const capture::DepthImage& image : images) {
+      if (image.depth[p] > 0.0f) readings.push_back(image.depth[p]);
+    }
+    std::sort(readings.begin(), readings.end(), std::greater<float>());
+    // The farthest window of cluster_width_m holding min_count readings: a lone reading far
+    // behind (a flying pixel) is skipped rather than taken for the scene.
+    size_t end = 0;
+    for (size_t begin = 0; begin < readings.size(); ++begin) {
+      end = std::max(end, begin);
+      while (end < readings.size() && readings[begin] - readings[end] <= options.cluster_width_m)
+        ++end;
+      if (end - begin < min_count) continue;
+      cluster.assign(readings.begin() + begin, readings.begin() + end);
+      const float median = Median(cluster);
+      for (float& z : cluster) z = std::abs(z - median);
+      scene.depth_m[p] = median;
+      scene.sigma_m[p] = 1.4826f * Median(cluster);
+      break;
+    }
+  }
+  return scene;
+}
+
+}  // namespace softid::ingest

@@ -1,0 +1,49 @@
+// What a camera sees when the object is not there: per pixel, the depth of the static scene
+// (floor, walls, clutter) and how much that depth scatters from frame to frame (sensor noise).
+// Pixels that are closer than the static scene by well more than the noise show something that
+// moves: the object.
+#pragma once
+
+#include <vector>
+
+#include "core/capture/depth_image.h"
+#include "core/common/status.h"
+
+namespace softid::ingest {
+
+struct StaticScene {
+  int width = 0;
+  int height = 0;
+  // Per pixel (row-major): depth of the static scene along the camera z axis [m]; 0 where the
+  // camera never saw anything behind the object (or saw nothing at all).
+  std::vector<float> depth_m;
+  // Per pixel: robust standard deviation of that depth over the frames that show it [m].
+  std::vector<float> sigma_m;
+
+  float depth(int col, int row) const { return depth_m[static_cast<size_t>(row) * width + col]; }
+  float sigma(int col, int row) const { return sigma_m[static_cast<size_t>(row) * width + col]; }
+};
+
+struct StaticSceneOptions {
+  // Samples within this distance of a pixel's farthest reading belong to the static scene [m]:
+  // larger than the depth noise, smaller than the object's height above what is behind it.
+  // The object passes in front of a pixel for some frames; the scene behind it is the farthest
+  // consistent reading, so a moving object never becomes background even if it covers a pixel in
+  // most frames.
+  double cluster_width_m = 0.02;
+  // A pixel is static scene only if this share of its frames shows the scene (others: no data
+  // or the object in front).
+  double min_share = 0.05;
+
+  Status Validate() const;
+};
+
+// The static scene from `images` of one camera (background frames of the empty scene, or the
+// recording's own frames: the object moves, so every pixel shows the scene behind it in some
+// frames). Per pixel: the farthest cluster of readings (within cluster_width_m of the farthest
+// one), its median as the depth and 1.4826 times its median absolute deviation as sigma.
+// InvalidArgument when images is empty or sizes differ, naming the image.
+Result<StaticScene> EstimateStaticScene(const std::vector<capture::DepthImage>& images,
+                                        const StaticSceneOptions& options = {});
+
+}  // namespace softid::ingest
