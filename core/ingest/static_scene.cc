@@ -76,4 +76,19 @@ Result<StaticScene> EstimateStaticScene(const std::vector<capture::DepthImage>& 
   return scene;
 }
 
+void StaticScenePoints(const StaticScene& scene, const capture::PixelRays& rays,
+                       std::vector<Eigen::Vector3d>* points_C, std::vector<float>* sigmas_m) {
+  points_C->clear();
+  sigmas_m->clear();
+  for (int row = 0; row < scene.height; ++row) {
+    for (int col = 0; col < scene.width; ++col) {
+      const float z = scene.depth(col, row);
+      if (z <= 0.0f) continue;
+      const Eigen::Vector2d& xy = rays.at(col, row);
+      points_C->push_back(z * Eigen::Vector3d(xy.x(), xy.y(), 1.0));
+      sigmas_m->push_back(scene.sigma(col, row));
+    }
+  }
+}
+
 }  // namespace softid::ingest

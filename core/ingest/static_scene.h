@@ -4,9 +4,11 @@
 // moves: the object.
 #pragma once
 
+#include <Eigen/Core>
 #include <vector>
 
 #include "core/capture/depth_image.h"
+#include "core/capture/pixel_rays.h"
 #include "core/common/status.h"
 
 namespace softid::ingest {
@@ -45,5 +47,10 @@ struct StaticSceneOptions {
 // InvalidArgument when images is empty or sizes differ, naming the image.
 Result<StaticScene> EstimateStaticScene(const std::vector<capture::DepthImage>& images,
                                         const StaticSceneOptions& options = {});
+
+// The static scene's points in the camera frame [m], unprojected along the lens's rays (same
+// size as the scene), with each point's sigma; pixels of unknown depth are left out.
+void StaticScenePoints(const StaticScene& scene, const capture::PixelRays& rays,
+                       std::vector<Eigen::Vector3d>* points_C, std::vector<float>* sigmas_m);
 
 }  // namespace softid::ingest
