@@ -9,6 +9,8 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/ingest/openmp_threads.h"
+
 namespace softid::ingest {
 namespace {
 
@@ -71,6 +73,7 @@ Result<FloorPlane> FindFloorPlane(const std::vector<Eigen::Vector3d>& points_C,
       std::max(options.min_threshold_m, options.noise_multiple * MedianOf(sigmas_m));
   const double cos_tilt = std::cos(options.max_tilt_deg * std::numbers::pi / 180.0);
   const size_t min_inliers = static_cast<size_t>(options.min_share * points_C.size());
+  const ScopedOpenMPThreads serial(1);
   open3d::utility::random::Seed(static_cast<int>(options.seed));
   open3d::geometry::PointCloud remaining(points_C);
   std::string seen;

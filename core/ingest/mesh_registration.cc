@@ -1,0 +1,181 @@
+#include "core/ingest/mesh_registration.h"
+
+#include <fmt/format.h>
+#include <open3d/geometry/PointCloud.h>
+#include <open3d/geometry/TriangleMesh.h>
+#include <open3d/pipelines/registration/CorrespondenceChecker.h>
+#include <open3d/pipelines/registration/Feature.h>
+#include <open3d/pipelines/registration/Registration.h>
+#include <open3d/utility/Random.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <numbers>
+
+#include "core/ingest/openmp_threads.h"
+
+namespace softid::ingest {
+namespace {
+
+namespace o3d = open3d;
+namespace reg = open3d::pipelines::registration;
+
+// Points sampled uniformly over the mesh's area, with the triangles' normals.
+std::shared_ptr<o3d::geometry::PointCloud> SampleSurface(const geometry::TriangleMesh& mesh,
+                                                         int count) {
+  o3d::geometry::TriangleMesh o3d_mesh(mesh.vertices, mesh.triangles);
+  o3d_mesh.ComputeTriangleNormals();
+  return o3d_mesh.SamplePointsUniformly(count, /*use_triangle_normal=*/true);
+}
+
+struct Features {
+  std::shared_ptr<o3d::geometry::PointCloud> cloud;
+  std::shared_ptr<reg::Feature> fpfh;
+};
+
+Features DownsampleWithFeatures(const o3d::geometry::PointCloud& cloud, double voxel) {
+  Features out;
+  out.cloud = cloud.VoxelDownSample(voxel);
+  out.cloud->EstimateNormals(o3d::geometry::KDTreeSearchParamHybrid(2 * voxel, 30));
+  out.fpfh =
+      reg::ComputeFPFHFeature(*out.cloud, o3d::geometry::KDTreeSearchParamHybrid(5 * voxel, 100));
+  return out;
+}
+
+// Starting poses (observed -> model) for a grid of orientations: Fibonacci-sphere axes times
+// in-plane turns; the model's centroid is placed behind the observed points' centroid, along the
+// viewing ray, by half the model's mean radius (one side of a body is seen, its centre lies
+// behind).
+std::vector<Eigen::Matrix4d> RotationGridStarts(const geometry::TriangleMesh& mesh_S,
+                                                const std::vector<Eigen::Vector3d>& observed_C,
+                                                int rotations) {
+  Eigen::Vector3d model_centre = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& v : mesh_S.vertices) model_centre += v;
+  model_centre /= static_cast<double>(mesh_S.vertices.size());
+  double radius = 0.0;
+  for (const Eigen::Vector3d& v : mesh_S.vertices) radius += (v - model_centre).norm();
+  radius /= static_cast<double>(mesh_S.vertices.size());
+  Eigen::Vector3d observed_centre = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& p : observed_C) observed_centre += p;
+  observed_centre /= static_cast<double>(observed_C.size());
+  const Eigen::Vector3d centre_C = observed_centre + 0.5 * radius * observed_centre.normalized();
+  constexpr int kTurns = 10;
+  const int axes = std::max(1, rotations / kTurns);
+  const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
+  std::vector<Eigen::Matrix4d> starts;
+  for (int a = 0; a < axes; ++a) {
+    const double z = 1.0 - 2.0 * (a + 0.5) / axes;
+    const double r = std::sqrt(1.0 - z * z);
+    const Eigen::Vector3d axis(r * std::cos(golden * a), r * std::sin(golden * a), z);
+    const Eigen::Matrix3d tilt =
+        Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), axis).toRotationMatrix();
+    for (int t = 0; t < kTurns; ++t) {
+      // R_CS: model -> camera; the start maps observed -> model, its inverse.
+      const Eigen::Matrix3d R_CS =
+          tilt * Eigen::AngleAxisd(2.0 * std::numbers::pi * t / kTurns, Eigen::Vector3d::UnitZ())
+                     .toRotationMatrix();
+      Eigen::Isometry3d X_CS = Eigen::Isometry3d::Identity();
+      X_CS.linear() = R_CS;
+      X_CS.translation() = centre_C - R_CS * model_centre;
+      starts.push_back(X_CS.inverse().matrix());
+    }
+  }
+  return starts;
+}
+
+}  // namespace
+
+Status MeshRegistrationOptions::Validate() const {
+  if (!(voxels_per_diagonal >= 5.0) || !std::isfinite(voxels_per_diagonal)) {
+    return Status::InvalidArgument(
+        fmt::format("voxels_per_diagonal = {}: must be >= 5", voxels_per_diagonal));
+  }
+  if (attempts < 0 || ransac_iterations < 1 || rotations < 0 || attempts + rotations < 1) {
+    return Status::InvalidArgument(
+        fmt::format("attempts = {}, rotations = {}, ransac_iterations = {}: need >= 0, >= 0 (not "
+                    "both 0) and >= 1",
+                    attempts, rotations, ransac_iterations));
+  }
+  if (!(noise_sigma_m >= 0.0) || !std::isfinite(noise_sigma_m) ||
+      !(min_overlap > 0.0 && min_overlap <= 1.0)) {
+    return Status::InvalidArgument(fmt::format(
+        "noise_sigma_m = {}, min_overlap = {}: need >= 0 and (0, 1]", noise_sigma_m, min_overlap));
+  }
+  return Status::Ok();
+}
+
+Result<MeshRegistration> RegisterMesh(const geometry::TriangleMesh& mesh_S,
+                                      const std::vector<Eigen::Vector3d>& observed_C,
+                                      const MeshRegistrationOptions& options) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  if (mesh_S.vertices.empty() || mesh_S.triangles.empty()) {
+    return Status::InvalidArgument("registration: the mesh is empty");
+  }
+  if (observed_C.size() < 30) {
+    return Status::InvalidArgument(fmt::format(
+        "registration: {} observed points of the object (at least 30)", observed_C.size()));
+  }
+  const ScopedOpenMPThreads serial(1);
+  const double voxel = mesh_S.Bounds().diagonal().norm() / options.voxels_per_diagonal;
+  const std::shared_ptr<o3d::geometry::PointCloud> model = SampleSurface(mesh_S, 60000);
+  const o3d::geometry::PointCloud observed(observed_C);
+  const Features model_features = DownsampleWithFeatures(*model, voxel);
+  const Features observed_features = DownsampleWithFeatures(observed, voxel);
+  const reg::CorrespondenceCheckerBasedOnEdgeLength edges(0.9);
+  const reg::CorrespondenceCheckerBasedOnDistance distance(1.5 * voxel);
+  const double fine_distance = std::max(3.0 * options.noise_sigma_m, 0.25 * voxel);
+
+  // Hypotheses: RANSAC on FPFH features, and a grid of rotations with the model set behind the
+  // observed side (features of one side of an object match its whole surface poorly, so RANSAC
+  // alone fails on some views). Each is refined by ICP on the downsampled clouds; the best few by
+  // overlap then by the full clouds.
+  std::vector<Eigen::Matrix4d> starts = RotationGridStarts(mesh_S, observed_C, options.rotations);
+  o3d::utility::random::Seed(static_cast<int>(options.seed));
+  for (int attempt = 0; attempt < options.attempts; ++attempt) {
+    starts.push_back(reg::RegistrationRANSACBasedOnFeatureMatching(
+                         *observed_features.cloud, *model_features.cloud, *observed_features.fpfh,
+                         *model_features.fpfh, /*mutual_filter=*/true, 1.5 * voxel,
+                         reg::TransformationEstimationPointToPoint(false), 3, {edges, distance},
+                         reg::RANSACConvergenceCriteria(options.ransac_iterations, 0.999))
+                         .transformation_);
+  }
+  std::vector<std::pair<double, Eigen::Matrix4d>> coarse;
+  for (const Eigen::Matrix4d& start : starts) {
+    const reg::RegistrationResult r = reg::RegistrationICP(
+        *observed_features.cloud, *model_features.cloud, 2.0 * voxel, start,
+        reg::TransformationEstimationPointToPlane(), reg::ICPConvergenceCriteria(1e-4, 1e-4, 15));
+    coarse.emplace_back(r.fitness_ - r.inlier_rmse_ / (2.0 * voxel), r.transformation_);
+  }
+  const size_t keep = std::min<size_t>(coarse.size(), 6);
+  std::partial_sort(coarse.begin(), coarse.begin() + keep, coarse.end(),
+                    [](const auto& a, const auto& b) { return a.first > b.first; });
+  MeshRegistration best;
+  for (size_t i = 0; i < keep; ++i) {
+    const reg::RegistrationResult mid =
+        reg::RegistrationICP(observed, *model, 1.0 * voxel, coarse[i].second,
+                             reg::TransformationEstimationPointToPlane());
+    const reg::RegistrationResult fine = reg::RegistrationICP(
+        observed, *model, fine_distance, mid.transformation_,
+        reg::TransformationEstimationPointToPlane(), reg::ICPConvergenceCriteria(1e-9, 1e-9, 60));
+    const bool better = fine.fitness_ > best.overlap + 1e-3 ||
+                        (fine.fitness_ > best.overlap - 1e-3 && fine.inlier_rmse_ < best.rms_m);
+    if (i == 0 || better) {
+      best.X_CS = Eigen::Isometry3d(fine.transformation_).inverse();
+      best.overlap = fine.fitness_;
+      best.rms_m = fine.inlier_rmse_;
+      best.hypothesis = static_cast<int>(i);
+    }
+  }
+  best.max_distance_m = fine_distance;
+  if (best.overlap < options.min_overlap) {
+    return Status::FailedPrecondition(fmt::format(
+        "registration of the mesh to the first frame did not converge: {:.0f} % of the {} object "
+        "points lie within {:.1f} mm of the posed mesh (needs {:.0f} %), RMS {:.2f} mm",
+        100 * best.overlap, observed_C.size(), 1e3 * fine_distance, 100 * options.min_overlap,
+        1e3 * best.rms_m));
+  }
+  return best;
+}
+
+}  // namespace softid::ingest
