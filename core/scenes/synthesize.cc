@@ -19,6 +19,33 @@ Status SynthesisOptions::Validate() const {
   return Status::Ok();
 }
 
+nlohmann::json SynthesisTruthJson(const Scene& scene, const RunOptions& run,
+                                  const capture::DepthNoiseOptions& noise, double depth_scale,
+                                  int num_elements, double simulated_mass) {
+  return {
+      {"format", kTruthFormat},
+      {"scene", scene.name},
+      {"parameters", fem::ToJson(scene.parameters)},
+      {"generator",
+       {{"cells_along_longest_side", run.simulation.cells_along_longest_side},
+        {"cell_size", run.simulation.cell_size},
+        {"substeps_per_frame", run.substeps_per_frame},
+        {"time_step", 1.0 / (run.fps * run.substeps_per_frame)},
+        {"newmark_beta", run.simulation.newmark_beta},
+        {"newmark_gamma", run.simulation.newmark_gamma},
+        {"generalized_alpha_m", run.simulation.generalized_alpha_m},
+        {"generalized_alpha_f", run.simulation.generalized_alpha_f},
+        {"elements", num_elements},
+        {"simulated_mass", simulated_mass},
+        {"noise",
+         {{"sigma_constant", noise.sigma_constant},
+          {"sigma_quadratic", noise.sigma_quadratic},
+          {"dropout_probability", noise.dropout_probability},
+          {"seed", noise.seed},
+          {"depth_scale", depth_scale}}}}},
+  };
+}
+
 Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& options,
                                     const std::filesystem::path& out,
                                     const std::function<void(int, int)>& progress) {
@@ -84,28 +111,8 @@ Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& 
   if (ec) return Status::IoError("out = " + out.string() + ": " + ec.message());
 
   // truth.json first: capture.json is written last, so a folder with it is complete.
-  nlohmann::json truth = {
-      {"format", kTruthFormat},
-      {"scene", scene.name},
-      {"parameters", fem::ToJson(scene.parameters)},
-      {"generator",
-       {{"cells_along_longest_side", options.run.simulation.cells_along_longest_side},
-        {"cell_size", options.run.simulation.cell_size},
-        {"substeps_per_frame", options.run.substeps_per_frame},
-        {"time_step", 1.0 / (options.run.fps * options.run.substeps_per_frame)},
-        {"newmark_beta", options.run.simulation.newmark_beta},
-        {"newmark_gamma", options.run.simulation.newmark_gamma},
-        {"generalized_alpha_m", options.run.simulation.generalized_alpha_m},
-        {"generalized_alpha_f", options.run.simulation.generalized_alpha_f},
-        {"elements", summary.num_elements},
-        {"simulated_mass", summary.mass},
-        {"noise",
-         {{"sigma_constant", options.noise.sigma_constant},
-          {"sigma_quadratic", options.noise.sigma_quadratic},
-          {"dropout_probability", options.noise.dropout_probability},
-          {"seed", options.noise.seed},
-          {"depth_scale", options.depth_scale}}}}},
-  };
+  const nlohmann::json truth = SynthesisTruthJson(
+      scene, options.run, options.noise, options.depth_scale, summary.num_elements, summary.mass);
   {
     std::ofstream file(out / kTruthFileName);
     file << truth.dump(2) << "\n";

@@ -37,6 +37,12 @@ struct SynthesisSummary {
   double mean_valid_pixels = 0.0;  // per frame and camera
 };
 
+// truth.json of a synthetic capture or recording: format, scene name, the true parameters under
+// their public names and the generator's settings (run, noise, depth scale, element count, mass).
+nlohmann::json SynthesisTruthJson(const Scene& scene, const RunOptions& run,
+                                  const capture::DepthNoiseOptions& noise, double depth_scale,
+                                  int num_elements, double simulated_mass);
+
 // Writes <out>/capture.json, <out>/object.obj, <out>/camN/%06d.png, <out>/truth.json and
 // <out>/preview.png (a contact sheet of the first camera's frames).
 // Refuses to write into a folder that already holds a capture.json.
