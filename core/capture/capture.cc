@@ -122,6 +122,10 @@ json ToJson(const Capture& capture) {
   }
   out["cameras"] = std::move(cameras);
   if (!capture.frame_times.empty()) out["frame_times"] = capture.frame_times;
+  if (capture.floor) {
+    const Eigen::Vector3d& n = capture.floor->normal;
+    out["floor"] = {{"normal", {n.x(), n.y(), n.z()}}, {"offset", capture.floor->offset_m}};
+  }
   return out;
 }
 
@@ -171,6 +175,20 @@ Result<Capture> CaptureFromJson(const json& root, std::string_view source) {
       }
     }
     capture.fixed_region = Eigen::AlignedBox3d(min, max);
+  }
+
+  if (const auto it = root.find("floor"); it != root.end()) {
+    SOFTID_RETURN_IF_ERROR(reader.CheckObject("floor", *it));
+    SOFTID_ASSIGN_OR_RETURN(const json* normal, reader.Require(*it, "floor", "normal"));
+    SOFTID_ASSIGN_OR_RETURN(const json* offset, reader.Require(*it, "floor", "offset"));
+    Capture::Floor floor;
+    SOFTID_ASSIGN_OR_RETURN(floor.normal, reader.Vector3("floor.normal", *normal));
+    if (!(floor.normal.norm() > 1e-9)) {
+      return reader.Error("floor.normal", *normal, "must not be zero");
+    }
+    floor.normal.normalize();
+    SOFTID_ASSIGN_OR_RETURN(floor.offset_m, reader.Number("floor.offset", *offset));
+    capture.floor = floor;
   }
 
   SOFTID_ASSIGN_OR_RETURN(const json* cameras, reader.Require(root, "", "cameras"));

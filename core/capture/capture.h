@@ -15,7 +15,9 @@
 //       "world_from_camera": [16 numbers, row-major 4x4],    // X_WC, rigid; OpenCV camera axes
 //       "frames": ["cam0/000000.png", "cam0/000001.png"]     // frame k shows time k / fps
 //     }],
-//     "frame_times": [0.0, 0.0171]        // optional [s]: time of frame k instead of k / fps
+//     "frame_times": [0.0, 0.0171],       // optional [s]: time of frame k instead of k / fps
+//     "floor": {"normal": [0, 0, 1], "offset": 0.0}  // optional: the floor n . x = offset [m] as
+//                                         // measured; the ground's value unless a job sets it
 //   }
 // Gravity is -z in the world frame. Every camera has the same number of frames (>= 1). Frames are
 // 16-bit single-channel PNGs of depth along the camera z axis (value * depth_scale metres), 0 = no
@@ -86,6 +88,14 @@ struct Capture {
   std::vector<double> frame_times;
   std::optional<double> mass_kg;                    // [kg], > 0 when present
   std::optional<Eigen::AlignedBox3d> fixed_region;  // world frame [m]: nodes inside are clamped
+  // The floor as the station measured it (e.g. softid-lab ingest): the plane n . x = offset_m in
+  // the world frame, n a unit vector pointing up. A fit takes it as the ground plane unless the
+  // job config fixes or starts the ground itself.
+  struct Floor {
+    Eigen::Vector3d normal{0, 0, 1};
+    double offset_m = 0.0;
+  };
+  std::optional<Floor> floor;
   std::vector<CameraRecording> cameras;
 
   // Number of frames per camera (all cameras have the same); 0 without cameras.

@@ -500,7 +500,10 @@ Result<fem::PhysicalParameters> BaseParameters(const capture::Capture& capture,
   const bool ground_given =
       config.fixed.contains("ground") || (config.initial.count("ground_plane") > 0 &&
                                           config.initial.at("ground_plane").value.has_value());
-  if (config.IsFitted("ground_plane") && !ground_given) {
+  if (capture.floor && !ground_given) {
+    // The floor the station measured starts (or, when not fitted, is) the ground.
+    base.ground = fem::GroundPlane{capture.floor->normal, capture.floor->offset_m};
+  } else if (config.IsFitted("ground_plane") && !ground_given) {
     const Eigen::Vector3d normal = -base.gravity.normalized();
     double lowest = std::numeric_limits<double>::infinity();
     for (const ObservedFrame& frame : frames) {

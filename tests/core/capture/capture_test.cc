@@ -692,5 +692,31 @@ TEST(CaptureRejects, BadFrameTimes) {
                 {"frame_times", "must be a JSON array"});
 }
 
+// The floor a station measured round-trips, normalised; malformed floors name the field.
+TEST(Capture, FloorIsReadNormalisedAndRoundTrips) {
+  const CaptureDir dir;
+  const Result<Capture> with_floor = dir.ReadEdited([](json& j) {
+    j["floor"] = {{"normal", {0.0, 0.0, 2.0}}, {"offset", -0.25}};
+  });
+  ASSERT_TRUE(with_floor.ok()) << with_floor.status().ToString();
+  ASSERT_TRUE(with_floor->floor.has_value());
+  EXPECT_EQ(with_floor->floor->normal, Eigen::Vector3d(0, 0, 1));
+  EXPECT_EQ(with_floor->floor->offset_m, -0.25);
+  const Result<Capture> again = CaptureFromJson(ToJson(*with_floor));
+  ASSERT_TRUE(again.ok());
+  EXPECT_EQ(again->floor->offset_m, -0.25);
+  Capture without = *with_floor;
+  without.floor.reset();
+  EXPECT_FALSE(ToJson(without).contains("floor"));
+  ExpectInvalid(dir.ReadEdited([](json& j) {
+    j["floor"] = {{"normal", {0, 0, 0}}, {"offset", 0}};
+  }),
+                {"floor.normal", "must not be zero"});
+  ExpectInvalid(dir.ReadEdited([](json& j) {
+    j["floor"] = {{"normal", {0, 0, 1}}};
+  }),
+                {"floor.offset", "missing"});
+}
+
 }  // namespace
 }  // namespace softid::capture
