@@ -28,6 +28,8 @@ packages=(
   # fuzzing (tests/fuzz): clang with libFuzzer and the sanitizer runtimes; llvm-14 for
   # llvm-symbolizer, which puts file and line into the stack trace of a crash
   clang-14 libclang-rt-14-dev llvm-14
+  # OpenMP for clang: the whole project is configured in the fuzz build (core/ingest needs it)
+  libomp-14-dev
 )
 
 missing=()

@@ -4,7 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <opencv2/imgproc.hpp>
+#include <opencv2/core.hpp>
 
 namespace softid::ingest {
 
@@ -15,6 +15,10 @@ Status ForegroundOptions::Validate() const {
   }
   if (!(min_margin_m >= 0.0) || !std::isfinite(min_margin_m)) {
     return Status::InvalidArgument(fmt::format("min_margin_m = {}: must be >= 0", min_margin_m));
+  }
+  if (!(max_depth_step > 0.0) || !std::isfinite(max_depth_step)) {
+    return Status::InvalidArgument(
+        fmt::format("max_depth_step = {}: must be positive", max_depth_step));
   }
   if (min_region_pixels < 1) {
     return Status::InvalidArgument(
@@ -44,29 +48,47 @@ Result<Foreground> SegmentForeground(const capture::DepthImage& frame, const Sta
       if (behind <= 0.0f || behind - z > margin) candidates(row, col) = 1;
     }
   }
-  cv::Mat1i labels;
-  cv::Mat stats, centroids;
-  const int count = cv::connectedComponentsWithStats(candidates, labels, stats, centroids, 8);
+  // Regions: 8-connected candidates whose depths join without a jump (a pixel of the object and a
+  // noisy floor pixel beside its silhouette are neighbours in the image, not in space). OpenCV's
+  // connected components know no depth, hence this flood fill.
   Foreground out;
   out.width = frame.width;
   out.height = frame.height;
   out.mask.assign(static_cast<size_t>(frame.width) * frame.height, 0);
-  std::vector<int> region_of_label(count, -1);
-  for (int label = 1; label < count; ++label) {
-    if (stats.at<int>(label, cv::CC_STAT_AREA) < options.min_region_pixels) continue;
-    region_of_label[label] = static_cast<int>(out.regions.size());
-    out.regions.emplace_back();
-  }
-  for (int row = 0; row < frame.height; ++row) {
-    for (int col = 0; col < frame.width; ++col) {
-      const int region = region_of_label[labels(row, col)];
-      if (labels(row, col) == 0 || region < 0) continue;
-      const int pixel = row * frame.width + col;
-      const Eigen::Vector2d& xy = rays.at(col, row);
-      out.regions[region].pixels.push_back(pixel);
-      out.regions[region].centroid_C += frame.at(col, row) * Eigen::Vector3d(xy.x(), xy.y(), 1.0);
-      out.mask[pixel] = 1;
+  std::vector<int> label(out.mask.size(), -1), stack, members;
+  for (int seed = 0; seed < static_cast<int>(label.size()); ++seed) {
+    if (!candidates(seed / frame.width, seed % frame.width) || label[seed] >= 0) continue;
+    members.clear();
+    stack.assign(1, seed);
+    label[seed] = seed;
+    while (!stack.empty()) {
+      const int p = stack.back();
+      stack.pop_back();
+      members.push_back(p);
+      const int row = p / frame.width, col = p % frame.width;
+      const float z = frame.depth[p];
+      for (int dr = -1; dr <= 1; ++dr) {
+        for (int dc = -1; dc <= 1; ++dc) {
+          const int r = row + dr, c = col + dc;
+          if (r < 0 || c < 0 || r >= frame.height || c >= frame.width) continue;
+          const int q = r * frame.width + c;
+          if (label[q] >= 0 || !candidates(r, c)) continue;
+          if (std::abs(frame.depth[q] - z) > options.max_depth_step * z) continue;
+          label[q] = seed;
+          stack.push_back(q);
+        }
+      }
     }
+    if (static_cast<int>(members.size()) < options.min_region_pixels) continue;
+    ForegroundRegion region;
+    region.pixels = members;
+    std::sort(region.pixels.begin(), region.pixels.end());
+    for (const int p : region.pixels) {
+      const Eigen::Vector2d& xy = rays.xy[p];
+      region.centroid_C += frame.depth[p] * Eigen::Vector3d(xy.x(), xy.y(), 1.0);
+      out.mask[p] = 1;
+    }
+    out.regions.push_back(std::move(region));
   }
   for (ForegroundRegion& region : out.regions) region.centroid_C /= region.pixels.size();
   std::sort(out.regions.begin(), out.regions.end(),

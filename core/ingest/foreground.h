@@ -18,7 +18,11 @@ struct ForegroundOptions {
   // that pixel's noise and by more than min_margin_m (sigma from few frames can be tiny).
   double noise_sigmas = 4.0;
   double min_margin_m = 0.004;
-  // Connected regions (8-neighbourhood) of fewer pixels are noise, not objects.
+  // Neighbouring pixels (8-neighbourhood) belong to one region when their depths differ by at most
+  // this fraction of the depth: a surface seen at 80 degrees from its normal steps about 2 % per
+  // pixel at 140-pixel focal lengths; the gap between an object and the floor behind it is larger.
+  double max_depth_step = 0.05;
+  // Regions of fewer pixels are noise, not objects.
   int min_region_pixels = 12;
 
   Status Validate() const;

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <map>
 
 namespace softid::ingest {
 namespace {
@@ -15,6 +16,30 @@ float Median(std::vector<float>& values) {
   return values[mid];
 }
 
+// A pixel seen behind the object in few frames has a sigma from few readings, often far too
+// small. The sensor's noise depends on depth: each pixel's sigma is raised to the median sigma of
+// the pixels at its depth (bins 3 % wide, at least 20 pixels each).
+void FloorSigmaByDepth(StaticScene* scene) {
+  constexpr double kBinRatio = 1.03;
+  constexpr size_t kMinPixels = 20;
+  std::map<int, std::vector<float>> bins;
+  const auto bin_of = [&](float z) {
+    return static_cast<int>(std::floor(std::log(z) / std::log(kBinRatio)));
+  };
+  for (size_t p = 0; p < scene->depth_m.size(); ++p) {
+    if (scene->depth_m[p] > 0.0f) bins[bin_of(scene->depth_m[p])].push_back(scene->sigma_m[p]);
+  }
+  std::map<int, float> floor;
+  for (auto& [bin, sigmas] : bins) {
+    if (sigmas.size() >= kMinPixels) floor[bin] = Median(sigmas);
+  }
+  for (size_t p = 0; p < scene->depth_m.size(); ++p) {
+    if (scene->depth_m[p] <= 0.0f) continue;
+    const auto it = floor.find(bin_of(scene->depth_m[p]));
+    if (it != floor.end()) scene->sigma_m[p] = std::max(scene->sigma_m[p], it->second);
+  }
+}
+
 }  // namespace
 
 Status StaticSceneOptions::Validate() const {
@@ -22,8 +47,8 @@ Status StaticSceneOptions::Validate() const {
     return Status::InvalidArgument(
         fmt::format("cluster_width_m = {}: must be positive", cluster_width_m));
   }
-  if (!(min_share > 0.0 && min_share <= 1.0)) {
-    return Status::InvalidArgument(fmt::format("min_share = {}: must lie in (0, 1]", min_share));
+  if (min_readings < 1) {
+    return Status::InvalidArgument(fmt::format("min_readings = {}: must be >= 1", min_readings));
   }
   return Status::Ok();
 }
@@ -46,8 +71,7 @@ Result<StaticScene> EstimateStaticScene(const std::vector<capture::DepthImage>& 
   }
   scene.depth_m.assign(pixels, 0.0f);
   scene.sigma_m.assign(pixels, 0.0f);
-  const size_t min_count =
-      std::max<size_t>(1, static_cast<size_t>(std::ceil(options.min_share * images.size())));
+  const size_t min_count = static_cast<size_t>(options.min_readings);
   std::vector<float> readings, cluster;
   readings.reserve(images.size());
   cluster.reserve(images.size());
@@ -73,6 +97,7 @@ Result<StaticScene> EstimateStaticScene(const std::vector<capture::DepthImage>& 
       break;
     }
   }
+  FloorSigmaByDepth(&scene);
   return scene;
 }
 

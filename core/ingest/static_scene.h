@@ -33,9 +33,11 @@ struct StaticSceneOptions {
   // consistent reading, so a moving object never becomes background even if it covers a pixel in
   // most frames.
   double cluster_width_m = 0.02;
-  // A pixel is static scene only if this share of its frames shows the scene (others: no data
-  // or the object in front).
-  double min_share = 0.05;
+  // Readings the farthest window needs to count as the scene. One: a pixel where the object
+  // rests for most of the recording shows what is behind it only in the frames before it came to
+  // rest, sometimes just once (a rarer reading farther away than the scene does not occur: a
+  // sensor's flying pixels lie between an object and what is behind it).
+  int min_readings = 1;
 
   Status Validate() const;
 };
@@ -43,7 +45,8 @@ struct StaticSceneOptions {
 // The static scene from `images` of one camera (background frames of the empty scene, or the
 // recording's own frames: the object moves, so every pixel shows the scene behind it in some
 // frames). Per pixel: the farthest cluster of readings (within cluster_width_m of the farthest
-// one), its median as the depth and 1.4826 times its median absolute deviation as sigma.
+// one), its median as the depth and 1.4826 times its median absolute deviation as sigma, raised to
+// the median sigma of the pixels at the same depth (few readings understate the noise).
 // InvalidArgument when images is empty or sizes differ, naming the image.
 Result<StaticScene> EstimateStaticScene(const std::vector<capture::DepthImage>& images,
                                         const StaticSceneOptions& options = {});

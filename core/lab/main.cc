@@ -29,13 +29,15 @@ int main(int argc, char** argv) {
   add("simulate", "simulate a scene and write the deformed surface per frame (PLY)",
       softid::lab::RegisterSimulate);
   add("bench", "time simulation steps at several grid sizes", softid::lab::RegisterBench);
+  add("ingest", "turn a raw recording into a capture (writes capture.json, ingest.json)",
+      softid::lab::RegisterIngest);
   add("fit", "recover physical parameters from a capture (writes result.json)",
       softid::lab::RegisterFit);
   add("diagnose", "fit, then look for physics the model left out (writes diagnosis.json)",
       softid::lab::RegisterDiagnose);
   add("prove-diagnosis", "concealed-effect benchmark of the diagnosis (confusion table)",
       softid::lab::RegisterProveDiagnosis);
-  add("reproduce", "benchmarks of issue 3: table1 | ball-bounce | pillow-ramp | bar-hanging",
+  add("reproduce", "benchmarks: table1 | ball-bounce | pillow-ramp | bar-hanging",
       softid::lab::RegisterReproduce);
   try {
     app.parse(argc, argv);

@@ -1,0 +1,316 @@
+#include "core/ingest/ingest.h"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "core/capture/capture.h"
+#include "core/capture/pixel_rays.h"
+#include "core/ingest/timeline.h"
+
+namespace softid::ingest {
+namespace {
+
+using capture::DepthImage;
+
+// One camera's view: its lens, static scene, pose and the object's points per recording frame.
+struct CameraView {
+  capture::PixelRays rays;
+  StaticScene scene;
+  Eigen::Isometry3d X_WC = Eigen::Isometry3d::Identity();
+  std::vector<std::vector<Eigen::Vector3d>> object_points_C;  // per recording frame
+};
+
+Result<StaticScene> CameraStaticScene(const recording::Recording& rec, int c,
+                                      const IngestOptions& options, bool* from_background) {
+  const recording::RecordingCamera& camera = rec.cameras[c];
+  std::vector<DepthImage> images;
+  *from_background = !camera.background.empty();
+  if (*from_background) {
+    for (int b = 0; b < static_cast<int>(camera.background.size()); ++b) {
+      SOFTID_ASSIGN_OR_RETURN(DepthImage image, recording::LoadBackgroundFrame(rec, c, b));
+      images.push_back(std::move(image));
+    }
+  } else {
+    const int n = static_cast<int>(camera.frames.size());
+    const int used = std::min(n, options.max_static_frames);
+    for (int i = 0; i < used; ++i) {
+      const int k = used == 1 ? 0 : static_cast<int>(std::lround(i * (n - 1.0) / (used - 1.0)));
+      SOFTID_ASSIGN_OR_RETURN(DepthImage image, recording::LoadRecordingFrame(rec, c, k));
+      images.push_back(std::move(image));
+    }
+  }
+  return EstimateStaticScene(images, options.static_scene);
+}
+
+bool OnBorder(int pixel, int width, int height) {
+  const int row = pixel / width, col = pixel % width;
+  return row == 0 || col == 0 || row == height - 1 || col == width - 1;
+}
+
+// Segments and tracks the object through every frame of camera c.
+Status SegmentCamera(const recording::Recording& rec, int c, double object_radius_m,
+                     const IngestOptions& options, CameraView* view, CameraIngest* report,
+                     const IngestProgress& progress) {
+  const recording::RecordingCamera& camera = rec.cameras[c];
+  const int n = static_cast<int>(camera.frames.size());
+  ObjectTracker tracker(object_radius_m, options.tracking);
+  int frames_on_border = 0;
+  for (int k = 0; k < n; ++k) {
+    SOFTID_ASSIGN_OR_RETURN(DepthImage image, recording::LoadRecordingFrame(rec, c, k));
+    SOFTID_ASSIGN_OR_RETURN(Foreground fg,
+                            SegmentForeground(image, view->scene, view->rays, options.foreground));
+    const TrackedFrame tracked = tracker.Track(fg, view->X_WC, camera.frames[k].time_s);
+    if (k == 0 && !tracked.found) {
+      return Status::FailedPrecondition(fmt::format(
+          "ingest: camera \"{}\" frame 0 ({}): no foreground: nothing is nearer than the static "
+          "scene (is the object in view, and does it move during the recording?)",
+          camera.camera.name, camera.frames[0].file));
+    }
+    std::vector<Eigen::Vector3d> points;
+    points.reserve(tracked.pixels.size());
+    bool border = false;
+    for (const int pixel : tracked.pixels) {
+      const Eigen::Vector2d& xy = view->rays.xy[pixel];
+      points.push_back(image.depth[pixel] * Eigen::Vector3d(xy.x(), xy.y(), 1.0));
+      border = border || OnBorder(pixel, image.width, image.height);
+    }
+    frames_on_border += border ? 1 : 0;
+    report->object_pixels.push_back(static_cast<int>(tracked.pixels.size()));
+    report->rejected_regions.push_back(tracked.rejected_regions);
+    report->object_masks.push_back(tracked.pixels);
+    view->object_points_C.push_back(std::move(points));
+    if (progress) progress("segmentation", k + 1, n);
+  }
+  if (frames_on_border == n) {
+    return Status::FailedPrecondition(fmt::format(
+        "ingest: camera \"{}\": the object touches the image border in all {} frames: it is cut "
+        "off (move the camera back or the object into view)",
+        camera.camera.name, n));
+  }
+  return Status::Ok();
+}
+
+// A mesh in the wrong unit cannot match: compare its size with the spread of the object's points.
+Status CheckMeshScale(const geometry::TriangleMesh& mesh, const std::vector<Eigen::Vector3d>& seen,
+                      const std::string& camera_name) {
+  Eigen::AlignedBox3d box;
+  for (const Eigen::Vector3d& p : seen) box.extend(p);
+  const double seen_m = box.diagonal().norm();
+  const double mesh_m = mesh.Bounds().diagonal().norm();
+  if (seen_m > 1.5 * mesh_m || seen_m < 0.05 * mesh_m) {
+    return Status::FailedPrecondition(fmt::format(
+        "ingest: camera \"{}\" frame 0: the object's points span {:.3g} m but the mesh's diagonal "
+        "is {:.3g} m: the mesh's size cannot match (is mesh_unit right?)",
+        camera_name, seen_m, mesh_m));
+  }
+  return Status::Ok();
+}
+
+// The object's points drawn into the camera's ideal pinhole image: each point at its nearest
+// pixel, the nearest point winning (never a blend of depths).
+DepthImage SplatToPinhole(const std::vector<Eigen::Vector3d>& points_C,
+                          const capture::PinholeCamera& camera) {
+  DepthImage image = DepthImage::Zeros(camera.width, camera.height);
+  for (const Eigen::Vector3d& p : points_C) {
+    if (p.z() <= 0.0) continue;
+    const int col = static_cast<int>(std::lround(camera.fx * p.x() / p.z() + camera.cx));
+    const int row = static_cast<int>(std::lround(camera.fy * p.y() / p.z() + camera.cy));
+    if (col < 0 || row < 0 || col >= camera.width || row >= camera.height) continue;
+    float& z = image.at(col, row);
+    if (z == 0.0f || p.z() < z) z = static_cast<float>(p.z());
+  }
+  return image;
+}
+
+Status WriteIngestJson(const std::filesystem::path& path, const IngestReport& report) {
+  std::ofstream file(path);
+  file << report.ToJson().dump(2) << "\n";
+  file.close();
+  if (!file) return Status::IoError(fmt::format("{}: cannot write", path.string()));
+  return Status::Ok();
+}
+
+nlohmann::json PoseJson(const Eigen::Isometry3d& X) {
+  nlohmann::json out = nlohmann::json::array();
+  for (int i = 0; i < 16; ++i) out.push_back(X.matrix()(i / 4, i % 4));
+  return out;
+}
+
+}  // namespace
+
+Status IngestOptions::Validate() const {
+  SOFTID_RETURN_IF_ERROR(static_scene.Validate());
+  SOFTID_RETURN_IF_ERROR(foreground.Validate());
+  SOFTID_RETURN_IF_ERROR(floor.Validate());
+  SOFTID_RETURN_IF_ERROR(tracking.Validate());
+  SOFTID_RETURN_IF_ERROR(registration.Validate());
+  if (max_static_frames < 1) {
+    return Status::InvalidArgument(
+        fmt::format("max_static_frames = {}: must be >= 1", max_static_frames));
+  }
+  if (!(same_time_s >= 0.0) || !std::isfinite(same_time_s)) {
+    return Status::InvalidArgument(fmt::format("same_time_s = {}: must be >= 0", same_time_s));
+  }
+  return Status::Ok();
+}
+
+nlohmann::json IngestReport::ToJson() const {
+  nlohmann::json cams = nlohmann::json::array();
+  for (const CameraIngest& c : cameras) {
+    cams.push_back({{"name", c.name},
+                    {"static_scene_from", c.static_from_background ? "background" : "frames"},
+                    {"object_pixels", c.object_pixels},
+                    {"rejected_regions", c.rejected_regions}});
+  }
+  return {{"format", "softid-ingest/1"},
+          {"cameras", std::move(cams)},
+          {"floor",
+           {{"normal", {floor_W.normal_W.x(), floor_W.normal_W.y(), floor_W.normal_W.z()}},
+            {"offset_m", floor_W.offset_m},
+            {"inliers", floor_C.inliers},
+            {"inlier_share", floor_C.inlier_share},
+            {"rms_m", floor_C.rms_m},
+            {"world_frame_from_floor", world_from_floor}}},
+          {"registration",
+           {{"overlap", registration.overlap},
+            {"rms_m", registration.rms_m},
+            {"max_distance_m", registration.max_distance_m},
+            {"world_from_mesh", PoseJson(X_WS)}}},
+          {"time",
+           {{"origin_s", time_origin_s},
+            {"frames", frame_times_s.size()},
+            {"median_interval_s", median_interval_s},
+            {"max_gap_s", max_gap_s}}}};
+}
+
+namespace {
+
+// Stage 2: the floor in camera 0's static scene, and every camera's pose in the world frame
+// (given, or built on the floor for a single camera without one).
+Status FloorAndWorld(const recording::Recording& rec, const IngestOptions& options,
+                     std::vector<CameraView>* views, IngestReport* report) {
+  const recording::RecordingCamera& camera0 = rec.cameras[0];
+  std::vector<Eigen::Vector3d> points;
+  std::vector<float> sigmas;
+  StaticScenePoints((*views)[0].scene, (*views)[0].rays, &points, &sigmas);
+  // Up: the world's z seen from a posed camera, else image up (OpenCV's y points down).
+  const Eigen::Vector3d up_C = camera0.has_world_from_camera
+                                   ? Eigen::Vector3d(camera0.camera.X_WC.linear().row(2))
+                                   : Eigen::Vector3d(0.0, -1.0, 0.0);
+  Result<FloorPlane> floor = FindFloorPlane(points, sigmas, up_C, options.floor);
+  if (!floor.ok()) {
+    return floor.status().WithContext(fmt::format("ingest: camera \"{}\"", camera0.camera.name));
+  }
+  report->floor_C = *floor;
+  for (int c = 0; c < rec.NumCameras(); ++c) (*views)[c].X_WC = rec.cameras[c].camera.X_WC;
+  if (!camera0.has_world_from_camera) {
+    (*views)[0].X_WC = WorldFromFloor(*floor);
+    report->world_from_floor = true;
+  }
+  report->floor_W = FloorInWorld(*floor, (*views)[0].X_WC);
+  return Status::Ok();
+}
+
+// Stage 4: the mesh's pose at the release, from camera 0's first frame.
+Status PoseMesh(const recording::Recording& rec, const geometry::TriangleMesh& mesh_S,
+                const IngestOptions& options, const std::vector<CameraView>& views,
+                IngestReport* report) {
+  const std::vector<Eigen::Vector3d>& first = views[0].object_points_C[0];
+  SOFTID_RETURN_IF_ERROR(CheckMeshScale(mesh_S, first, rec.cameras[0].camera.name));
+  MeshRegistrationOptions registration = options.registration;
+  std::vector<float> sigmas = views[0].scene.sigma_m;
+  std::erase(sigmas, 0.0f);
+  if (!sigmas.empty()) {
+    std::nth_element(sigmas.begin(), sigmas.begin() + sigmas.size() / 2, sigmas.end());
+    registration.noise_sigma_m = std::max<double>(sigmas[sigmas.size() / 2], 1e-4);
+  }
+  Result<MeshRegistration> found = RegisterMesh(mesh_S, first, registration);
+  if (!found.ok()) {
+    return found.status().WithContext(
+        fmt::format("ingest: camera \"{}\" frame 0", rec.cameras[0].camera.name));
+  }
+  report->registration = *found;
+  report->X_WS = views[0].X_WC * found->X_CS;
+  return Status::Ok();
+}
+
+// Stage 5: the capture folder: one clock, the object's points on each camera's ideal pinhole.
+Status WriteIngestedCapture(const recording::Recording& rec, const geometry::TriangleMesh& mesh_S,
+                            const IngestOptions& options, const std::vector<CameraView>& views,
+                            const std::filesystem::path& capture_dir, IngestReport* report) {
+  const Timeline timeline = MergeTimeline(rec, options.same_time_s);
+  report->time_origin_s = timeline.origin_s;
+  report->median_interval_s = timeline.median_interval_s;
+  report->max_gap_s = timeline.max_gap_s;
+  capture::Capture capture;
+  capture.mesh_file = "object.obj";
+  capture.fps = timeline.median_interval_s > 0.0 ? 1.0 / timeline.median_interval_s : 30.0;
+  capture.mass_kg = rec.mass_kg;
+  capture.floor = capture::Capture::Floor{report->floor_W.normal_W, report->floor_W.offset_m};
+  std::vector<std::vector<DepthImage>> frames(rec.NumCameras());
+  for (int c = 0; c < rec.NumCameras(); ++c) {
+    capture::CameraRecording camera;
+    camera.camera = rec.cameras[c].camera;
+    camera.camera.X_WC = views[c].X_WC;
+    camera.depth_scale = rec.cameras[c].depth_scale;
+    capture.cameras.push_back(camera);
+  }
+  for (const TimelineFrame& entry : timeline.frames) {
+    capture.frame_times.push_back(entry.time_s);
+    report->frame_times_s.push_back(entry.time_s);
+    for (int c = 0; c < rec.NumCameras(); ++c) {
+      const capture::PinholeCamera& camera = capture.cameras[c].camera;
+      frames[c].push_back(
+          entry.frame_of[c] < 0
+              ? DepthImage::Zeros(camera.width, camera.height)
+              : SplatToPinhole(views[c].object_points_C[entry.frame_of[c]], camera));
+    }
+  }
+  geometry::TriangleMesh mesh_W = mesh_S;
+  for (Eigen::Vector3d& v : mesh_W.vertices) v = report->X_WS * v;
+  SOFTID_RETURN_IF_ERROR(capture::WriteCapture(capture_dir, capture, mesh_W, frames));
+  return WriteIngestJson(capture_dir / "ingest.json", *report);
+}
+
+}  // namespace
+
+Result<IngestReport> Ingest(const recording::Recording& rec,
+                            const std::filesystem::path& capture_dir, const IngestOptions& options,
+                            const IngestProgress& progress) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  if (rec.NumCameras() == 0) return Status::InvalidArgument("ingest: the recording has no camera");
+  SOFTID_ASSIGN_OR_RETURN(const geometry::TriangleMesh mesh_S, recording::LoadRecordingMesh(rec));
+  IngestReport report;
+  std::vector<CameraView> views(rec.NumCameras());
+  report.cameras.resize(rec.NumCameras());
+  // 1. Each camera's lens and static scene.
+  for (int c = 0; c < rec.NumCameras(); ++c) {
+    report.cameras[c].name = rec.cameras[c].camera.name;
+    SOFTID_ASSIGN_OR_RETURN(
+        views[c].rays, capture::ComputePixelRays(rec.cameras[c].camera, rec.cameras[c].distortion));
+    SOFTID_ASSIGN_OR_RETURN(
+        views[c].scene,
+        CameraStaticScene(rec, c, options, &report.cameras[c].static_from_background));
+    if (progress) progress("static scene", c + 1, rec.NumCameras());
+  }
+  // 2. The floor and the world frame.
+  SOFTID_RETURN_IF_ERROR(FloorAndWorld(rec, options, &views, &report));
+  // 3. The object's pixels in every frame.
+  const double object_radius_m = 0.5 * mesh_S.Bounds().diagonal().norm();
+  for (int c = 0; c < rec.NumCameras(); ++c) {
+    SOFTID_RETURN_IF_ERROR(
+        SegmentCamera(rec, c, object_radius_m, options, &views[c], &report.cameras[c], progress));
+  }
+  // 4. The mesh's pose at the release.
+  SOFTID_RETURN_IF_ERROR(PoseMesh(rec, mesh_S, options, views, &report));
+  if (progress) progress("registration", 1, 1);
+  // 5. The capture.
+  SOFTID_RETURN_IF_ERROR(WriteIngestedCapture(rec, mesh_S, options, views, capture_dir, &report));
+  return report;
+}
+
+}  // namespace softid::ingest

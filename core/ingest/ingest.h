@@ -1,0 +1,76 @@
+// A raw recording (softid-recording/1) turned into a capture (softid-capture/1) that every fit and
+// the service read: the static scene and the object's pixels in every frame, the floor and the
+// world frame, the scanned mesh posed at the release, one clock for all cameras. The stages are
+// in this folder; this runs them in order and writes the capture and ingest.json.
+#pragma once
+
+#include <Eigen/Geometry>
+#include <filesystem>
+#include <functional>
+#include <nlohmann/json_fwd.hpp>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "core/common/status.h"
+#include "core/ingest/floor_plane.h"
+#include "core/ingest/foreground.h"
+#include "core/ingest/mesh_registration.h"
+#include "core/ingest/object_tracking.h"
+#include "core/ingest/static_scene.h"
+#include "core/ingest/world_frame.h"
+#include "core/recording/recording.h"
+
+namespace softid::ingest {
+
+struct IngestOptions {
+  StaticSceneOptions static_scene;
+  ForegroundOptions foreground;
+  FloorPlaneOptions floor;
+  ObjectTrackingOptions tracking;
+  MeshRegistrationOptions registration;
+  // Without background frames, the static scene comes from at most this many frames spread over
+  // the recording (memory stays bounded for long recordings).
+  int max_static_frames = 64;
+  // Frames of different cameras this close in time form one capture frame [s].
+  double same_time_s = 1e-4;
+
+  Status Validate() const;
+};
+
+struct CameraIngest {
+  std::string name;
+  bool static_from_background = false;
+  std::vector<int> object_pixels;     // per recording frame (0: object not found)
+  std::vector<int> rejected_regions;  // per recording frame: foreground left out
+  // Per recording frame: the object's pixels (row-major indices in the raw, distorted image).
+  std::vector<std::vector<int>> object_masks;
+};
+
+struct IngestReport {
+  std::vector<CameraIngest> cameras;
+  FloorPlane floor_C;             // in camera 0's frame
+  WorldPlane floor_W;             // in the world frame
+  bool world_from_floor = false;  // the world frame was built on the floor (no camera pose given)
+  MeshRegistration registration;  // in camera 0's frame, on its first frame
+  Eigen::Isometry3d X_WS = Eigen::Isometry3d::Identity();  // mesh pose at the release
+  double time_origin_s = 0.0;                              // device-clock time of t = 0
+  std::vector<double> frame_times_s;
+  double median_interval_s = 0.0, max_gap_s = 0.0;
+
+  // ingest.json contents (masks left out).
+  nlohmann::json ToJson() const;
+};
+
+using IngestProgress = std::function<void(std::string_view stage, int done, int total)>;
+
+// Ingests `recording` into the capture folder `capture_dir` (capture.json, object.obj, per-camera
+// frames with only the object's pixels, undistorted onto the camera's ideal pinhole without
+// interpolation; frame_times) plus ingest.json. Errors name the stage, the camera and the frame:
+// no foreground, the object on the image border in every frame, a mesh whose size cannot match
+// the object's points, a registration that does not converge (overlap and RMS), no floor.
+Result<IngestReport> Ingest(const recording::Recording& recording,
+                            const std::filesystem::path& capture_dir,
+                            const IngestOptions& options = {}, const IngestProgress& progress = {});
+
+}  // namespace softid::ingest

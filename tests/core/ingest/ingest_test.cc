@@ -1,0 +1,166 @@
+// A synthetic raw recording (softid-lab synth --raw: floor, walls, clutter, a dropped torus,
+// distorted lens, structured-light noise, jittery clock with drops, the mesh in mm in a random
+// scanner pose) ingested into a capture and held against its truth: masks, floor, mesh pose,
+// frame times; and the ingest's refusals.
+#include "core/ingest/ingest.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <numbers>
+#include <opencv2/imgcodecs.hpp>
+
+#include "core/capture/capture.h"
+#include "core/capture/depth_noise.h"
+#include "core/geometry/mesh_distance.h"
+#include "core/scenes/raw_recording_synthesis.h"
+#include "core/scenes/scene.h"
+
+namespace softid::ingest {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct RawDir {
+  fs::path path;
+  explicit RawDir(const std::string& name)
+      : path(fs::temp_directory_path() /
+             ("softid_ingest_" + name + "_" + std::to_string(getpid()))) {
+    fs::remove_all(path);
+  }
+  ~RawDir() { fs::remove_all(path); }
+};
+
+scenes::RawSynthesisOptions RecordingOptions(int background_frames) {
+  scenes::RawSynthesisOptions options;
+  options.run.duration = 0.4;
+  options.cameras.width = 160;
+  options.cameras.height = 120;
+  options.noise = capture::StructuredLightNoise(3);
+  options.depth_scale = capture::kStructuredLightDepthScale;
+  options.background_frames = background_frames;
+  options.write_true_masks = true;
+  return options;
+}
+
+Eigen::Isometry3d Pose(const nlohmann::json& numbers) {
+  Eigen::Matrix4d m;
+  for (int i = 0; i < 16; ++i) m(i / 4, i % 4) = numbers[i].get<double>();
+  return Eigen::Isometry3d(m);
+}
+
+double IoU(const std::vector<int>& found, const cv::Mat& truth) {
+  std::vector<uint8_t> mine(truth.total(), 0);
+  for (const int p : found) mine[p] = 1;
+  int both = 0, either = 0;
+  for (size_t p = 0; p < mine.size(); ++p) {
+    const bool t = truth.data[p] > 0;
+    both += mine[p] && t;
+    either += mine[p] || t;
+  }
+  return either == 0 ? 1.0 : static_cast<double>(both) / either;
+}
+
+// Bounds a recording's masks and floor must meet.
+struct Bounds {
+  double min_iou = 0.97;
+  double max_floor_mm = 1.0;
+};
+
+void IngestAndCompare(int background_frames, const Bounds& bounds) {
+  Result<scenes::Scene> scene = scenes::MakeBuiltinScene("torus-drop");
+  ASSERT_TRUE(scene.ok());
+  RawDir raw("raw" + std::to_string(background_frames));
+  RawDir cap("cap" + std::to_string(background_frames));
+  ASSERT_TRUE(
+      scenes::SynthesizeRawRecording(*scene, RecordingOptions(background_frames), raw.path).ok());
+  Result<recording::Recording> rec = recording::ReadRecording(raw.path);
+  ASSERT_TRUE(rec.ok()) << rec.status().ToString();
+  Result<IngestReport> report = Ingest(*rec, cap.path);
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  nlohmann::json truth;
+  std::ifstream(raw.path / "truth.json") >> truth;
+  const nlohmann::json& t = truth["raw"];
+  const Eigen::Isometry3d X_WC = Pose(t["cameras"][0]["world_from_camera"]);
+  const Eigen::Isometry3d X_WS = Pose(t["world_from_scanner"]);
+
+  // Masks: every frame against the true mask.
+  double worst_iou = 1.0;
+  int worst_frame = -1;
+  const CameraIngest& camera = report->cameras[0];
+  for (size_t k = 0; k < camera.object_masks.size(); ++k) {
+    char name[64];
+    std::snprintf(name, sizeof(name), "truth_masks/cam0/%06zu.png", k);
+    const cv::Mat mask = cv::imread((raw.path / name).string(), cv::IMREAD_GRAYSCALE);
+    ASSERT_FALSE(mask.empty()) << name;
+    const double iou = IoU(camera.object_masks[k], mask);
+    if (iou < worst_iou) {
+      worst_iou = iou;
+      worst_frame = static_cast<int>(k);
+    }
+  }
+  // Floor: the truth's plane seen from the camera.
+  const Eigen::Vector3d n_W(t["floor"]["normal"][0], t["floor"]["normal"][1],
+                            t["floor"]["normal"][2]);
+  const Eigen::Vector3d n_C = X_WC.linear().transpose() * n_W;
+  const double offset_C = t["floor"]["offset"].get<double>() - n_W.dot(X_WC.translation());
+  const double floor_deg =
+      std::acos(std::min(1.0, n_C.dot(report->floor_C.normal_C))) * 180 / std::numbers::pi;
+  const double floor_mm = 1e3 * std::abs(offset_C - report->floor_C.offset_m);
+  // Mesh pose in the camera frame, over the mesh's vertices.
+  const Eigen::Isometry3d X_CS_true = X_WC.inverse() * X_WS;
+  Result<geometry::TriangleMesh> mesh = recording::LoadRecordingMesh(*rec);
+  ASSERT_TRUE(mesh.ok());
+  // Over the vertices, the distance of the found pose to the true-posed surface: the torus is
+  // symmetric (turned about its axis or flipped over it is the same surface, and the same body).
+  geometry::TriangleMesh true_surface_C = *mesh;
+  for (Eigen::Vector3d& v : true_surface_C.vertices) v = X_CS_true * v;
+  Result<geometry::MeshDistance> distance = geometry::MeshDistance::Create(true_surface_C);
+  ASSERT_TRUE(distance.ok());
+  double squares = 0.0;
+  for (const Eigen::Vector3d& v : mesh->vertices) {
+    squares += std::pow(distance->Distance(report->registration.X_CS * v), 2);
+  }
+  const double pose_mm = 1e3 * std::sqrt(squares / mesh->vertices.size());
+  std::printf(
+      "background %d: worst IoU %.4f (frame %d), floor %.3f deg %.2f mm, mesh surface %.3f "
+      "mm RMS\n",
+      background_frames, worst_iou, worst_frame, floor_deg, floor_mm, pose_mm);
+  EXPECT_GE(worst_iou, bounds.min_iou);
+  EXPECT_LT(floor_deg, 0.5);
+  EXPECT_LT(floor_mm, bounds.max_floor_mm);
+  EXPECT_LT(pose_mm, 1.0);
+
+  // Frame times: device clock minus the first frame's, equal to the true times minus frame 0's.
+  Result<capture::Capture> written = capture::ReadCapture(cap.path);
+  ASSERT_TRUE(written.ok()) << written.status().ToString();
+  ASSERT_EQ(written->frame_times.size(), t["frame_times_s"].size());
+  for (size_t k = 0; k < written->frame_times.size(); ++k) {
+    const double expected =
+        t["frame_times_s"][k].get<double>() - t["frame_times_s"][0].get<double>();
+    EXPECT_NEAR(written->frame_times[k], expected, 1e-6) << "frame " << k;
+  }
+  ASSERT_TRUE(written->floor.has_value());
+  EXPECT_TRUE(fs::exists(cap.path / "ingest.json"));
+}
+
+// Without background frames the static scene comes from the frames themselves. The torus falls
+// straight down in the image onto where it rests: pixels it covers in every frame never show what
+// is behind them, so they read as scene and drop out of the mask after the landing (IoU 0.93 at
+// the worst frame; 0.98 with background frames). A known gap of the ingest, bounded here so that
+// it can only get better.
+TEST(Ingest, RawRecordingAgainstItsTruth) {
+  IngestAndCompare(0, {.min_iou = 0.92, .max_floor_mm = 1.5});
+}
+
+TEST(Ingest, RawRecordingWithBackgroundFramesAgainstItsTruth) {
+  IngestAndCompare(3, {});
+}
+
+}  // namespace
+}  // namespace softid::ingest
