@@ -230,8 +230,11 @@ Status PoseMesh(const recording::Recording& rec, const geometry::TriangleMesh& m
   }
   Result<MeshRegistration> found = RegisterMesh(mesh_S, first, registration);
   if (!found.ok()) {
-    return found.status().WithContext(
-        fmt::format("ingest: camera \"{}\" frame 0", rec.cameras[0].camera.name));
+    // A mesh of another object, or in another unit than declared, matches no pose.
+    return Status(found.status().code(),
+                  fmt::format("ingest: camera \"{}\" frame 0: {} (is the mesh this object, and "
+                              "is mesh_unit right?)",
+                              rec.cameras[0].camera.name, found.status().message()));
   }
   report->registration = *found;
   report->X_WS = views[0].X_WC * found->X_CS;

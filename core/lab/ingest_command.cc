@@ -44,6 +44,14 @@ void PrintSummary(const ingest::IngestReport& report, double seconds,
 }
 
 int RunIngest(const IngestFlags& flags) {
+  if (const Result<recording::FolderFormat> format = recording::DetectFolderFormat(flags.recording);
+      format.ok() && *format == recording::FolderFormat::kCapture) {
+    spdlog::error(
+        "{}: a capture already (capture.json), not a recording: fit it directly with "
+        "softid-lab fit",
+        flags.recording);
+    return kExitInvalidInput;
+  }
   Result<recording::Recording> recording = recording::ReadRecording(flags.recording);
   if (!recording.ok()) {
     spdlog::error("{}", recording.status().message());

@@ -18,6 +18,7 @@
 #include "core/capture/capture.h"
 #include "core/capture/depth_noise.h"
 #include "core/geometry/mesh_distance.h"
+#include "core/geometry/triangle_mesh.h"
 #include "core/scenes/raw_recording_synthesis.h"
 #include "core/scenes/scene.h"
 
@@ -160,6 +161,60 @@ TEST(Ingest, RawRecordingAgainstItsTruth) {
 
 TEST(Ingest, RawRecordingWithBackgroundFramesAgainstItsTruth) {
   IngestAndCompare(3, {});
+}
+
+// A short raw recording with background frames for the refusals below.
+fs::path WriteSmallRecording(const RawDir& dir) {
+  Result<scenes::Scene> scene = scenes::MakeBuiltinScene("torus-drop");
+  EXPECT_TRUE(scene.ok());
+  scenes::RawSynthesisOptions options = RecordingOptions(2);
+  options.run.duration = 0.1;
+  options.write_true_masks = false;
+  const Result<scenes::RawSynthesisSummary> written =
+      scenes::SynthesizeRawRecording(*scene, options, dir.path);
+  EXPECT_TRUE(written.ok()) << written.status().ToString();
+  return dir.path;
+}
+
+// A mesh three times the object's size (a wrong unit the size checks let through: one side of
+// a body spans less than its diagonal) matches no pose: refused naming the camera, the frame and
+// mesh_unit; nothing is written.
+TEST(IngestRejects, MeshWhoseSizeCannotMatchThePoints) {
+  RawDir raw("scale");
+  RawDir cap("scale_cap");
+  WriteSmallRecording(raw);
+  Result<recording::Recording> rec = recording::ReadRecording(raw.path);
+  ASSERT_TRUE(rec.ok());
+  Result<geometry::TriangleMesh> mesh = geometry::ReadTriangleMesh(raw.path / rec->mesh_file);
+  ASSERT_TRUE(mesh.ok());
+  for (Eigen::Vector3d& v : mesh->vertices) v *= 3.0;
+  ASSERT_TRUE(geometry::WriteTriangleMeshPly(raw.path / rec->mesh_file, *mesh).ok());
+  const Result<IngestReport> report = Ingest(*rec, cap.path);
+  ASSERT_FALSE(report.ok());
+  EXPECT_EQ(report.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(report.status().message().find("camera \"cam0\" frame 0"), std::string::npos)
+      << report.status().message();
+  EXPECT_NE(report.status().message().find("mesh_unit"), std::string::npos);
+  EXPECT_FALSE(fs::exists(cap.path / "capture.json"));
+}
+
+// Frames that show only the empty scene: no foreground in frame 0, named with its file.
+TEST(IngestRejects, NoObjectInTheFrames) {
+  RawDir raw("empty");
+  RawDir cap("empty_cap");
+  WriteSmallRecording(raw);
+  Result<recording::Recording> rec = recording::ReadRecording(raw.path);
+  ASSERT_TRUE(rec.ok());
+  for (const recording::RecordingFrame& frame : rec->cameras[0].frames) {
+    fs::copy_file(raw.path / rec->cameras[0].background[0], raw.path / frame.file,
+                  fs::copy_options::overwrite_existing);
+  }
+  const Result<IngestReport> report = Ingest(*rec, cap.path);
+  ASSERT_FALSE(report.ok());
+  EXPECT_NE(report.status().message().find("no foreground"), std::string::npos)
+      << report.status().message();
+  EXPECT_NE(report.status().message().find(rec->cameras[0].frames[0].file), std::string::npos);
+  EXPECT_FALSE(fs::exists(cap.path / "capture.json"));
 }
 
 }  // namespace
