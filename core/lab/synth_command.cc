@@ -1,5 +1,6 @@
 #include <spdlog/spdlog.h>
 
+#include <functional>
 #include <memory>
 
 #include "core/lab/commands.h"
@@ -29,6 +30,23 @@ struct SynthFlags {
   bool true_masks = false;
 };
 
+// Logs "synth: <unit> k/n (p%)" at every tenth of the run.
+std::function<void(int, int)> TenthsLogger(const char* unit) {
+  return [unit, last_percent = -1](int done, int total) mutable {
+    const int percent = 100 * (done + 1) / total;
+    if (percent / 10 != last_percent / 10) {
+      spdlog::info("synth: {} {}/{} ({}%)", unit, done + 1, total, percent);
+      last_percent = percent;
+    }
+  };
+}
+
+// Logs a failed synthesis; the exit code tells bad input from other failures.
+int ExitForFailure(const Status& status) {
+  spdlog::error("{}", status.message());
+  return status.code() == StatusCode::kInvalidArgument ? kExitInvalidInput : kExitFailure;
+}
+
 int RunRawSynth(const SynthFlags& flags, const scenes::Scene& scene) {
   scenes::RawSynthesisOptions options;
   options.run = flags.scene.BuildRunOptions();
@@ -51,20 +69,9 @@ int RunRawSynth(const SynthFlags& flags, const scenes::Scene& scene) {
   const int num_frames = options.run.NumFrames(scene);
   spdlog::info("synth --raw: scene {} -> {} ({} frames, {} camera(s) {}x{})", scene.name, flags.out,
                num_frames, options.cameras.count, options.cameras.width, options.cameras.height);
-  int last_percent = -1;
   Result<scenes::RawSynthesisSummary> summary =
-      scenes::SynthesizeRawRecording(scene, options, flags.out, [&](int step, int total) {
-        const int percent = 100 * (step + 1) / total;
-        if (percent / 10 != last_percent / 10) {
-          spdlog::info("synth: step {}/{} ({}%)", step + 1, total, percent);
-          last_percent = percent;
-        }
-      });
-  if (!summary.ok()) {
-    spdlog::error("{}", summary.status().message());
-    return summary.status().code() == StatusCode::kInvalidArgument ? kExitInvalidInput
-                                                                   : kExitFailure;
-  }
+      scenes::SynthesizeRawRecording(scene, options, flags.out, TenthsLogger("step"));
+  if (!summary.ok()) return ExitForFailure(summary.status());
   const auto& s = *summary;
   std::printf("recording written to %s\n", flags.out.c_str());
   std::printf(
@@ -112,20 +119,9 @@ int RunSynth(const SynthFlags& flags) {
   const int num_frames = options.run.NumFrames(*scene);
   spdlog::info("synth: scene {} -> {} ({} frames, {} camera(s) {}x{})", scene->name, flags.out,
                num_frames, options.cameras.count, options.cameras.width, options.cameras.height);
-  int last_percent = -1;
   Result<scenes::SynthesisSummary> summary =
-      scenes::Synthesize(*scene, options, flags.out, [&](int frame, int total) {
-        const int percent = 100 * (frame + 1) / total;
-        if (percent / 10 != last_percent / 10) {
-          spdlog::info("synth: frame {}/{} ({}%)", frame + 1, total, percent);
-          last_percent = percent;
-        }
-      });
-  if (!summary.ok()) {
-    spdlog::error("{}", summary.status().message());
-    return summary.status().code() == StatusCode::kInvalidArgument ? kExitInvalidInput
-                                                                   : kExitFailure;
-  }
+      scenes::Synthesize(*scene, options, flags.out, TenthsLogger("frame"));
+  if (!summary.ok()) return ExitForFailure(summary.status());
   const auto& s = *summary;
   std::printf("capture written to %s\n", flags.out.c_str());
   std::printf(

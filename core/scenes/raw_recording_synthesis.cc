@@ -254,36 +254,24 @@ Result<RawSynthesisSummary> SynthesizeRawRecording(const Scene& scene,
   RawSynthesisSummary summary;
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = Eigen::Vector3d::Constant(-1e300);
   double reach = scene.view_radius;
-  Result<RunSummary> run = [&]() -> Result<RunSummary> {
-    try {
-      return RunScene(scene, fine, [&](int step, const fem::Simulator& sim) {
-        if (step == 0) {
-          summary.num_elements = sim.hex_mesh().NumElements();
-          summary.num_nodes = sim.hex_mesh().NumNodes();
-          summary.mass = sim.total_mass();
-        }
-        geometry::TriangleMesh surface = sim.DeformedSurface();
-        for (const auto& v : surface.vertices) {
-          const Eigen::Vector3d f = floor.ToFloor(v);
-          lo = lo.cwiseMin(f);
-          hi = hi.cwiseMax(f);
-          reach = std::max(reach, (v - scene.view_target).norm());
-        }
-        auto it = surfaces.find(step);
-        if (it != surfaces.end()) it->second = std::move(surface);
-        if (progress) progress(step, num_steps);
-      });
-    } catch (const std::invalid_argument& e) {
-      return Status::InvalidArgument(e.what());
+  const auto record_step = [&](int step, const fem::Simulator& sim) {
+    if (step == 0) {
+      summary.num_elements = sim.hex_mesh().NumElements();
+      summary.num_nodes = sim.hex_mesh().NumNodes();
+      summary.mass = sim.total_mass();
     }
-  }();
-  SOFTID_RETURN_IF_ERROR(run.status());
-  summary.run = *run;
-  if (run->diverged) {
-    return Status::FailedPrecondition("the simulation of scene " + scene.name + " diverged after " +
-                                      std::to_string(run->num_steps) +
-                                      " steps; lower the time step or stiffen the contact");
-  }
+    geometry::TriangleMesh surface = sim.DeformedSurface();
+    for (const auto& v : surface.vertices) {
+      const Eigen::Vector3d f = floor.ToFloor(v);
+      lo = lo.cwiseMin(f);
+      hi = hi.cwiseMax(f);
+      reach = std::max(reach, (v - scene.view_target).norm());
+    }
+    auto it = surfaces.find(step);
+    if (it != surfaces.end()) it->second = std::move(surface);
+    if (progress) progress(step, num_steps);
+  };
+  SOFTID_ASSIGN_OR_RETURN(summary.run, RunSceneToEnd(scene, fine, record_step, "steps"));
   // Without a ground plane (free flight, clamped objects) the floor lies below the motion.
   if (p.ground) {
     floor_offset = p.ground->offset;

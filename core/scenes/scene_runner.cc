@@ -56,4 +56,24 @@ Result<RunSummary> RunScene(const Scene& scene, const RunOptions& options,
   return summary;
 }
 
+Result<RunSummary> RunSceneToEnd(const Scene& scene, const RunOptions& options,
+                                 const std::function<void(int, const fem::Simulator&)>& on_frame,
+                                 std::string_view frames_noun) {
+  Result<RunSummary> run = [&]() -> Result<RunSummary> {
+    try {
+      return RunScene(scene, options, on_frame);
+    } catch (const std::invalid_argument& e) {
+      return Status::InvalidArgument(e.what());
+    }
+  }();
+  SOFTID_RETURN_IF_ERROR(run.status());
+  if (run->diverged) {
+    return Status::FailedPrecondition(
+        "the simulation of scene " + scene.name + " diverged after " +
+        std::to_string(frames_noun == "steps" ? run->num_steps : run->num_frames) + " " +
+        std::string(frames_noun) + "; lower the time step or stiffen the contact");
+  }
+  return run;
+}
+
 }  // namespace softid::scenes

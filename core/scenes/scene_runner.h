@@ -5,6 +5,7 @@
 
 #include <functional>
 #include <optional>
+#include <string_view>
 
 #include "core/common/status.h"
 #include "core/fem/simulator.h"
@@ -35,5 +36,12 @@ struct RunSummary {
 // @throws std::invalid_argument (from the simulator) when the scene's parameters are invalid.
 Result<RunSummary> RunScene(const Scene& scene, const RunOptions& options,
                             const std::function<void(int, const fem::Simulator&)>& on_frame);
+
+// RunScene with its failures as statuses, for writers of synthetic data: InvalidArgument for a
+// scene the simulator rejects, FailedPrecondition naming the scene and how many `frames_noun`
+// ("frames", "steps") ran when the simulation diverges.
+Result<RunSummary> RunSceneToEnd(const Scene& scene, const RunOptions& options,
+                                 const std::function<void(int, const fem::Simulator&)>& on_frame,
+                                 std::string_view frames_noun = "frames");
 
 }  // namespace softid::scenes

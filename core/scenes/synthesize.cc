@@ -62,34 +62,22 @@ Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& 
   const int num_frames = options.run.NumFrames(scene);
   long long valid_pixels = 0;
 
-  Result<RunSummary> run = [&]() -> Result<RunSummary> {
-    try {
-      return RunScene(scene, options.run, [&](int frame, const fem::Simulator& sim) {
-        if (frame == 0) {
-          summary.num_elements = sim.hex_mesh().NumElements();
-          summary.num_nodes = sim.hex_mesh().NumNodes();
-          summary.mass = sim.total_mass();
-        }
-        const geometry::TriangleMesh surface = sim.DeformedSurface();
-        for (size_t c = 0; c < cameras.size(); ++c) {
-          capture::DepthImage image = renderer.Render(surface, cameras[c]);
-          capture::ApplyDepthNoise(options.noise, frame, static_cast<int>(c), &image);
-          valid_pixels += image.NumValid();
-          frames[c].push_back(std::move(image));
-        }
-        if (progress) progress(frame, num_frames);
-      });
-    } catch (const std::invalid_argument& e) {
-      return Status::InvalidArgument(e.what());
+  const auto record_frame = [&](int frame, const fem::Simulator& sim) {
+    if (frame == 0) {
+      summary.num_elements = sim.hex_mesh().NumElements();
+      summary.num_nodes = sim.hex_mesh().NumNodes();
+      summary.mass = sim.total_mass();
     }
-  }();
-  SOFTID_RETURN_IF_ERROR(run.status());
-  summary.run = *run;
-  if (run->diverged) {
-    return Status::FailedPrecondition("the simulation of scene " + scene.name + " diverged after " +
-                                      std::to_string(run->num_frames) +
-                                      " frames; lower the time step or stiffen the contact");
-  }
+    const geometry::TriangleMesh surface = sim.DeformedSurface();
+    for (size_t c = 0; c < cameras.size(); ++c) {
+      capture::DepthImage image = renderer.Render(surface, cameras[c]);
+      capture::ApplyDepthNoise(options.noise, frame, static_cast<int>(c), &image);
+      valid_pixels += image.NumValid();
+      frames[c].push_back(std::move(image));
+    }
+    if (progress) progress(frame, num_frames);
+  };
+  SOFTID_ASSIGN_OR_RETURN(summary.run, RunSceneToEnd(scene, options.run, record_frame));
   summary.num_cameras = static_cast<int>(cameras.size());
   summary.mean_valid_pixels =
       static_cast<double>(valid_pixels) / (static_cast<double>(num_frames) * cameras.size());
