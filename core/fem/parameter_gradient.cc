@@ -20,6 +20,10 @@ ParameterGradient& ParameterGradient::operator+=(const ParameterGradient& other)
         ground_normal += other.ground_normal;
         ground_offset += other.ground_offset;
         break;
+      case ParameterShape::kPose:
+        initial_pose_rotation += other.initial_pose_rotation;
+        initial_pose_translation += other.initial_pose_translation;
+        break;
       case ParameterShape::kStiffnessField:
         if (stiffness_field.size() < other.stiffness_field.size())
           stiffness_field.resize(other.stiffness_field.size(), 0.0);
@@ -40,6 +44,10 @@ nlohmann::json ToJson(const ParameterGradient& g) {
       case ParameterShape::kVector3: entry = json::FromVector3(g.*parameter.vector_gradient); break;
       case ParameterShape::kPlane:
         entry = {{"normal", json::FromVector3(g.ground_normal)}, {"offset", g.ground_offset}};
+        break;
+      case ParameterShape::kPose:
+        entry = {{"rotation", json::FromVector3(g.initial_pose_rotation)},
+                 {"translation", json::FromVector3(g.initial_pose_translation)}};
         break;
       case ParameterShape::kStiffnessField: entry = g.stiffness_field; break;
     }

@@ -19,6 +19,9 @@ struct ParameterGradient {
   Eigen::Vector3d gravity = Eigen::Vector3d::Zero();
   Eigen::Vector3d initial_velocity = Eigen::Vector3d::Zero();
   Eigen::Vector3d initial_angular_velocity = Eigen::Vector3d::Zero();
+  // d / d InitialPose::rotation (the rotation vector) and d / d InitialPose::translation.
+  Eigen::Vector3d initial_pose_rotation = Eigen::Vector3d::Zero();
+  Eigen::Vector3d initial_pose_translation = Eigen::Vector3d::Zero();
   // The ground plane n . x = offset with n treated as a free 3-vector (the force uses n as given,
   // so a parameterisation of the unit normal chains through d n / d angles).
   Eigen::Vector3d ground_normal = Eigen::Vector3d::Zero();

@@ -82,6 +82,10 @@ constexpr auto kRegistry = std::to_array<ParameterInfo>({
     Vector3("initial_angular_velocity", "rad/s",
             "angular velocity about the centre of mass at the first frame",
             &PP::initial_angular_velocity, &PG::initial_angular_velocity),
+    Special("initial_pose", "initial_pose", "rad, m",
+            "rigid correction of the rest pose at the first frame: a rotation vector about the "
+            "rest mesh's bounding-box centre, then a translation",
+            Shape::kPose, Transform::kPose),
     Special("ground_plane", "ground", "m",
             "the floor n . x = offset; `\"ground\": null` in `fixed`: free flight", Shape::kPlane,
             Transform::kGroundPlaneTilt),
@@ -118,6 +122,7 @@ constexpr bool IsConsistent(const ParameterInfo& p) {
              p.scalar == nullptr;
     case Transform::kGroundPlaneTilt: return p.shape == Shape::kPlane;
     case Transform::kStiffnessField: return p.shape == Shape::kStiffnessField;
+    case Transform::kPose: return p.shape == Shape::kPose;
   }
   return false;
 }
@@ -153,6 +158,7 @@ std::string_view Describe(ParameterTransform transform) {
     case Transform::kIdentity: return "the vector";
     case Transform::kGroundPlaneTilt: return "tilt of the normal, offset";
     case Transform::kStiffnessField: return "log scales, or a log gradient";
+    case Transform::kPose: return "rotation x 5, translation x 10 / L";
   }
   return "?";
 }
@@ -213,6 +219,7 @@ nlohmann::json ToJson(const PhysicalParameters& p, const ParameterInfo& paramete
     case Shape::kVector3: return json::FromVector3(p.*parameter.vector);
     case Shape::kPlane: return p.ground ? ToJson(*p.ground) : nlohmann::json(nullptr);
     case Shape::kStiffnessField: return ToJson(p.stiffness_field);
+    case Shape::kPose: return ToJson(p.initial_pose);
   }
   return nullptr;
 }
@@ -240,6 +247,10 @@ Status ParameterFromJson(const nlohmann::json& value, const ParameterInfo& param
       SOFTID_ASSIGN_OR_RETURN(p->stiffness_field, StiffnessFieldFromJson(value, field));
       break;
     }
+    case Shape::kPose: {
+      SOFTID_ASSIGN_OR_RETURN(p->initial_pose, InitialPoseFromJson(value, field));
+      break;
+    }
   }
   return Status::Ok();
 }
@@ -251,6 +262,7 @@ void CopyParameter(const ParameterInfo& parameter, const PhysicalParameters& fro
     case Shape::kVector3: to->*parameter.vector = from.*parameter.vector; break;
     case Shape::kPlane: to->ground = from.ground; break;
     case Shape::kStiffnessField: to->stiffness_field = from.stiffness_field; break;
+    case Shape::kPose: to->initial_pose = from.initial_pose; break;
   }
 }
 

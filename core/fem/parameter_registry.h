@@ -18,8 +18,9 @@
 
 namespace softid::fem {
 
-// Whether the parameter is a scalar, a 3-vector, the ground plane or the stiffness field.
-enum class ParameterShape { kScalar, kVector3, kPlane, kStiffnessField };
+// Whether the parameter is a scalar, a 3-vector, the ground plane, the stiffness field or the
+// initial pose.
+enum class ParameterShape { kScalar, kVector3, kPlane, kStiffnessField, kPose };
 
 // How the optimiser maps a parameter p to unconstrained variables x (inverse/parameter_space.h),
 // so that no step can leave the valid range and steps have comparable scales.
@@ -31,6 +32,8 @@ enum class ParameterTransform {
   kGroundPlaneTilt,  // n = normalise(n0 + x0 t1 + x1 t2) around the start normal n0 (no pole
                      // singularity), offset = x2 L / 10 (L the body size)
   kStiffnessField,   // region scales: x = log(scale); linear: log_gradient = x / L
+  kPose,             // rotation = x[0..2] / 5 [rad], translation = x[3..5] L / 10: a unit of
+                     // x moves the surface by about L / 10 either way, as the plane's offset
 };
 
 // The optimiser variable in words ("log", ...), for the docs' table.

@@ -31,6 +31,17 @@ const char* ToString(StiffnessField::Kind kind) {
   return "uniform";
 }
 
+Eigen::Isometry3d InitialPose::WorldFromRest(const Eigen::Vector3d& centre_m) const {
+  const double angle = rotation.norm();
+  const Eigen::Matrix3d turn = angle > 0.0
+                                   ? Eigen::AngleAxisd(angle, rotation / angle).toRotationMatrix()
+                                   : Eigen::Matrix3d::Identity();
+  Eigen::Isometry3d pose = Eigen::Isometry3d::Identity();
+  pose.linear() = turn;
+  pose.translation() = centre_m + translation - turn * centre_m;
+  return pose;
+}
+
 Status PhysicalParameters::Validate() const {
   for (const ParameterInfo& parameter : ParameterRegistry()) {
     const std::string field(parameter.json_key);
@@ -56,6 +67,17 @@ Status PhysicalParameters::Validate() const {
         }
         if (!std::isfinite(ground->offset)) {
           return json::Invalid(field + ".offset", ground->offset, "must be finite");
+        }
+        break;
+      }
+      case ParameterShape::kPose: {
+        if (!initial_pose.translation.allFinite()) {
+          return json::Invalid(field + ".translation", json::FromVector3(initial_pose.translation),
+                               "must be finite");
+        }
+        if (!initial_pose.rotation.allFinite()) {
+          return json::Invalid(field + ".rotation", json::FromVector3(initial_pose.rotation),
+                               "must be finite");
         }
         break;
       }
@@ -100,6 +122,11 @@ nlohmann::json ToJson(const StiffnessField& field) {
     j["log_gradient"] = json::FromVector3(field.log_gradient);
   }
   return j;
+}
+
+nlohmann::json ToJson(const InitialPose& pose) {
+  return {{"rotation", json::FromVector3(pose.rotation)},
+          {"translation", json::FromVector3(pose.translation)}};
 }
 
 nlohmann::json ToJson(const PhysicalParameters& p) {
@@ -162,6 +189,18 @@ Result<StiffnessField> StiffnessFieldFromJson(const nlohmann::json& j, const std
     return json::Invalid(field + ".kind", j["kind"], "must be uniform, regions or linear");
   }
   return out;
+}
+
+Result<InitialPose> InitialPoseFromJson(const nlohmann::json& j, const std::string& field) {
+  if (!j.is_object() || !j.contains("rotation") || !j.contains("translation")) {
+    return json::Invalid(field, j,
+                         "must be {\"rotation\": [rx, ry, rz], \"translation\": [tx, ty, tz]}");
+  }
+  InitialPose pose;
+  SOFTID_ASSIGN_OR_RETURN(pose.rotation, json::ToVector3(j["rotation"], field + ".rotation"));
+  SOFTID_ASSIGN_OR_RETURN(pose.translation,
+                          json::ToVector3(j["translation"], field + ".translation"));
+  return pose;
 }
 
 Result<PhysicalParameters> PhysicalParametersFromJson(const nlohmann::json& j,

@@ -42,6 +42,19 @@ struct StiffnessField {
 
 const char* ToString(StiffnessField::Kind kind);
 
+// A rigid correction of the rest pose at the first frame: the rest mesh turned by `rotation`
+// about the centre of its bounding box, then moved by `translation`. It lets a fit correct a
+// registration error of the scanned mesh (millimetres, degrees) instead of biasing the material.
+// Zero: the rest mesh stands where the capture put it.
+struct InitialPose {
+  Eigen::Vector3d rotation = Eigen::Vector3d::Zero();     // rotation vector [rad]
+  Eigen::Vector3d translation = Eigen::Vector3d::Zero();  // [m]
+
+  bool IsIdentity() const { return rotation.isZero(0.0) && translation.isZero(0.0); }
+  // X_W = R (X - centre) + centre + translation, for the rest mesh's box centre `centre`.
+  Eigen::Isometry3d WorldFromRest(const Eigen::Vector3d& centre_m) const;
+};
+
 struct PhysicalParameters {
   double youngs_modulus = 1.0e5;   // E [Pa], > 0
   double poisson_ratio = 0.3;      // nu [-], in (0, 0.5)
@@ -51,6 +64,7 @@ struct PhysicalParameters {
   Eigen::Vector3d gravity = Eigen::Vector3d(0.0, 0.0, -9.81);  // true acceleration [m/s^2]
   Eigen::Vector3d initial_velocity = Eigen::Vector3d::Zero();  // of the centre of mass [m/s]
   Eigen::Vector3d initial_angular_velocity = Eigen::Vector3d::Zero();  // about it [rad/s]
+  InitialPose initial_pose;                                            // none by default
   std::optional<GroundPlane> ground;                                   // none: free flight
   // Penalty contact with the ground: pressure per metre of penetration [Pa/m]. 0 selects
   // DefaultContactStiffness (below).
@@ -83,14 +97,18 @@ inline double DefaultContactStiffness(double youngs_modulus_pa, double length_m)
 // JSON under the public names (truth.json, result values). Vectors are arrays; the ground plane is
 // {"normal": [..], "offset": d} or null; the stiffness field is {"kind": "uniform"} |
 // {"kind": "regions", "regions": [{"min": [..], "max": [..], "scale": s}]} |
-// {"kind": "linear", "origin": [..], "log_gradient": [..]}.
+// {"kind": "linear", "origin": [..], "log_gradient": [..]}; the initial pose is
+// {"rotation": [..], "translation": [..]}.
 nlohmann::json ToJson(const PhysicalParameters& parameters);
 nlohmann::json ToJson(const GroundPlane& plane);
 nlohmann::json ToJson(const StiffnessField& field);
+// {"rotation": [rx, ry, rz], "translation": [tx, ty, tz]}
+nlohmann::json ToJson(const InitialPose& pose);
 // Reads the fields present in `json` over `defaults`; unknown keys are rejected by name.
 Result<PhysicalParameters> PhysicalParametersFromJson(const nlohmann::json& json,
                                                       const PhysicalParameters& defaults = {});
 Result<GroundPlane> GroundPlaneFromJson(const nlohmann::json& json, const std::string& field);
 Result<StiffnessField> StiffnessFieldFromJson(const nlohmann::json& json, const std::string& field);
+Result<InitialPose> InitialPoseFromJson(const nlohmann::json& json, const std::string& field);
 
 }  // namespace softid::fem

@@ -88,12 +88,15 @@ constexpr double kMinNodeMassShare = 0.25;
 Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalParameters& parameters,
                      const SimulationOptions& options,
                      const std::optional<Eigen::AlignedBox3d>& fixed_region)
-    : parameters_(parameters), options_(options) {
+    : world_parameters_(parameters), options_(options) {
   ThrowIfError(parameters.Validate());
   ThrowIfError(options.Validate());
   SOFTID_THROW_UNLESS(!rest_mesh.triangles.empty(), "rest mesh has no triangles");
   length_ = rest_mesh.Bounds().sizes().maxCoeff();
   SOFTID_THROW_UNLESS(length_ > 0.0, "rest mesh has zero extent");
+  pose_centre_ = rest_mesh.Bounds().center();
+  rest_frame_ = RestFrame(parameters.initial_pose, pose_centre_);
+  parameters_ = rest_frame_.ToRest(parameters);
 
   geometry::SignedDistanceOptions sdf_options;
   sdf_options.cells_along_longest_side = options.cells_along_longest_side;
@@ -182,7 +185,9 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
 
 void Simulator::SetParameters(const PhysicalParameters& parameters) {
   ThrowIfError(parameters.Validate());
-  parameters_ = parameters;
+  world_parameters_ = parameters;
+  rest_frame_ = RestFrame(parameters.initial_pose, pose_centre_);
+  parameters_ = rest_frame_.ToRest(parameters);
   ApplyParameters();
 }
 
@@ -983,8 +988,10 @@ StepSummary Simulator::SolveStatic() {
 
 std::vector<Eigen::Vector3d> Simulator::SurfacePositions() const {
   std::vector<Eigen::Vector3d> positions(embedding_.NumPoints());
+  const Eigen::Isometry3d& X_WS = rest_frame_.world_from_rest();
   for (int p = 0; p < embedding_.NumPoints(); ++p) {
-    positions[p] = embedding_.rest_positions[p] + embedding_.Interpolate(mesh_, state_.u, p);
+    positions[p] =
+        X_WS * (embedding_.rest_positions[p] + embedding_.Interpolate(mesh_, state_.u, p));
   }
   return positions;
 }
@@ -1001,7 +1008,8 @@ Energies Simulator::ComputeEnergies() const {
   for (int i = 0; i < mesh_.NumNodes(); ++i) {
     const Eigen::Vector3d x = mesh_.rest_positions[i] + state_.u.segment<3>(3 * i);
     energies.kinetic += 0.5 * mass_[i] * state_.v.segment<3>(3 * i).squaredNorm();
-    energies.gravitational -= mass_[i] * parameters_.gravity.dot(x);
+    energies.gravitational -=
+        mass_[i] * world_parameters_.gravity.dot(rest_frame_.world_from_rest() * x);
   }
   std::array<Eigen::Vector3d, 8> x;
   for (int e = 0; e < mesh_.NumElements(); ++e) {
@@ -1024,13 +1032,13 @@ Eigen::Vector3d Simulator::CentreOfMass() const {
   for (int i = 0; i < mesh_.NumNodes(); ++i) {
     com += mass_[i] * (mesh_.rest_positions[i] + state_.u.segment<3>(3 * i));
   }
-  return com / mass_.sum();
+  return rest_frame_.world_from_rest() * (com / mass_.sum());
 }
 
 Eigen::Vector3d Simulator::CentreOfMassVelocity() const {
   Eigen::Vector3d p = Eigen::Vector3d::Zero();
   for (int i = 0; i < mesh_.NumNodes(); ++i) p += mass_[i] * state_.v.segment<3>(3 * i);
-  return p / mass_.sum();
+  return rest_frame_.world_from_rest().linear() * (p / mass_.sum());
 }
 
 }  // namespace softid::fem

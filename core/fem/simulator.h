@@ -26,6 +26,7 @@
 #include "core/fem/parameter_gradient.h"
 #include "core/fem/physical_parameters.h"
 #include "core/fem/point_forces.h"
+#include "core/fem/rest_frame.h"
 #include "core/fem/simulation_options.h"
 #include "core/fem/step_tangent_operator.h"
 #include "core/fem/surface_embedding.h"
@@ -73,7 +74,12 @@ class Simulator {
             const SimulationOptions& options,
             const std::optional<Eigen::AlignedBox3d>& fixed_region = std::nullopt);
 
-  const PhysicalParameters& parameters() const { return parameters_; }
+  // The parameters as given, in the world frame (with their initial pose).
+  const PhysicalParameters& parameters() const { return world_parameters_; }
+  // The simulation runs in the rest mesh's frame; this carries it into the world
+  // (PhysicalParameters::initial_pose). state() is in the rest frame; the positions below are in
+  // the world.
+  const RestFrame& rest_frame() const { return rest_frame_; }
   const SimulationOptions& options() const { return options_; }
   const geometry::SignedDistanceField& signed_distance() const { return sdf_; }
   const HexMesh& hex_mesh() const { return mesh_; }
@@ -124,16 +130,21 @@ class Simulator {
   // direct dependence of L on `previous`). d L / d parameters through this step is added to
   // `gradient`. One transposed solve with the exact step Jacobian, re-assembled from the states:
   // nothing per step is stored but the states. Leaves the simulator in state `previous`.
+  // The states and the adjoint are in the rest frame, and so is what this adds to `gradient`'s
+  // gravity and ground until BackpropagateInitialState carries the whole gradient into the world.
   // Fails (Internal) when the transposed system cannot be solved.
   Status BackpropagateStep(const SimulationState& previous, const SimulationState& next,
                            StateAdjoint* adjoint, ParameterGradient* gradient);
   // Adjoint of Reset(): adds d L / d parameters through the initial state (its velocity from the
   // initial linear and angular velocity, its acceleration from the equations of motion), given
-  // dL/d(initial state) in `adjoint`. `initial` is the state Reset() produced.
+  // dL/d(initial state) in `adjoint`. `initial` is the state Reset() produced. Ends the backward
+  // pass: carries `gradient` from the rest frame into the world and adds the initial pose's share
+  // (RestFrame::ChainToWorld); d L / d pose through observed positions is the caller's
+  // (RestFrame::DisplacementGradientToRest).
   void BackpropagateInitialState(const SimulationState& initial, const StateAdjoint& adjoint,
                                  ParameterGradient* gradient);
 
-  // Deformed positions of the surface vertices [m].
+  // Deformed positions of the surface vertices in the world [m].
   std::vector<Eigen::Vector3d> SurfacePositions() const;
   geometry::TriangleMesh DeformedSurface() const;
   Energies ComputeEnergies() const;
@@ -243,7 +254,11 @@ class Simulator {
   // LinearSolver::Symmetry).
   LinearSolver::Symmetry TangentSymmetry(Mode mode) const;
 
+  // parameters_ is what the physics uses: world_parameters_ in the rest frame (rest_frame.h).
+  PhysicalParameters world_parameters_;
   PhysicalParameters parameters_;
+  RestFrame rest_frame_;
+  Eigen::Vector3d pose_centre_ = Eigen::Vector3d::Zero();  // rest mesh's bounding-box centre [m]
   SimulationOptions options_;
   double length_ = 0.0;
   // Diagonal of the FE nodes' rest bounding box [m] (the divergence test's yardstick).

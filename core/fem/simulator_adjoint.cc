@@ -394,6 +394,7 @@ void Simulator::BackpropagateInitialState(const SimulationState& initial,
     gradient->initial_velocity += vi;
     gradient->initial_angular_velocity += (mesh_.rest_positions[i] - com).cross(vi);
   }
+  rest_frame_.ChainToWorld(world_parameters_, gradient);
 }
 
 }  // namespace softid::fem

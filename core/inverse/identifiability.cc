@@ -72,6 +72,14 @@ PhysicalValue ValueOf(const ParameterSpace& space, const fem::PhysicalParameters
     }
     return out;
   }
+  if (info->shape == fem::ParameterShape::kPose) {
+    const bool rotation = name.find(".rotation[") != std::string::npos;
+    const Eigen::Vector3d& vector = rotation ? p.initial_pose.rotation : p.initial_pose.translation;
+    out.value = vector[name[name.find('[') + 1] - '0'];
+    out.scale = vector.norm();
+    out.unit = rotation ? "rad" : "m";
+    return out;
+  }
   if (info->shape == fem::ParameterShape::kStiffnessField) {
     // Index after "stiffness_field[" may have several digits.
     const int k = std::stoi(name.substr(name.find('[') + 1));

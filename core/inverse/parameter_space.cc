@@ -22,6 +22,11 @@ double InverseSoftplus(double p) {
   return p > 30.0 ? p : std::log(std::expm1(p));
 }
 
+// The initial pose's variables (fem::ParameterTransform::kPose): a unit moves the surface of a
+// body of size L by about L / 10, through the rotation (L / 2 arms) or the translation.
+constexpr double kPoseRotationPerVariable = 0.2;     // [rad]
+constexpr double kPoseTranslationPerVariable = 0.1;  // [L]
+
 }  // namespace
 
 Result<ParameterSpace> ParameterSpace::Create(const std::vector<std::string>& names,
@@ -83,6 +88,13 @@ Result<ParameterSpace> ParameterSpace::Create(const std::vector<std::string>& na
           space.variable_names_.push_back(name + "[" + std::to_string(k) + "]");
         break;
       }
+      case Transform::kPose:
+        entry.size = 6;
+        for (const char* part : {".rotation[", ".translation["}) {
+          for (int k = 0; k < 3; ++k)
+            space.variable_names_.push_back(name + part + std::to_string(k) + "]");
+        }
+        break;
     }
     offset += entry.size;
     space.entries_.push_back(entry);
@@ -132,6 +144,12 @@ std::vector<double> ParameterSpace::ToVariables(const fem::PhysicalParameters& p
         }
         break;
       }
+      case Transform::kPose:
+        for (int k = 0; k < 3; ++k) {
+          xe[k] = p.initial_pose.rotation[k] / kPoseRotationPerVariable;
+          xe[3 + k] = p.initial_pose.translation[k] / (kPoseTranslationPerVariable * length_scale_);
+        }
+        break;
     }
   }
   return x;
@@ -159,6 +177,12 @@ fem::PhysicalParameters ParameterSpace::ToParameters(const double* x,
           for (int k = 0; k < e.size; ++k) p.stiffness_field.regions[k].scale = std::exp(xe[k]);
         } else {
           for (int k = 0; k < 3; ++k) p.stiffness_field.log_gradient[k] = xe[k] / length_scale_;
+        }
+        break;
+      case Transform::kPose:
+        for (int k = 0; k < 3; ++k) {
+          p.initial_pose.rotation[k] = xe[k] * kPoseRotationPerVariable;
+          p.initial_pose.translation[k] = xe[3 + k] * kPoseTranslationPerVariable * length_scale_;
         }
         break;
     }
@@ -201,6 +225,12 @@ void ParameterSpace::ChainGradient(const fem::ParameterGradient& g, const double
               k < static_cast<int>(g.stiffness_field.size()) ? g.stiffness_field[k] : 0.0;
           ge[k] = field_kind_ == fem::StiffnessField::Kind::kLinear ? dk / length_scale_
                                                                     : dk * std::exp(xe[k]);
+        }
+        break;
+      case Transform::kPose:
+        for (int k = 0; k < 3; ++k) {
+          ge[k] = g.initial_pose_rotation[k] * kPoseRotationPerVariable;
+          ge[3 + k] = g.initial_pose_translation[k] * kPoseTranslationPerVariable * length_scale_;
         }
         break;
     }

@@ -139,9 +139,11 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
         continue;
       }
       out.frame_costs[next_frame] = cost_->Evaluate(u, frame.points, &frame_gradient_);
+      frame_gradient_ /= fitted;
+      const Eigen::VectorXd& gradient = RestGradient(next_frame, &out.gradient);
       const double weight = observation_steps_[next_frame].weight;
-      adjoint.u += (weight / fitted) * frame_gradient_;
-      if (weight < 1.0) carry += ((1.0 - weight) / fitted) * frame_gradient_;
+      adjoint.u += weight * gradient;
+      if (weight < 1.0) carry += (1.0 - weight) * gradient;
     }
   };
   for (int step = last_step; step >= 1; --step) {
@@ -201,11 +203,26 @@ Result<std::vector<std::vector<cost::PointMatch>>> TrajectoryObjective::MatchPoi
   return matches;
 }
 
-const Eigen::VectorXd& TrajectoryObjective::ObservedDisplacement(int k) {
+const Eigen::VectorXd& TrajectoryObjective::RestDisplacement(int k) {
   const ObservationStep& at = observation_steps_[k];
   if (at.weight == 1.0) return states_[at.step].u;
   observed_u_ = at.weight * states_[at.step].u + (1.0 - at.weight) * states_[at.step - 1].u;
   return observed_u_;
+}
+
+const Eigen::VectorXd& TrajectoryObjective::ObservedDisplacement(int k) {
+  const fem::RestFrame& frame = simulator_->rest_frame();
+  if (frame.is_identity()) return RestDisplacement(k);
+  frame.DisplacementToWorld(simulator_->hex_mesh().rest_positions, RestDisplacement(k), &world_u_);
+  return world_u_;
+}
+
+const Eigen::VectorXd& TrajectoryObjective::RestGradient(int k, fem::ParameterGradient* gradient) {
+  // Also at the identity: d cost / d pose is wanted there (a fit of the pose starts there).
+  simulator_->rest_frame().DisplacementGradientToRest(simulator_->hex_mesh().rest_positions,
+                                                      RestDisplacement(k), frame_gradient_,
+                                                      &rest_gradient_, gradient);
+  return rest_gradient_;
 }
 
 }  // namespace softid::inverse

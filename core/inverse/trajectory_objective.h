@@ -106,14 +106,21 @@ class TrajectoryObjective {
     int step = 0;
     double weight = 1.0;
   };
-  // The simulated displacement at observed frame k (a state, or `observed_u_` interpolated).
+  // The simulated displacement at observed frame k in the rest frame (a state, or `observed_u_`
+  // interpolated), and in the world (the initial pose applied; the same vector without one).
+  const Eigen::VectorXd& RestDisplacement(int k);
   const Eigen::VectorXd& ObservedDisplacement(int k);
+  // frame_gradient_ (d cost / d world displacement at frame k) in the rest frame, adding d cost /
+  // d initial pose through it to *gradient.
+  const Eigen::VectorXd& RestGradient(int k, fem::ParameterGradient* gradient);
 
   std::vector<ObservationStep> observation_steps_;  // per observed frame
   std::vector<fem::SimulationState> states_;        // per step, reused across evaluations
   Eigen::VectorXd observed_u_;                      // scratch of ObservedDisplacement
-  Eigen::VectorXd frame_gradient_;
-  std::vector<cost::PointMatch> matches_;  // scratch of EvaluateResiduals
+  Eigen::VectorXd world_u_;                         // scratch of ObservedDisplacement
+  Eigen::VectorXd frame_gradient_;                  // d frame cost / d world displacement
+  Eigen::VectorXd rest_gradient_;                   // the same in the rest frame
+  std::vector<cost::PointMatch> matches_;           // scratch of EvaluateResiduals
   const std::atomic<bool>* cancel_ = nullptr;
 };
 

@@ -28,6 +28,8 @@ nlohmann::json SampleJson(const ParameterInfo& parameter) {
     case ParameterShape::kStiffnessField:
       return {{"kind", "regions"},
               {"regions", {{{"min", {0.0, 0.0, 0.0}}, {"max", {1.0, 1.0, 1.0}}, {"scale", 2.5}}}}};
+    case ParameterShape::kPose:
+      return {{"rotation", {0.01, -0.02, 0.03}}, {"translation", {0.001, 0.002, -0.003}}};
   }
   return nullptr;
 }
@@ -52,6 +54,7 @@ std::string DefaultText(const ParameterInfo& parameter) {
     }
     case ParameterShape::kPlane: return value.is_null() ? "none" : value.dump();
     case ParameterShape::kStiffnessField: return value["kind"].get<std::string>();
+    case ParameterShape::kPose: return "identity";
   }
   return "?";
 }
@@ -62,6 +65,7 @@ std::string ValidValuesText(const ParameterInfo& parameter) {
     case ParameterShape::kVector3: return "finite";
     case ParameterShape::kPlane: return "any non-zero normal, finite offset";
     case ParameterShape::kStiffnessField: return "region scales > 0";
+    case ParameterShape::kPose: return "finite";
   }
   return "?";
 }
@@ -213,6 +217,10 @@ TEST(ParameterRegistry, GradientSumAndJsonCoverEveryParameter) {
         g.ground_offset = value;
         break;
       case ParameterShape::kStiffnessField: g.stiffness_field = {value, value}; break;
+      case ParameterShape::kPose:
+        g.initial_pose_rotation = Eigen::Vector3d(value, 0, -value);
+        g.initial_pose_translation = Eigen::Vector3d(0, value, 0);
+        break;
     }
     value += 1.0;
   }
@@ -236,6 +244,10 @@ TEST(ParameterRegistry, GradientSumAndJsonCoverEveryParameter) {
       case ParameterShape::kPlane:
         EXPECT_EQ(sum["offset"].get<double>(), 2 * once["offset"].get<double>());
         EXPECT_EQ(sum["normal"][0].get<double>(), 2 * once["normal"][0].get<double>());
+        break;
+      case ParameterShape::kPose:
+        EXPECT_EQ(sum["rotation"][0].get<double>(), 2 * once["rotation"][0].get<double>());
+        EXPECT_EQ(sum["translation"][1].get<double>(), 2 * once["translation"][1].get<double>());
         break;
     }
   }

@@ -23,6 +23,8 @@ fem::PhysicalParameters Sample(fem::StiffnessField::Kind kind) {
   p.gravity = Eigen::Vector3d(0.1, -0.2, -9.7);
   p.initial_velocity = Eigen::Vector3d(0.5, 0.0, -1.0);
   p.initial_angular_velocity = Eigen::Vector3d(1.0, -2.0, 0.25);
+  p.initial_pose.rotation = Eigen::Vector3d(0.02, -0.05, 0.01);
+  p.initial_pose.translation = Eigen::Vector3d(0.003, 0.001, -0.002);
   p.ground = fem::GroundPlane{Eigen::Vector3d(0.1, -0.2, 1.0).normalized(), 0.015};
   p.friction_coefficient = 0.45;
   p.drag_linear = 0.2;
@@ -66,6 +68,10 @@ struct LinearCost {
           weights.ground_offset = 30.0 * w;
           break;
         case fem::ParameterShape::kStiffnessField: weights.stiffness_field = {w, -w, 0.3}; break;
+        case fem::ParameterShape::kPose:
+          weights.initial_pose_rotation = Eigen::Vector3d(w, -0.7, 0.2);
+          weights.initial_pose_translation = Eigen::Vector3d(0.3, w, -2.0 * w);
+          break;
       }
     }
   }
@@ -91,6 +97,9 @@ struct LinearCost {
         }
         return c;
       }
+      case fem::ParameterShape::kPose:
+        return weights.initial_pose_rotation.dot(p.initial_pose.rotation) +
+               weights.initial_pose_translation.dot(p.initial_pose.translation);
     }
     return 0.0;
   }

@@ -35,6 +35,11 @@ void ExpectAdjointMatchesFiniteDifferences(
   p.mass_damping *= 0.7;
   p.gravity += Eigen::Vector3d(0.2, -0.1, 0.3);
   p.ground->offset += 0.004;
+  // A turned and moved rest pose and a spin: the gradient crosses the rest frame's chain rule
+  // (gravity, ground, velocities into the rest frame, displacements back).
+  p.initial_pose.rotation = Eigen::Vector3d(0.03, -0.02, 0.05);
+  p.initial_pose.translation = Eigen::Vector3d(0.002, -0.003, 0.001);
+  p.initial_angular_velocity = Eigen::Vector3d(0.4, -0.6, 0.3);
   TrajectoryObjective objective(small.mesh, std::nullopt, p, options, {}, frames, small.capture.fps,
                                 2);
   Result<ObjectiveEvaluation> base = objective.Evaluate(p, true);
@@ -59,6 +64,7 @@ void ExpectAdjointMatchesFiniteDifferences(
     double adjoint;
   };
   const Eigen::Vector3d d(0.3, -0.5, 0.81);
+  const Eigen::Vector3d tangent = p.ground->normal.cross(d).normalized();
   const std::vector<Check> checks = {
       {"youngs_modulus (log)", [](auto& q, double t) { q.youngs_modulus *= std::exp(t); }, 1e-5,
        g.youngs_modulus * p.youngs_modulus},
@@ -70,6 +76,14 @@ void ExpectAdjointMatchesFiniteDifferences(
       {"initial_velocity", [&](auto& q, double t) { q.initial_velocity += t * d; }, 1e-6,
        g.initial_velocity.dot(d)},
       {"ground.offset", [](auto& q, double t) { q.ground->offset += t; }, 1e-7, g.ground_offset},
+      {"ground.normal", [&](auto& q, double t) { q.ground->normal += t * tangent; }, 1e-7,
+       g.ground_normal.dot(tangent)},
+      {"initial_angular_velocity", [&](auto& q, double t) { q.initial_angular_velocity += t * d; },
+       1e-6, g.initial_angular_velocity.dot(d)},
+      {"initial_pose.rotation", [&](auto& q, double t) { q.initial_pose.rotation += t * d; }, 1e-6,
+       g.initial_pose_rotation.dot(d)},
+      {"initial_pose.translation", [&](auto& q, double t) { q.initial_pose.translation += t * d; },
+       1e-7, g.initial_pose_translation.dot(d)},
   };
   for (const Check& check : checks) {
     const double fd = central(check.set, check.step);
