@@ -9,6 +9,7 @@
 
 #include "core/capture/capture.h"
 #include "core/capture/pixel_rays.h"
+#include "core/ingest/contact_sheet.h"
 #include "core/ingest/timeline.h"
 
 namespace softid::ingest {
@@ -311,8 +312,10 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
   // 4. The mesh's pose at the release.
   SOFTID_RETURN_IF_ERROR(PoseMesh(rec, mesh_S, options, views, &report));
   if (progress) progress("registration", 1, 1);
-  // 5. The capture.
+  // 5. The capture, and a picture of what the ingest saw.
   SOFTID_RETURN_IF_ERROR(WriteIngestedCapture(rec, mesh_S, options, views, capture_dir, &report));
+  SOFTID_RETURN_IF_ERROR(
+      WriteContactSheet(capture_dir / kContactSheetFileName, rec, report, mesh_S, views[0].rays));
   return report;
 }
 

@@ -62,13 +62,17 @@ struct IngestReport {
   nlohmann::json ToJson() const;
 };
 
+// The ingest's picture in the capture folder (contact_sheet.h).
+inline constexpr std::string_view kContactSheetFileName = "ingest.png";
+
 using IngestProgress = std::function<void(std::string_view stage, int done, int total)>;
 
 // Ingests `recording` into the capture folder `capture_dir` (capture.json, object.obj, per-camera
 // frames with only the object's pixels, undistorted onto the camera's ideal pinhole without
-// interpolation; frame_times) plus ingest.json. Errors name the stage, the camera and the frame:
-// no foreground, the object on the image border in every frame, a mesh whose size cannot match
-// the object's points, a registration that does not converge (overlap and RMS), no floor.
+// interpolation; frame_times) plus ingest.json and ingest.png (contact_sheet.h). Errors name the
+// stage, the camera and the frame: no foreground, the object on the image border in every frame, a
+// mesh whose size cannot match the object's points, a registration that does not converge (overlap
+// and RMS), no floor.
 Result<IngestReport> Ingest(const recording::Recording& recording,
                             const std::filesystem::path& capture_dir,
                             const IngestOptions& options = {}, const IngestProgress& progress = {});

@@ -1,5 +1,5 @@
 // softid-lab ingest RECORDING -o CAPTURE: a raw recording (softid-recording/1) turned into a
-// capture (softid-capture/1) plus ingest.json, and a summary of what was found.
+// capture (softid-capture/1) plus ingest.json and ingest.png, and a summary of what was found.
 #include <spdlog/spdlog.h>
 
 #include <chrono>

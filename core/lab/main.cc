@@ -29,7 +29,7 @@ int main(int argc, char** argv) {
   add("simulate", "simulate a scene and write the deformed surface per frame (PLY)",
       softid::lab::RegisterSimulate);
   add("bench", "time simulation steps at several grid sizes", softid::lab::RegisterBench);
-  add("ingest", "turn a raw recording into a capture (writes capture.json, ingest.json)",
+  add("ingest", "turn a raw recording into a capture (writes capture.json, ingest.json, ingest.png)",
       softid::lab::RegisterIngest);
   add("fit", "recover physical parameters from a capture (writes result.json)",
       softid::lab::RegisterFit);

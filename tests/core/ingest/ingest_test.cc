@@ -73,6 +73,37 @@ struct Bounds {
   double max_floor_mm = 1.0;
 };
 
+// The contact sheet: 12 frames in 3 rows of 4; on the first, the registered mesh's outline
+// (yellow) around the pixels taken as the object (red); the floor (green) on every frame.
+void ExpectContactSheetShowsTheObject(const fs::path& path, int frames) {
+  const cv::Mat sheet = cv::imread(path.string(), cv::IMREAD_COLOR);
+  ASSERT_FALSE(sheet.empty()) << path;
+  ASSERT_GE(frames, 12);
+  const int tile_w = (sheet.cols - 4) / 4 - 4, tile_h = (sheet.rows - 4) / 3 - 4;
+  const cv::Mat first = sheet(cv::Rect(4, 4, tile_w, tile_h));
+  cv::Rect object, outline;
+  int floor_pixels = 0;
+  for (int row = 0; row < first.rows; ++row) {
+    for (int col = 0; col < first.cols; ++col) {
+      const cv::Vec3b bgr = first.at<cv::Vec3b>(row, col);
+      const int b = bgr[0], g = bgr[1], r = bgr[2];
+      const cv::Rect pixel(col, row, 1, 1);
+      if (r > g + 60 && r > b + 60) object = object.empty() ? pixel : (object | pixel);
+      if (r > 200 && g > 200 && b < 60) outline = outline.empty() ? pixel : (outline | pixel);
+      if (g > r + 40 && g > b + 40) ++floor_pixels;
+    }
+  }
+  ASSERT_FALSE(object.empty());
+  ASSERT_FALSE(outline.empty());
+  const double overlap = static_cast<double>((object & outline).area()) / (object | outline).area();
+  std::printf("contact sheet %dx%d: object box %dx%d, outline box %dx%d (overlap %.2f), %.0f %% "
+              "floor\n",
+              sheet.cols, sheet.rows, object.width, object.height, outline.width, outline.height,
+              overlap, 100.0 * floor_pixels / first.total());
+  EXPECT_GT(overlap, 0.8);
+  EXPECT_GT(floor_pixels, first.total() / 10);
+}
+
 void IngestAndCompare(int background_frames, const Bounds& bounds) {
   Result<scenes::Scene> scene = scenes::MakeBuiltinScene("torus-drop");
   ASSERT_TRUE(scene.ok());
@@ -148,6 +179,8 @@ void IngestAndCompare(int background_frames, const Bounds& bounds) {
   }
   ASSERT_TRUE(written->floor.has_value());
   EXPECT_TRUE(fs::exists(cap.path / "ingest.json"));
+  ExpectContactSheetShowsTheObject(cap.path / kContactSheetFileName,
+                                   static_cast<int>(camera.object_masks.size()));
 }
 
 // Without background frames the static scene comes from the frames themselves. The torus falls
