@@ -27,6 +27,14 @@ Status ForegroundOptions::Validate() const {
   return Status::Ok();
 }
 
+namespace {
+
+// Candidate pixels: nearer than the scene, or of a scene that may be the object itself (they join
+// a region of nearer pixels but make none alone).
+constexpr uint8_t kNearer = 1, kJoinsOnly = 2;
+
+}  // namespace
+
 Result<Foreground> SegmentForeground(const capture::DepthImage& frame, const StaticScene& scene,
                                      const capture::PixelRays& rays,
                                      const ForegroundOptions& options) {
@@ -45,7 +53,11 @@ Result<Foreground> SegmentForeground(const capture::DepthImage& frame, const Sta
       const float behind = scene.depth(col, row);
       const double margin =
           std::max(options.min_margin_m, options.noise_sigmas * scene.sigma(col, row));
-      if (behind <= 0.0f || behind - z > margin) candidates(row, col) = 1;
+      if (behind <= 0.0f || behind - z > margin) {
+        candidates(row, col) = kNearer;
+      } else if (!scene.maybe_object.empty() && scene.maybe_object[row * frame.width + col]) {
+        candidates(row, col) = kJoinsOnly;
+      }
     }
   }
   // Regions: 8-connected candidates whose depths join without a jump (a pixel of the object and a
@@ -59,6 +71,7 @@ Result<Foreground> SegmentForeground(const capture::DepthImage& frame, const Sta
   for (int seed = 0; seed < static_cast<int>(label.size()); ++seed) {
     if (!candidates(seed / frame.width, seed % frame.width) || label[seed] >= 0) continue;
     members.clear();
+    int nearer = 0;
     stack.assign(1, seed);
     label[seed] = seed;
     while (!stack.empty()) {
@@ -66,6 +79,7 @@ Result<Foreground> SegmentForeground(const capture::DepthImage& frame, const Sta
       stack.pop_back();
       members.push_back(p);
       const int row = p / frame.width, col = p % frame.width;
+      nearer += candidates(row, col) == kNearer ? 1 : 0;
       const float z = frame.depth[p];
       for (int dr = -1; dr <= 1; ++dr) {
         for (int dc = -1; dc <= 1; ++dc) {
@@ -79,7 +93,7 @@ Result<Foreground> SegmentForeground(const capture::DepthImage& frame, const Sta
         }
       }
     }
-    if (static_cast<int>(members.size()) < options.min_region_pixels) continue;
+    if (nearer < options.min_region_pixels) continue;
     ForegroundRegion region;
     region.pixels = members;
     std::sort(region.pixels.begin(), region.pixels.end());

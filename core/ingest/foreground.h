@@ -42,8 +42,9 @@ struct Foreground {
 };
 
 // The foreground of `frame` against `scene` (same size): pixels with data that are nearer than the
-// static scene by the margin above, or that have data where the scene has none; regions smaller
-// than min_region_pixels are dropped. Points are unprojected along `rays` (the camera's lens).
+// static scene by the margin above, or that have data where the scene has none; regions with
+// fewer than min_region_pixels such pixels are dropped. Pixels the scene marks maybe_object join
+// a region when their depths continue it. Points are unprojected along `rays` (the camera's lens).
 // InvalidArgument when the sizes differ.
 Result<Foreground> SegmentForeground(const capture::DepthImage& frame, const StaticScene& scene,
                                      const capture::PixelRays& rays,

@@ -52,6 +52,22 @@ bool OnBorder(int pixel, int width, int height) {
   return row == 0 || col == 0 || row == height - 1 || col == width - 1;
 }
 
+// A static scene from the recording's own frames: the pixels the object covers in the first frame
+// may show it in every frame (see MarkHiddenByTheObject).
+Status MarkHiddenPixels(const recording::Recording& rec, int c, const WorldPlane& floor_W,
+                        const IngestOptions& options, CameraView* view) {
+  SOFTID_ASSIGN_OR_RETURN(DepthImage first, recording::LoadRecordingFrame(rec, c, 0));
+  SOFTID_ASSIGN_OR_RETURN(Foreground fg,
+                          SegmentForeground(first, view->scene, view->rays, options.foreground));
+  if (fg.regions.empty()) return Status::Ok();  // SegmentCamera reports it
+  const Eigen::Matrix3d& R_WC = view->X_WC.linear();
+  const Eigen::Vector3d normal_C = R_WC.transpose() * floor_W.normal_W;
+  const double offset_C = floor_W.offset_m - floor_W.normal_W.dot(view->X_WC.translation());
+  MarkHiddenByTheObject(fg.regions[0].pixels, normal_C, offset_C, view->rays, options.static_scene,
+                        &view->scene);
+  return Status::Ok();
+}
+
 // Segments and tracks the object through every frame of camera c.
 Status SegmentCamera(const recording::Recording& rec, int c, double object_radius_m,
                      const IngestOptions& options, CameraView* view, CameraIngest* report,
@@ -306,6 +322,8 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
   // 3. The object's pixels in every frame.
   const double object_radius_m = 0.5 * mesh_S.Bounds().diagonal().norm();
   for (int c = 0; c < rec.NumCameras(); ++c) {
+    if (!report.cameras[c].static_from_background)
+      SOFTID_RETURN_IF_ERROR(MarkHiddenPixels(rec, c, report.floor_W, options, &views[c]));
     SOFTID_RETURN_IF_ERROR(
         SegmentCamera(rec, c, object_radius_m, options, &views[c], &report.cameras[c], progress));
   }

@@ -50,6 +50,10 @@ Status StaticSceneOptions::Validate() const {
   if (min_readings < 1) {
     return Status::InvalidArgument(fmt::format("min_readings = {}: must be >= 1", min_readings));
   }
+  if (!(min_height_above_floor_m >= 0.0) || !std::isfinite(min_height_above_floor_m)) {
+    return Status::InvalidArgument(
+        fmt::format("min_height_above_floor_m = {}: must be >= 0", min_height_above_floor_m));
+  }
   return Status::Ok();
 }
 
@@ -99,6 +103,20 @@ Result<StaticScene> EstimateStaticScene(const std::vector<capture::DepthImage>& 
   }
   FloorSigmaByDepth(&scene);
   return scene;
+}
+
+void MarkHiddenByTheObject(const std::vector<int>& first_object_pixels,
+                           const Eigen::Vector3d& floor_normal_C, double floor_offset_m,
+                           const capture::PixelRays& rays, const StaticSceneOptions& options,
+                           StaticScene* scene) {
+  scene->maybe_object.assign(scene->depth_m.size(), 0);
+  for (const int p : first_object_pixels) {
+    const float z = scene->depth_m[p];
+    if (z <= 0.0f) continue;
+    const Eigen::Vector3d point = z * Eigen::Vector3d(rays.xy[p].x(), rays.xy[p].y(), 1.0);
+    if (floor_normal_C.dot(point) - floor_offset_m > options.min_height_above_floor_m)
+      scene->maybe_object[p] = 1;
+  }
 }
 
 void StaticScenePoints(const StaticScene& scene, const capture::PixelRays& rays,

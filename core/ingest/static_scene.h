@@ -21,6 +21,10 @@ struct StaticScene {
   std::vector<float> depth_m;
   // Per pixel: robust standard deviation of that depth over the frames that show it [m].
   std::vector<float> sigma_m;
+  // Per pixel, or empty: 1 where the depth may be the object itself at rest, never seen behind
+  // (MarkHiddenByTheObject). Such pixels join an object region their depths continue, but never
+  // make one by themselves.
+  std::vector<uint8_t> maybe_object;
 
   float depth(int col, int row) const { return depth_m[static_cast<size_t>(row) * width + col]; }
   float sigma(int col, int row) const { return sigma_m[static_cast<size_t>(row) * width + col]; }
@@ -38,6 +42,8 @@ struct StaticSceneOptions {
   // rest, sometimes just once (a rarer reading farther away than the scene does not occur: a
   // sensor's flying pixels lie between an object and what is behind it).
   int min_readings = 1;
+  // MarkHiddenByTheObject: scene points at most this high above the floor are floor [m].
+  double min_height_above_floor_m = 0.01;
 
   Status Validate() const;
 };
@@ -50,6 +56,17 @@ struct StaticSceneOptions {
 // InvalidArgument when images is empty or sizes differ, naming the image.
 Result<StaticScene> EstimateStaticScene(const std::vector<capture::DepthImage>& images,
                                         const StaticSceneOptions& options = {});
+
+// Without views of the empty scene, pixels the object covers in every frame (it falls onto where
+// it was) show only the object: their "static" depth is the object at rest, and the object would
+// lose them once it lies still. Marks as maybe_object the pixels of `first_object_pixels` (the
+// object in the first frame) whose static point stands higher than min_height_above_floor_m above
+// the floor n_C . p = offset_m: resting object, or clutter behind the released object, which the
+// foreground tells apart by whether the object's region continues into them.
+void MarkHiddenByTheObject(const std::vector<int>& first_object_pixels,
+                           const Eigen::Vector3d& floor_normal_C, double floor_offset_m,
+                           const capture::PixelRays& rays, const StaticSceneOptions& options,
+                           StaticScene* scene);
 
 // The static scene's points in the camera frame [m], unprojected along the lens's rays (same
 // size as the scene), with each point's sigma; pixels of unknown depth are left out.

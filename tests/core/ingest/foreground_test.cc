@@ -97,5 +97,52 @@ TEST(StaticScene, RejectsEmptyOrMismatchedInput) {
             std::string::npos);
 }
 
+// Pixels the scene marks maybe_object (the object may rest on them in every frame) join the
+// object's region where its depth continues into them, and make no region alone (clutter behind
+// the released object stays out).
+TEST(Foreground, MaybeObjectPixelsJoinAContinuingRegionOnly) {
+  constexpr int kWidth = 40, kHeight = 30;
+  StaticScene scene;
+  scene.width = kWidth;
+  scene.height = kHeight;
+  scene.depth_m.assign(kWidth * kHeight, 2.0f);
+  scene.sigma_m.assign(kWidth * kHeight, 0.002f);
+  scene.maybe_object.assign(kWidth * kHeight, 0);
+  DepthImage frame = DepthImage::Zeros(kWidth, kHeight);
+  frame.depth.assign(kWidth * kHeight, 2.0f);
+  const auto pixel = [](int col, int row) { return row * kWidth + col; };
+  // The object: columns 5..14 nearer than the scene; columns 15..19 the object too, but the scene
+  // there is the object itself (depth 1.5, as seen), marked maybe_object.
+  for (int row = 10; row < 20; ++row) {
+    for (int col = 5; col < 20; ++col) frame.depth[pixel(col, row)] = 1.5f;
+    for (int col = 15; col < 20; ++col) {
+      scene.depth_m[pixel(col, row)] = 1.5f;
+      scene.maybe_object[pixel(col, row)] = 1;
+    }
+  }
+  // Clutter at 1.0 m, its scene the clutter itself and marked maybe_object, apart from the object.
+  for (int row = 10; row < 20; ++row) {
+    for (int col = 28; col < 36; ++col) {
+      frame.depth[pixel(col, row)] = 1.0f;
+      scene.depth_m[pixel(col, row)] = 1.0f;
+      scene.maybe_object[pixel(col, row)] = 1;
+    }
+  }
+  capture::PinholeCamera camera;
+  camera.width = kWidth;
+  camera.height = kHeight;
+  camera.fx = camera.fy = 40.0;
+  camera.cx = 19.5;
+  camera.cy = 14.5;
+  Result<capture::PixelRays> rays = capture::ComputePixelRays(camera, {});
+  ASSERT_TRUE(rays.ok());
+  const Result<Foreground> fg = SegmentForeground(frame, scene, *rays);
+  ASSERT_TRUE(fg.ok()) << fg.status().ToString();
+  ASSERT_EQ(fg->regions.size(), 1u);
+  EXPECT_EQ(fg->regions[0].pixels.size(), 10u * 15u);
+  EXPECT_EQ(fg->mask[pixel(17, 15)], 1);
+  EXPECT_EQ(fg->mask[pixel(30, 15)], 0);
+}
+
 }  // namespace
 }  // namespace softid::ingest
