@@ -102,13 +102,22 @@ Status SegmentCamera(const recording::Recording& rec, int c, double object_radiu
     view->object_points_C.push_back(std::move(points));
     if (progress) progress("segmentation", k + 1, n);
   }
-  if (frames_on_border == n) {
-    return Status::FailedPrecondition(fmt::format(
-        "ingest: camera \"{}\": the object touches the image border in all {} frames: it is cut "
-        "off (move the camera back or the object into view)",
-        camera.camera.name, n));
-  }
+  report->cut_off = frames_on_border == n;
   return Status::Ok();
+}
+
+// A camera that never sees the whole object still constrains the fit with what it sees; a
+// recording where no camera does is set up wrong (and the mesh has no whole view to register to).
+Status CheckSomeCameraSeesTheWholeObject(const recording::Recording& rec,
+                                         const IngestReport& report) {
+  for (const CameraIngest& camera : report.cameras) {
+    if (!camera.cut_off) return Status::Ok();
+  }
+  return Status::FailedPrecondition(fmt::format(
+      "ingest: camera \"{}\": the object touches the image border in all {} frames{}: it is cut "
+      "off (move the camera back or the object into view)",
+      rec.cameras[0].camera.name, rec.cameras[0].frames.size(),
+      rec.NumCameras() > 1 ? ", as in every other camera" : ""));
 }
 
 // A mesh in the wrong unit cannot match: compare its size with the spread of the object's points.
@@ -181,7 +190,8 @@ nlohmann::json IngestReport::ToJson() const {
     cams.push_back({{"name", c.name},
                     {"static_scene_from", c.static_from_background ? "background" : "frames"},
                     {"object_pixels", c.object_pixels},
-                    {"rejected_regions", c.rejected_regions}});
+                    {"rejected_regions", c.rejected_regions},
+                    {"cut_off", c.cut_off}});
   }
   return {{"format", "softid-ingest/1"},
           {"cameras", std::move(cams)},
@@ -327,6 +337,7 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
     SOFTID_RETURN_IF_ERROR(
         SegmentCamera(rec, c, object_radius_m, options, &views[c], &report.cameras[c], progress));
   }
+  SOFTID_RETURN_IF_ERROR(CheckSomeCameraSeesTheWholeObject(rec, report));
   // 4. The mesh's pose at the release.
   SOFTID_RETURN_IF_ERROR(PoseMesh(rec, mesh_S, options, views, &report));
   if (progress) progress("registration", 1, 1);

@@ -43,6 +43,7 @@ struct CameraIngest {
   bool static_from_background = false;
   std::vector<int> object_pixels;     // per recording frame (0: object not found)
   std::vector<int> rejected_regions;  // per recording frame: foreground left out
+  bool cut_off = false;               // the object touches the image border in every frame
   // Per recording frame: the object's pixels (row-major indices in the raw, distorted image).
   std::vector<std::vector<int>> object_masks;
 };
@@ -70,9 +71,9 @@ using IngestProgress = std::function<void(std::string_view stage, int done, int 
 // Ingests `recording` into the capture folder `capture_dir` (capture.json, object.obj, per-camera
 // frames with only the object's pixels, undistorted onto the camera's ideal pinhole without
 // interpolation; frame_times) plus ingest.json and ingest.png (contact_sheet.h). Errors name the
-// stage, the camera and the frame: no foreground, the object on the image border in every frame, a
-// mesh whose size cannot match the object's points, a registration that does not converge (overlap
-// and RMS), no floor.
+// stage, the camera and the frame: no foreground, the object on the image border in every frame of
+// every camera, a mesh whose size cannot match the object's points, a registration that does not
+// converge (overlap and RMS), no floor.
 Result<IngestReport> Ingest(const recording::Recording& recording,
                             const std::filesystem::path& capture_dir,
                             const IngestOptions& options = {}, const IngestProgress& progress = {});

@@ -21,6 +21,7 @@ Command RegisterIngest(CLI::App* app);
 Command RegisterFit(CLI::App* app);
 Command RegisterDiagnose(CLI::App* app);
 Command RegisterProveDiagnosis(CLI::App* app);
+Command RegisterProveIngest(CLI::App* app);
 Command RegisterReproduce(CLI::App* app);
 
 }  // namespace softid::lab

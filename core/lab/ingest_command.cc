@@ -33,6 +33,9 @@ void PrintSummary(const ingest::IngestReport& report, double seconds,
     std::printf("  camera %-8s object in %d of %zu frames (static scene from %s)\n",
                 camera.name.c_str(), found, camera.object_pixels.size(),
                 camera.static_from_background ? "background frames" : "the frames");
+    if (camera.cut_off) {
+      std::printf("    warning: the object touches this camera's image border in every frame\n");
+    }
   }
   std::printf("  floor      %d points (%.0f %%), RMS %.2f mm%s\n", report.floor_C.inliers,
               100 * report.floor_C.inlier_share, 1e3 * report.floor_C.rms_m,

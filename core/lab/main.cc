@@ -29,7 +29,8 @@ int main(int argc, char** argv) {
   add("simulate", "simulate a scene and write the deformed surface per frame (PLY)",
       softid::lab::RegisterSimulate);
   add("bench", "time simulation steps at several grid sizes", softid::lab::RegisterBench);
-  add("ingest", "turn a raw recording into a capture (writes capture.json, ingest.json, ingest.png)",
+  add("ingest",
+      "turn a raw recording into a capture (writes capture.json, ingest.json, ingest.png)",
       softid::lab::RegisterIngest);
   add("fit", "recover physical parameters from a capture (writes result.json)",
       softid::lab::RegisterFit);
@@ -37,6 +38,8 @@ int main(int argc, char** argv) {
       softid::lab::RegisterDiagnose);
   add("prove-diagnosis", "concealed-effect benchmark of the diagnosis (confusion table)",
       softid::lab::RegisterProveDiagnosis);
+  add("prove-ingest", "raw recordings ingested and held against their truth (table)",
+      softid::lab::RegisterProveIngest);
   add("reproduce", "benchmarks: table1 | ball-bounce | pillow-ramp | bar-hanging",
       softid::lab::RegisterReproduce);
   try {

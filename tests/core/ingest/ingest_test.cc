@@ -12,13 +12,13 @@
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
-#include <numbers>
 #include <opencv2/imgcodecs.hpp>
 
 #include "core/capture/capture.h"
 #include "core/capture/depth_noise.h"
-#include "core/geometry/mesh_distance.h"
 #include "core/geometry/triangle_mesh.h"
+#include "core/lab/ingest_truth.h"
+#include "core/lab/ingest_truth.h"
 #include "core/scenes/raw_recording_synthesis.h"
 #include "core/scenes/scene.h"
 
@@ -47,24 +47,6 @@ scenes::RawSynthesisOptions RecordingOptions(int background_frames) {
   options.background_frames = background_frames;
   options.write_true_masks = true;
   return options;
-}
-
-Eigen::Isometry3d Pose(const nlohmann::json& numbers) {
-  Eigen::Matrix4d m;
-  for (int i = 0; i < 16; ++i) m(i / 4, i % 4) = numbers[i].get<double>();
-  return Eigen::Isometry3d(m);
-}
-
-double IoU(const std::vector<int>& found, const cv::Mat& truth) {
-  std::vector<uint8_t> mine(truth.total(), 0);
-  for (const int p : found) mine[p] = 1;
-  int both = 0, either = 0;
-  for (size_t p = 0; p < mine.size(); ++p) {
-    const bool t = truth.data[p] > 0;
-    both += mine[p] && t;
-    either += mine[p] || t;
-  }
-  return either == 0 ? 1.0 : static_cast<double>(both) / either;
 }
 
 // Bounds a recording's masks and floor must meet.
@@ -96,10 +78,11 @@ void ExpectContactSheetShowsTheObject(const fs::path& path, int frames) {
   ASSERT_FALSE(object.empty());
   ASSERT_FALSE(outline.empty());
   const double overlap = static_cast<double>((object & outline).area()) / (object | outline).area();
-  std::printf("contact sheet %dx%d: object box %dx%d, outline box %dx%d (overlap %.2f), %.0f %% "
-              "floor\n",
-              sheet.cols, sheet.rows, object.width, object.height, outline.width, outline.height,
-              overlap, 100.0 * floor_pixels / first.total());
+  std::printf(
+      "contact sheet %dx%d: object box %dx%d, outline box %dx%d (overlap %.2f), %.0f %% "
+      "floor\n",
+      sheet.cols, sheet.rows, object.width, object.height, outline.width, outline.height, overlap,
+      100.0 * floor_pixels / first.total());
   EXPECT_GT(overlap, 0.8);
   EXPECT_GT(floor_pixels, first.total() / 10);
 }
@@ -115,59 +98,25 @@ void IngestAndCompare(int background_frames, const Bounds& bounds) {
   ASSERT_TRUE(rec.ok()) << rec.status().ToString();
   Result<IngestReport> report = Ingest(*rec, cap.path);
   ASSERT_TRUE(report.ok()) << report.status().ToString();
-  nlohmann::json truth;
-  std::ifstream(raw.path / "truth.json") >> truth;
-  const nlohmann::json& t = truth["raw"];
-  const Eigen::Isometry3d X_WC = Pose(t["cameras"][0]["world_from_camera"]);
-  const Eigen::Isometry3d X_WS = Pose(t["world_from_scanner"]);
-
-  // Masks: every frame against the true mask.
-  double worst_iou = 1.0;
-  int worst_frame = -1;
+  Result<lab::IngestAccuracy> accuracy = lab::CompareIngestWithTruth(raw.path, *rec, *report);
+  ASSERT_TRUE(accuracy.ok()) << accuracy.status().ToString();
   const CameraIngest& camera = report->cameras[0];
-  for (size_t k = 0; k < camera.object_masks.size(); ++k) {
-    char name[64];
-    std::snprintf(name, sizeof(name), "truth_masks/cam0/%06zu.png", k);
-    const cv::Mat mask = cv::imread((raw.path / name).string(), cv::IMREAD_GRAYSCALE);
-    ASSERT_FALSE(mask.empty()) << name;
-    const double iou = IoU(camera.object_masks[k], mask);
-    if (iou < worst_iou) {
-      worst_iou = iou;
-      worst_frame = static_cast<int>(k);
-    }
-  }
-  // Floor: the truth's plane seen from the camera.
-  const Eigen::Vector3d n_W(t["floor"]["normal"][0], t["floor"]["normal"][1],
-                            t["floor"]["normal"][2]);
-  const Eigen::Vector3d n_C = X_WC.linear().transpose() * n_W;
-  const double offset_C = t["floor"]["offset"].get<double>() - n_W.dot(X_WC.translation());
-  const double floor_deg =
-      std::acos(std::min(1.0, n_C.dot(report->floor_C.normal_C))) * 180 / std::numbers::pi;
-  const double floor_mm = 1e3 * std::abs(offset_C - report->floor_C.offset_m);
-  // Mesh pose in the camera frame, over the mesh's vertices.
-  const Eigen::Isometry3d X_CS_true = X_WC.inverse() * X_WS;
-  Result<geometry::TriangleMesh> mesh = recording::LoadRecordingMesh(*rec);
-  ASSERT_TRUE(mesh.ok());
-  // Over the vertices, the distance of the found pose to the true-posed surface: the torus is
-  // symmetric (turned about its axis or flipped over it is the same surface, and the same body).
-  geometry::TriangleMesh true_surface_C = *mesh;
-  for (Eigen::Vector3d& v : true_surface_C.vertices) v = X_CS_true * v;
-  Result<geometry::MeshDistance> distance = geometry::MeshDistance::Create(true_surface_C);
-  ASSERT_TRUE(distance.ok());
-  double squares = 0.0;
-  for (const Eigen::Vector3d& v : mesh->vertices) {
-    squares += std::pow(distance->Distance(report->registration.X_CS * v), 2);
-  }
-  const double pose_mm = 1e3 * std::sqrt(squares / mesh->vertices.size());
+  // The mesh pose is judged as a surface: the torus is symmetric (turned about its axis or flipped
+  // over it is the same surface, and the same body).
   std::printf(
       "background %d: worst IoU %.4f (frame %d), floor %.3f deg %.2f mm, mesh surface %.3f "
       "mm RMS\n",
-      background_frames, worst_iou, worst_frame, floor_deg, floor_mm, pose_mm);
-  EXPECT_GE(worst_iou, bounds.min_iou);
-  EXPECT_LT(floor_deg, 0.5);
-  EXPECT_LT(floor_mm, bounds.max_floor_mm);
-  EXPECT_LT(pose_mm, 1.0);
+      background_frames, accuracy->worst_iou, accuracy->worst_iou_frame, accuracy->floor_angle_deg,
+      1e3 * accuracy->floor_offset_m, 1e3 * accuracy->surface_rms_m);
+  EXPECT_GE(accuracy->worst_iou_frame, 0);  // the true masks were read
+  EXPECT_GE(accuracy->worst_iou, bounds.min_iou);
+  EXPECT_LT(accuracy->floor_angle_deg, 0.5);
+  EXPECT_LT(1e3 * accuracy->floor_offset_m, bounds.max_floor_mm);
+  EXPECT_LT(accuracy->surface_rms_m, 1e-3);
 
+  nlohmann::json truth;
+  std::ifstream(raw.path / "truth.json") >> truth;
+  const nlohmann::json& t = truth["raw"];
   // Frame times: device clock minus the first frame's, equal to the true times minus frame 0's.
   Result<capture::Capture> written = capture::ReadCapture(cap.path);
   ASSERT_TRUE(written.ok()) << written.status().ToString();
