@@ -136,7 +136,7 @@ ServiceResult<store::Capture> JobService::FinishUpload(const Caller& caller,
       if (!existed) added.push_back(entry.sha256);
     }
     Result<store::Capture> created =
-        jobs_->CreateCapture(*manifest, upload.request_id(), caller.station);
+        jobs_->CreateCapture(*manifest, upload.request_id(), caller.station, upload.format());
     if (!created.ok()) return FromStoreCreate(created.status());
     return *created;
   }();
@@ -146,8 +146,8 @@ ServiceResult<store::Capture> JobService::FinishUpload(const Caller& caller,
     return capture.status();
   }
   if (options_.metrics != nullptr) options_.metrics->CountUpload(true, bytes);
-  logger_->info("capture {}: stored {} files (request_id '{}')", capture->id,
-                capture->manifest.size(), capture->request_id);
+  logger_->info("capture {}: stored {} files, {} (request_id '{}')", capture->id,
+                capture->manifest.size(), capture->format, capture->request_id);
   return capture;
 }
 
