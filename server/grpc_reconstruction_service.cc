@@ -226,6 +226,7 @@ grpc::Status GrpcReconstructionService::GetResult(grpc::ServerContext* context,
   for (double cost : result->cost_history) response->add_cost_history(cost);
   for (int frame : result->cost_history_last_frame) response->add_cost_history_last_frame(frame);
   FittedParametersToProto(result->result, response);
+  if (!result->ingest.is_null()) response->set_ingest_json(result->ingest.dump());
   return grpc::Status::OK;
 }
 

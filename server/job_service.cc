@@ -36,7 +36,8 @@ JobService::JobService(store::JobStore* jobs, const store::BlobStore* blobs, Job
       events_(events),
       options_(std::move(options)),
       logger_(logger ? std::move(logger) : spdlog::default_logger()),
-      rate_limiter_(options_.quotas.requests_per_second, options_.quotas.request_burst) {}
+      rate_limiter_(options_.quotas.requests_per_second, options_.quotas.request_burst),
+      blob_puts_(options_.blob_puts != nullptr ? *options_.blob_puts : own_blob_puts_) {}
 
 JobService::StationState& JobService::Station(const std::string& station) {
   std::lock_guard lock(stations_mutex_);
@@ -348,7 +349,8 @@ ServiceResult<JobResult> JobService::GetResult(const Caller& caller, const std::
                          "job " + job_id + " is " + store::ToString(job->state) +
                              ": a result exists once it SUCCEEDED");
   }
-  JobResult out{job_id, *job->result, {}, {}};
+  JobResult out{job_id, *job->result, {}, {}, {}};
+  if (auto it = job->result->find("ingest"); it != job->result->end()) out.ingest = *it;
   if (auto it = job->result->find("cost_history"); it != job->result->end() && it->is_array()) {
     for (const nlohmann::json& cost : *it) {
       if (cost.is_number()) out.cost_history.push_back(cost.get<double>());

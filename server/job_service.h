@@ -61,6 +61,10 @@ struct JobServiceOptions {
   StationQuotas quotas;
   // Where uploads are counted; may be null.
   Metrics* metrics = nullptr;
+  // Held shared from a capture's first blob put to its commit and exclusive while unreferenced
+  // blobs are removed; shared with the workers, which store the captures they ingest. Null: the
+  // service's own (nothing else puts blobs).
+  std::shared_mutex* blob_puts = nullptr;
 };
 
 // What GetResult returns.
@@ -69,6 +73,8 @@ struct JobResult {
   nlohmann::json result;                     // result.json
   std::vector<double> cost_history;          // result["cost_history"]
   std::vector<int> cost_history_last_frame;  // result["cost_history_last_frame"]
+  // result["ingest"] (the ingest report of a job on a recording); null otherwise.
+  nlohmann::json ingest;
 };
 
 class JobService {
@@ -155,8 +161,9 @@ class JobService {
   std::mutex stations_mutex_;
   std::map<std::string, std::unique_ptr<StationState>> stations_;
   // Shared from an upload's first blob put to its commit; exclusive while a failed upload removes
-  // its blobs (RemoveUnreferencedBlobs).
-  std::shared_mutex blob_puts_;
+  // its blobs (RemoveUnreferencedBlobs). options_.blob_puts when given, else own_blob_puts_.
+  std::shared_mutex own_blob_puts_;
+  std::shared_mutex& blob_puts_;
 };
 
 }  // namespace softid::server
