@@ -270,6 +270,42 @@ ServiceStatus JobService::DeleteCapture(const Caller& caller, const std::string&
   return ServiceStatus::Ok();
 }
 
+ServiceStatus JobService::DownloadCapture(const Caller& caller, const std::string& capture_id,
+                                          const CaptureSink& send_capture,
+                                          const ChunkSink& send_chunk) {
+  Result<store::Capture> capture = jobs_->GetCapture(capture_id);
+  if (!capture.ok()) return capture.status();
+  if (!caller.Sees(capture->owner)) {
+    return ServiceStatus(ServiceCode::kNotFound, "capture " + capture_id + " not found");
+  }
+  if (!send_capture(*capture)) return ServiceStatus(ServiceCode::kCancelled, "the caller left");
+  std::string buffer(static_cast<size_t>(options_.upload_limits.max_chunk_bytes), '\0');
+  for (const store::ManifestEntry& entry : capture->manifest) {
+    Result<std::ifstream> in = blobs_->OpenBlob(entry.sha256);
+    if (!in.ok()) {
+      return ServiceStatus(ServiceCode::kInternal, "capture " + capture_id + ": \"" + entry.path +
+                                                       "\": " + in.status().message());
+    }
+    int64_t offset = 0;
+    // An empty file still gets one (empty) chunk, so the receiver creates it.
+    do {
+      in->read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+      const std::string_view data(buffer.data(), static_cast<size_t>(in->gcount()));
+      if (data.empty() && offset > 0) break;
+      if (!send_chunk(entry.path, offset, data)) {
+        return ServiceStatus(ServiceCode::kCancelled, "the caller left");
+      }
+      offset += static_cast<int64_t>(data.size());
+    } while (*in);
+    if (offset != entry.size_bytes) {
+      return ServiceStatus(ServiceCode::kInternal,
+                           fmt::format("capture {}: \"{}\": the blob has {} bytes, not {}",
+                                       capture_id, entry.path, offset, entry.size_bytes));
+    }
+  }
+  return ServiceStatus::Ok();
+}
+
 ServiceResult<std::pair<int, int>> JobService::RemoveOlderThan(std::chrono::seconds age) {
   const store::Timestamp cutoff = store::ToTimestamp(std::chrono::system_clock::now() - age);
   const Caller operator_caller = Caller::Operator();

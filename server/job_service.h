@@ -119,6 +119,16 @@ class JobService {
   ServiceStatus WatchJob(const Caller& caller, const std::string& job_id, int from_iteration,
                          const EventSink& send, const std::function<bool()>& stop);
 
+  // The caller's capture with its manifest, then each file's bytes in chunks of at most
+  // upload_limits.max_chunk_bytes, file by file in manifest order, until done (OK) or a sink
+  // returns false (Cancelled). NotFound for another station's capture, like a missing one;
+  // Internal when a blob of it is missing (a damaged data directory).
+  using CaptureSink = std::function<bool(const store::Capture& capture)>;
+  using ChunkSink =
+      std::function<bool(const std::string& path, int64_t offset_bytes, std::string_view data)>;
+  ServiceStatus DownloadCapture(const Caller& caller, const std::string& capture_id,
+                                const CaptureSink& send_capture, const ChunkSink& send_chunk);
+
   // Counts a call against the caller's request rate: ResourceExhausted when it is over.
   ServiceStatus Admit(const Caller& caller);
   // Deletes a capture of the caller's that no job uses, with the blobs no other capture lists.
