@@ -120,9 +120,11 @@ Result<IngestedCapture> IngestRecording(const store::Job& job, const store::Capt
   note.message = "ingest: done, derived capture " + derived->id;
   (void)context.jobs->AppendProgress(job.id, note);
   context.events->Notify(job.id);
-  // The recording's layout is not needed by the fit.
+  // Neither layout is needed by the fit, which reads the stored capture's own (hard links to its
+  // blobs): half the disk while it runs.
   std::error_code ignored;
   fs::remove_all(recording_dir, ignored);
+  fs::remove_all(capture_dir, ignored);
   return IngestedCapture{*std::move(derived), report->ToJson()};
 }
 
