@@ -208,7 +208,7 @@ TempDir* RecordingJobTest::folders_ = nullptr;
 bool RecordingJobTest::ok_ = false;
 std::string RecordingJobTest::error_;
 
-TEST_F(RecordingJobTest, RecordingUploadIsStoredWithItsFormat) {
+TEST_F(RecordingJobTest, RecordingUploadIsStoredWithItsFormatAndSizesItsJobs) {
   StartServer(/*num_workers=*/0);
   const client::CaptureFiles files = FolderFiles(Recording());
   EXPECT_TRUE(files.capture_json.empty());
@@ -224,6 +224,23 @@ TEST_F(RecordingJobTest, RecordingUploadIsStoredWithItsFormat) {
   ASSERT_TRUE(a_->ListCaptures({}, &page).ok());
   ASSERT_EQ(page.captures_size(), 1);
   EXPECT_EQ(page.captures(0).format(), "softid-recording/1");
+
+  // Jobs on it are sized at the door from its mesh and frames, as on a capture.
+  const int frames =
+      static_cast<int>(nlohmann::json::parse(files.recording_json)["cameras"][0]["frames"].size());
+  for (const auto& [config, needle] : std::vector<std::pair<nlohmann::json, std::string>>{
+           {{{"cells", 300}}, "config_json: cells = 300"},
+           {{{"frames", {{"last", frames}}}},
+            "frames.last = " + std::to_string(frames) + ": the capture has " +
+                std::to_string(frames) + " frames"}}) {
+    v1::CreateJobRequest request;
+    request.set_capture_id(capture.id());
+    request.set_config_json(config.dump());
+    v1::Job job;
+    const grpc::Status status = a_->CreateJob(request, &job);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << config.dump();
+    EXPECT_NE(status.error_message().find(needle), std::string::npos) << status.error_message();
+  }
 }
 
 TEST_F(RecordingJobTest, MalformedRecordingIsRefusedNamingFieldAndValueAndNothingStored) {
@@ -297,7 +314,7 @@ TEST_F(RecordingJobTest, RecordingJobIngestsFitsAndItsDerivedCaptureDownloads) {
       if (event.message().rfind("ingest: segmentation ", 0) == 0) ++segmentation_notes;
     }
   }
-  EXPECT_GE(segmentation_notes, 2);  // the first and the last frame at least
+  EXPECT_GE(segmentation_notes, 2);   // the first and the last frame at least
   EXPECT_LE(segmentation_notes, 11);  // throttled: about ten per stage, not one per frame
   EXPECT_GE(iterations, 1);
   EXPECT_LT(last_ingest_seq, first_iteration_seq);  // the ingest came first
