@@ -432,6 +432,26 @@ TEST_F(RecordingJobTest, IngestFailureFailsTheJobNamingTheProblem) {
   EXPECT_EQ(NumCaptures(*a_), 1);
 }
 
+// The client tells the folders apart by the description they hold, and refuses a folder that
+// holds both or neither, naming it.
+TEST_F(RecordingJobTest, ClientDetectsTheFolderFormat) {
+  TempDir dir;
+  client::CaptureFiles files;
+  std::string error;
+  EXPECT_FALSE(client::ReadFolderFiles(dir.path(), &files, &error));
+  EXPECT_NE(error.find("neither capture.json nor recording.json"), std::string::npos) << error;
+  fs::copy(Recording(), dir.path() / "both", fs::copy_options::recursive);
+  std::ofstream(dir.path() / "both" / "capture.json") << "{}";
+  error.clear();
+  EXPECT_FALSE(client::ReadFolderFiles(dir.path() / "both", &files, &error));
+  EXPECT_NE(error.find("both capture.json and recording.json"), std::string::npos) << error;
+  fs::remove(dir.path() / "both" / "recording.json");
+  error.clear();
+  EXPECT_TRUE(client::ReadFolderFiles(dir.path() / "both", &files, &error)) << error;
+  EXPECT_EQ(files.capture_json, "{}");
+  EXPECT_TRUE(files.recording_json.empty());
+}
+
 // The client writes only inside the target folder, whatever paths a server names.
 TEST(CaptureDownload, RefusesPathsOutsideTheFolder) {
   TempDir dir;
