@@ -337,22 +337,31 @@ std::string ValueWithSigma(const v1::FittedParameter& parameter) {
 void PrintIngestSummary(const nlohmann::json& ingest, const std::string& derived_capture_id) {
   std::printf("ingest: recording ingested into capture %s\n",
               derived_capture_id.empty() ? "?" : derived_capture_id.c_str());
-  const nlohmann::json floor = ingest.value("floor", nlohmann::json::object());
-  if (floor.contains("normal") && floor.contains("offset_m")) {
-    std::printf("  floor         n=%s d=%s m, RMS %.2g mm, %.0f %% inliers\n",
-                Compact(floor["normal"]).c_str(), Compact(floor["offset_m"]).c_str(),
-                1e3 * floor.value("rms_m", NAN), 100.0 * floor.value("inlier_share", NAN));
-  }
-  const nlohmann::json registration = ingest.value("registration", nlohmann::json::object());
-  if (registration.contains("rms_m")) {
-    std::printf("  registration  RMS %.2g mm, overlap %.0f %%\n",
-                1e3 * registration.value("rms_m", NAN), 100.0 * registration.value("overlap", NAN));
-  }
-  const nlohmann::json time = ingest.value("time", nlohmann::json::object());
-  if (time.contains("frames")) {
-    std::printf("  frames        %d (median interval %.3g ms, largest gap %.3g ms)\n",
-                time.value("frames", 0), 1e3 * time.value("median_interval_s", NAN),
-                1e3 * time.value("max_gap_s", NAN));
+  // The report comes from the server: a field of another type ends the summary, not the client.
+  try {
+    const nlohmann::json floor = ingest.value("floor", nlohmann::json::object());
+    const nlohmann::json normal = floor.value("normal", nlohmann::json());
+    if (normal.is_array() && normal.size() == 3 && floor.contains("offset_m")) {
+      // Three decimals: a world frame built on the floor gives (0, 0, 1) up to rounding noise.
+      std::printf("  floor         n=[%.3f, %.3f, %.3f] d=%.4g m, RMS %.2g mm, %.0f %% inliers\n",
+                  normal[0].get<double>(), normal[1].get<double>(), normal[2].get<double>(),
+                  floor.value("offset_m", NAN), 1e3 * floor.value("rms_m", NAN),
+                  100.0 * floor.value("inlier_share", NAN));
+    }
+    const nlohmann::json registration = ingest.value("registration", nlohmann::json::object());
+    if (registration.contains("rms_m")) {
+      std::printf("  registration  RMS %.2g mm, overlap %.0f %%\n",
+                  1e3 * registration.value("rms_m", NAN),
+                  100.0 * registration.value("overlap", NAN));
+    }
+    const nlohmann::json time = ingest.value("time", nlohmann::json::object());
+    if (time.contains("frames")) {
+      std::printf("  frames        %d (median interval %.3g ms, largest gap %.3g ms)\n",
+                  time.value("frames", 0), 1e3 * time.value("median_interval_s", NAN),
+                  1e3 * time.value("max_gap_s", NAN));
+    }
+  } catch (const nlohmann::json::exception&) {
+    std::printf("  (the ingest report is not in the expected form; see result.json)\n");
   }
 }
 
