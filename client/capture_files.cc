@@ -40,21 +40,58 @@ bool Sha256OfFile(const std::filesystem::path& file, std::string* hex, int64_t* 
   return true;
 }
 
-bool ReadCaptureFiles(const std::filesystem::path& directory, CaptureFiles* out,
-                      std::string* error) {
-  const std::filesystem::path json_path = directory / "capture.json";
+namespace {
+
+// Reads <directory>/<name> into `text` and parses it into `json` (an object).
+bool ReadDescription(const std::filesystem::path& directory, const std::string& name,
+                     const std::string& kind, std::string* text, nlohmann::json* json,
+                     std::string* error) {
+  const std::filesystem::path json_path = directory / name;
   std::ifstream in(json_path, std::ios::binary);
   if (!in) {
-    *error = json_path.string() + ": not found (is " + directory.string() + " a capture folder?)";
+    *error = json_path.string() + ": not found (is " + directory.string() + " a " + kind + "?)";
     return false;
   }
-  std::stringstream text;
-  text << in.rdbuf();
-  out->directory = directory;
-  out->capture_json = text.str();
-  const nlohmann::json json = nlohmann::json::parse(out->capture_json, nullptr, false);
-  if (json.is_discarded() || !json.is_object()) {
+  std::stringstream contents;
+  contents << in.rdbuf();
+  *text = contents.str();
+  *json = nlohmann::json::parse(*text, nullptr, false);
+  if (json->is_discarded() || !json->is_object()) {
     *error = json_path.string() + ": not a JSON object";
+    return false;
+  }
+  return true;
+}
+
+// Hashes each of `paths` (duplicates once) into out->files.
+bool HashFiles(const std::filesystem::path& directory, const std::vector<std::string>& paths,
+               const std::string& named_in, CaptureFiles* out, std::string* error) {
+  std::set<std::string> seen;
+  for (const std::string& path : paths) {
+    if (!seen.insert(path).second) continue;
+    v1::CaptureFile file;
+    file.set_path(path);
+    std::string hex;
+    int64_t size = 0;
+    if (!Sha256OfFile(directory / path, &hex, &size)) {
+      *error = (directory / path).string() + ": cannot read (named in " + named_in + ")";
+      return false;
+    }
+    file.set_sha256(hex);
+    file.set_size_bytes(size);
+    out->files.push_back(std::move(file));
+  }
+  return true;
+}
+
+}  // namespace
+
+bool ReadCaptureFiles(const std::filesystem::path& directory, CaptureFiles* out,
+                      std::string* error) {
+  nlohmann::json json;
+  out->directory = directory;
+  if (!ReadDescription(directory, "capture.json", "capture folder", &out->capture_json, &json,
+                       error)) {
     return false;
   }
   // Only the names are read here; their meaning is checked by the server.
@@ -72,22 +109,59 @@ bool ReadCaptureFiles(const std::filesystem::path& directory, CaptureFiles* out,
       }
     }
   }
-  std::set<std::string> seen;
-  for (const std::string& path : paths) {
-    if (!seen.insert(path).second) continue;
-    v1::CaptureFile file;
-    file.set_path(path);
-    std::string hex;
-    int64_t size = 0;
-    if (!Sha256OfFile(directory / path, &hex, &size)) {
-      *error = (directory / path).string() + ": cannot read (named in capture.json)";
-      return false;
-    }
-    file.set_sha256(hex);
-    file.set_size_bytes(size);
-    out->files.push_back(std::move(file));
+  return HashFiles(directory, paths, "capture.json", out, error);
+}
+
+bool ReadRecordingFiles(const std::filesystem::path& directory, CaptureFiles* out,
+                        std::string* error) {
+  nlohmann::json json;
+  out->directory = directory;
+  if (!ReadDescription(directory, "recording.json", "recording folder", &out->recording_json, &json,
+                       error)) {
+    return false;
   }
-  return true;
+  // Only the names are read here, as for a capture: recording.json's rules are the server's.
+  std::vector<std::string> paths;
+  if (auto mesh = json.find("mesh"); mesh != json.end() && mesh->is_string()) {
+    paths.push_back(mesh->get<std::string>());
+  }
+  if (auto cameras = json.find("cameras"); cameras != json.end() && cameras->is_array()) {
+    for (const nlohmann::json& camera : *cameras) {
+      if (!camera.is_object()) continue;
+      if (auto frames = camera.find("frames"); frames != camera.end() && frames->is_array()) {
+        for (const nlohmann::json& frame : *frames) {
+          if (!frame.is_object()) continue;
+          auto file = frame.find("file");
+          if (file != frame.end() && file->is_string()) paths.push_back(file->get<std::string>());
+        }
+      }
+      if (auto background = camera.find("background");
+          background != camera.end() && background->is_array()) {
+        for (const nlohmann::json& file : *background) {
+          if (file.is_string()) paths.push_back(file.get<std::string>());
+        }
+      }
+    }
+  }
+  return HashFiles(directory, paths, "recording.json", out, error);
+}
+
+bool ReadFolderFiles(const std::filesystem::path& directory, CaptureFiles* out,
+                     std::string* error) {
+  std::error_code ignored;
+  const bool capture = std::filesystem::exists(directory / "capture.json", ignored);
+  const bool recording = std::filesystem::exists(directory / "recording.json", ignored);
+  if (capture && recording) {
+    *error = directory.string() +
+             ": holds both capture.json and recording.json; a folder is one or the other";
+    return false;
+  }
+  if (recording) return ReadRecordingFiles(directory, out, error);
+  if (capture) return ReadCaptureFiles(directory, out, error);
+  *error = directory.string() +
+           ": holds neither capture.json nor recording.json (is it a capture or recording "
+           "folder?)";
+  return false;
 }
 
 }  // namespace softid::client

@@ -17,6 +17,7 @@
 #include <sstream>
 #include <string>
 
+#include "client/capture_download.h"
 #include "client/capture_files.h"
 #include "client/channel_credentials.h"
 #include "client/reconstruction_client.h"
@@ -100,6 +101,7 @@ nlohmann::json JobJson(const v1::Job& job) {
                         {"create_time_s", job.create_time().seconds()}};
   if (!job.request_id().empty()) out["request_id"] = job.request_id();
   if (!job.error().empty()) out["error"] = job.error();
+  if (!job.derived_capture_id().empty()) out["derived_capture_id"] = job.derived_capture_id();
   return out;
 }
 
@@ -111,6 +113,9 @@ void PrintJob(const v1::Job& job, const GlobalFlags& flags) {
   std::cout << job.id() << "  " << StateName(job.state()) << "  capture " << job.capture_id()
             << "  attempts " << job.attempts();
   if (job.cancel_requested() && !IsTerminal(job.state())) std::cout << "  (cancel requested)";
+  if (!job.derived_capture_id().empty()) {
+    std::cout << "\n  ingested into capture " << job.derived_capture_id();
+  }
   if (!job.error().empty()) std::cout << "\n  error: " << job.error();
   std::cout << "\n";
 }
@@ -327,8 +332,42 @@ std::string ValueWithSigma(const v1::FittedParameter& parameter) {
   return out;
 }
 
+// A few lines on the ingest of a job on a raw recording (ingest.json, "softid-ingest/1"): the
+// floor, how well the mesh registered, the frames; fields it lacks are left out.
+void PrintIngestSummary(const nlohmann::json& ingest, const std::string& derived_capture_id) {
+  std::printf("ingest: recording ingested into capture %s\n",
+              derived_capture_id.empty() ? "?" : derived_capture_id.c_str());
+  // The report comes from the server: a field of another type ends the summary, not the client.
+  try {
+    const nlohmann::json floor = ingest.value("floor", nlohmann::json::object());
+    const nlohmann::json normal = floor.value("normal", nlohmann::json());
+    if (normal.is_array() && normal.size() == 3 && floor.contains("offset_m")) {
+      // Three decimals: a world frame built on the floor gives (0, 0, 1) up to rounding noise.
+      std::printf("  floor         n=[%.3f, %.3f, %.3f] d=%.4g m, RMS %.2g mm, %.0f %% inliers\n",
+                  normal[0].get<double>(), normal[1].get<double>(), normal[2].get<double>(),
+                  floor.value("offset_m", NAN), 1e3 * floor.value("rms_m", NAN),
+                  100.0 * floor.value("inlier_share", NAN));
+    }
+    const nlohmann::json registration = ingest.value("registration", nlohmann::json::object());
+    if (registration.contains("rms_m")) {
+      std::printf("  registration  RMS %.2g mm, overlap %.0f %%\n",
+                  1e3 * registration.value("rms_m", NAN),
+                  100.0 * registration.value("overlap", NAN));
+    }
+    const nlohmann::json time = ingest.value("time", nlohmann::json::object());
+    if (time.contains("frames")) {
+      std::printf("  frames        %d (median interval %.3g ms, largest gap %.3g ms)\n",
+                  time.value("frames", 0), 1e3 * time.value("median_interval_s", NAN),
+                  1e3 * time.value("max_gap_s", NAN));
+    }
+  } catch (const nlohmann::json::exception&) {
+    std::printf("  (the ingest report is not in the expected form; see result.json)\n");
+  }
+}
+
 // The result of a job: a table of the typed parameters with their 1-sigma (or, with --json and
-// no -o, result.json itself); -o also writes result.json; --truth compares with a truth.json.
+// no -o, result.json itself), after an ingest summary for a job on a recording; -o also writes
+// result.json; --truth compares with a truth.json.
 int ShowResult(ReconstructionClient& client, const std::string& job_id, const std::string& out_file,
                const std::string& truth_file, const GlobalFlags& flags) {
   v1::Result r;
@@ -350,6 +389,12 @@ int ShowResult(ReconstructionClient& client, const std::string& job_id, const st
     std::cout << parsed.dump(2) << "\n";
     return kExitOk;
   } else if (!flags.json) {
+    if (!r.ingest_json().empty()) {
+      v1::Job job;  // for its derived capture; the summary stands without it
+      (void)client.GetJob(job_id, &job);
+      PrintIngestSummary(nlohmann::json::parse(r.ingest_json(), nullptr, false),
+                         job.derived_capture_id());
+    }
     for (const v1::FittedParameter& parameter : r.parameters()) {
       std::printf("%-26s %s %s\n", parameter.name().c_str(), ValueWithSigma(parameter).c_str(),
                   parameter.unit().c_str());
@@ -366,13 +411,13 @@ int ShowResult(ReconstructionClient& client, const std::string& job_id, const st
   return kExitOk;
 }
 
-// Uploads the capture folder `dir` and sets its id; an exit code.
+// Uploads the capture or raw recording folder `dir` and sets its id; an exit code.
 int UploadCaptureFolder(ReconstructionClient& client, const std::string& dir,
                         const std::string& request_id, const GlobalFlags& flags,
                         std::string* capture_id) {
   softid::client::CaptureFiles files;
   std::string error;
-  if (!softid::client::ReadCaptureFiles(dir, &files, &error)) {
+  if (!softid::client::ReadFolderFiles(dir, &files, &error)) {
     std::fprintf(stderr, "softid: %s\n", error.c_str());
     return kExitInvalidInput;
   }
@@ -381,7 +426,8 @@ int UploadCaptureFolder(ReconstructionClient& client, const std::string& dir,
       client.UploadCapture(files, request_id.empty() ? "" : request_id + "/capture", &capture);
   if (!s.ok()) return Report(s, flags);
   if (!flags.json) {
-    std::cout << "capture " << capture.id() << " uploaded (" << files.files.size() << " files)\n";
+    std::cout << (files.recording_json.empty() ? "capture " : "recording ") << capture.id()
+              << " uploaded (" << files.files.size() << " files)\n";
   }
   *capture_id = capture.id();
   return kExitOk;
@@ -402,16 +448,43 @@ int ListCaptures(ReconstructionClient& client, const GlobalFlags& flags) {
                        {"num_files", capture.num_files()},
                        {"total_bytes", capture.total_bytes()},
                        {"num_jobs", capture.num_jobs()},
+                       {"format", capture.format()},
                        {"create_time_s", capture.create_time().seconds()}});
         continue;
       }
-      std::printf("%s  %4d files  %8.1f MB  %3d job(s)%s%s\n", capture.id().c_str(),
+      std::printf("%s  %-9s  %4d files  %8.1f MB  %3d job(s)%s%s\n", capture.id().c_str(),
+                  capture.format() == "softid-recording/1" ? "recording" : "capture",
                   capture.num_files(), capture.total_bytes() / 1e6, capture.num_jobs(),
                   capture.request_id().empty() ? "" : "  request ", capture.request_id().c_str());
     }
     request.set_page_token(page.next_page_token());
   } while (!request.page_token().empty());
   if (flags.json) std::cout << all.dump() << "\n";
+  return kExitOk;
+}
+
+// Downloads capture `capture_id` into `dir` (absent or empty); an exit code.
+int DownloadCapture(ReconstructionClient& client, const std::string& capture_id,
+                    const std::string& dir, const GlobalFlags& flags) {
+  std::string error;
+  if (!softid::client::IsEmptyTarget(dir, &error)) {
+    std::fprintf(stderr, "softid: -o %s\n", error.c_str());
+    return kExitInvalidInput;
+  }
+  v1::Capture capture;
+  const grpc::Status s = client.DownloadCapture(capture_id, dir, &capture);
+  if (!s.ok()) return Report(s, flags);
+  if (flags.json) {
+    std::cout << nlohmann::json{{"id", capture.id()},
+                                {"format", capture.format()},
+                                {"num_files", capture.files_size()},
+                                {"directory", dir}}
+                     .dump()
+              << "\n";
+  } else {
+    std::cout << "capture " << capture.id() << " (" << capture.files_size() << " files) written to "
+              << dir << "\n";
+  }
   return kExitOk;
 }
 
@@ -449,9 +522,11 @@ int main(int argc, char** argv) {
   std::string capture_dir, config_file, request_id, job_id, out_file, truth_file, state;
   bool wait = false;
   std::string capture_id;
-  CLI::App* submit = app.add_subcommand("submit", "upload a capture folder and queue a job");
-  CLI::Option* dir_option =
-      submit->add_option("capture_dir", capture_dir, "capture folder (with capture.json)");
+  CLI::App* submit =
+      app.add_subcommand("submit", "upload a capture or raw recording folder and queue a job");
+  CLI::Option* dir_option = submit->add_option(
+      "capture_dir", capture_dir,
+      "capture folder (capture.json) or raw recording folder (recording.json; the job ingests it)");
   CLI::Option* capture_option = submit->add_option(
       "--capture", capture_id, "queue the job on this uploaded capture instead (see `captures`)");
   dir_option->excludes(capture_option);
@@ -483,6 +558,11 @@ int main(int argc, char** argv) {
   CLI::App* delete_capture = app.add_subcommand(
       "delete-capture", "delete an uploaded capture that no job uses (delete its jobs first)");
   delete_capture->add_option("capture", capture_id)->required();
+  CLI::App* download = app.add_subcommand(
+      "download", "download an uploaded or derived capture's files into a new or empty folder");
+  download->add_option("capture", capture_id)->required();
+  download->add_option("-o,--out", out_file, "folder to write (must not exist or be empty)")
+      ->required();
 
   try {
     app.parse(argc, argv);
@@ -576,6 +656,7 @@ int main(int argc, char** argv) {
     return kExitOk;
   }
   if (captures->parsed()) return ListCaptures(client, flags);
+  if (download->parsed()) return DownloadCapture(client, capture_id, out_file, flags);
   if (health->parsed()) {
     softid::client::ServingStatus serving;
     grpc::Status s = client.Health("", &serving);

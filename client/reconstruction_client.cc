@@ -10,6 +10,8 @@
 #include <thread>
 #include <vector>
 
+#include "client/capture_download.h"
+
 namespace softid::client {
 namespace {
 
@@ -94,7 +96,9 @@ grpc::Status ReconstructionClient::UploadCapture(const CaptureFiles& capture,
     v1::UploadCaptureRequest request;
     v1::CaptureManifest* manifest = request.mutable_manifest();
     manifest->set_request_id(request_id);
-    manifest->set_capture_json(capture.capture_json);
+    // Exactly one is non-empty: the server refuses both or neither.
+    if (!capture.capture_json.empty()) manifest->set_capture_json(capture.capture_json);
+    if (!capture.recording_json.empty()) manifest->set_recording_json(capture.recording_json);
     for (const v1::CaptureFile& file : capture.files) *manifest->add_files() = file;
     bool open = writer->Write(request);
     std::vector<char> buffer(static_cast<size_t>(options_.chunk_bytes));
@@ -118,6 +122,50 @@ grpc::Status ReconstructionClient::UploadCapture(const CaptureFiles& capture,
     // A failed Write means the server ended the call early; Finish says why.
     writer->WritesDone();
     return writer->Finish();
+  });
+}
+
+grpc::Status ReconstructionClient::DownloadCapture(const std::string& capture_id,
+                                                   const std::filesystem::path& directory,
+                                                   v1::Capture* out) {
+  std::string error;
+  if (!IsEmptyTarget(directory, &error)) {
+    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, error);
+  }
+  v1::DownloadCaptureRequest request;
+  request.set_capture_id(capture_id);
+  // Each attempt starts afresh: a retry after a cut writes every file again.
+  return WithRetry(options_.upload_timeout, [&](grpc::ClientContext* context) {
+    CaptureDownload download(directory);
+    std::unique_ptr<grpc::ClientReader<v1::DownloadCaptureResponse>> reader =
+        stub_->DownloadCapture(context, request);
+    v1::DownloadCaptureResponse message;
+    bool began = false, ok = true;
+    while (ok && reader->Read(&message)) {
+      if (!began) {
+        ok = message.has_capture() && download.Begin(message.capture(), &error);
+        if (!message.has_capture()) error = "the server sent a chunk before the capture";
+        if (ok) *out = message.capture();
+        began = true;
+      } else {
+        ok = message.has_chunk() && download.AddChunk(message.chunk(), &error);
+        if (!message.has_chunk()) error = "the server sent the capture twice";
+      }
+    }
+    if (!ok) {
+      context->TryCancel();
+      (void)reader->Finish();
+      download.Discard();
+      return grpc::Status(grpc::StatusCode::DATA_LOSS, error);
+    }
+    grpc::Status status = reader->Finish();
+    if (status.ok() && !began) {
+      status = grpc::Status(grpc::StatusCode::DATA_LOSS, "the server sent no capture");
+    } else if (status.ok() && !download.Finish(&error)) {
+      status = grpc::Status(grpc::StatusCode::DATA_LOSS, error);
+    }
+    if (!status.ok()) download.Discard();
+    return status;
   });
 }
 

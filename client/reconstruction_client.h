@@ -8,6 +8,7 @@
 #include <grpcpp/channel.h>
 
 #include <chrono>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <string>
@@ -53,6 +54,11 @@ class ReconstructionClient {
   grpc::Status CancelJob(const std::string& job_id, v1::Job* out);
   grpc::Status DeleteJob(const std::string& job_id);
   grpc::Status DeleteCapture(const std::string& capture_id);
+  // Downloads a capture's files into `directory` (absent or empty; see CaptureDownload) and sets
+  // `out` to the capture. On any error nothing of it is left in `directory`: FAILED_PRECONDITION
+  // for a non-empty target, DATA_LOSS for a path outside it, a short file or a wrong sha256.
+  grpc::Status DownloadCapture(const std::string& capture_id,
+                               const std::filesystem::path& directory, v1::Capture* out);
   grpc::Status GetResult(const std::string& job_id, v1::Result* out);
   // Calls `on_event` for every event until the job is terminal (OK). Resumes after a cut from the
   // last iteration seen, skipping events already delivered (by seq).

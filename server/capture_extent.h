@@ -1,7 +1,8 @@
 // The size of a stored capture (mesh bounds, frames, cameras, image size), read when a job is
 // created so that its resource needs are checked before it is queued (inverse::
 // EstimateJobResources). Lays the capture out in a scratch folder (hard links to the blobs) and
-// reads capture.json, the frame headers and the mesh.
+// reads capture.json, the frame headers and the mesh (for a raw recording: recording.json, its
+// frame headers and its mesh).
 #pragma once
 
 #include <filesystem>

@@ -9,6 +9,7 @@
 #include "core/capture/capture.h"
 #include "core/common/json_fields.h"
 #include "core/common/untrusted_json.h"
+#include "core/recording/recording.h"
 #include "server/redact_paths.h"
 #include "server/store/resource_id.h"
 
@@ -25,15 +26,63 @@ std::string InApiTerms(std::string message) {
   return message;
 }
 
-std::string CaptureReference(const capture::Capture& capture, const std::string& path) {
-  if (capture.mesh_file == path) return "capture.json mesh";
-  for (size_t c = 0; c < capture.cameras.size(); ++c) {
-    const auto& frames = capture.cameras[c].frames;
+// The files a folder description refers to, each with the field that does, e.g.
+// {"frames/cam0_0000.png", "capture.json cameras[0].frames[0]"}.
+using References = std::vector<std::pair<std::string, std::string>>;
+
+ServiceResult<References> CaptureReferences(const std::string& text) {
+  Result<nlohmann::json> json =
+      json::ParseUntrustedJson(text, "capture_json", capture::kCaptureJsonLimits);
+  if (!json.ok()) return json.status();
+  Result<capture::Capture> capture = capture::CaptureFromJson(*json, capture::kCaptureFileName);
+  if (!capture.ok()) return capture.status();
+  References out = {{capture->mesh_file, "capture.json mesh"}};
+  for (size_t c = 0; c < capture->cameras.size(); ++c) {
+    const auto& frames = capture->cameras[c].frames;
     for (size_t k = 0; k < frames.size(); ++k) {
-      if (frames[k] == path) return fmt::format("capture.json cameras[{}].frames[{}]", c, k);
+      out.emplace_back(frames[k], fmt::format("capture.json cameras[{}].frames[{}]", c, k));
     }
   }
-  return "capture.json";
+  return out;
+}
+
+ServiceResult<References> RecordingReferences(const std::string& text) {
+  // recording.json lists one entry per frame like capture.json: the same limits fit.
+  Result<nlohmann::json> json =
+      json::ParseUntrustedJson(text, "recording_json", capture::kCaptureJsonLimits);
+  if (!json.ok()) return json.status();
+  Result<recording::Recording> recording =
+      recording::RecordingFromJson(*json, recording::kRecordingFileName);
+  if (!recording.ok()) return recording.status();
+  References out = {{recording->mesh_file, "recording.json mesh"}};
+  for (size_t c = 0; c < recording->cameras.size(); ++c) {
+    const recording::RecordingCamera& camera = recording->cameras[c];
+    for (size_t k = 0; k < camera.frames.size(); ++k) {
+      out.emplace_back(camera.frames[k].file,
+                       fmt::format("recording.json cameras[{}].frames[{}].file", c, k));
+    }
+    for (size_t b = 0; b < camera.background.size(); ++b) {
+      out.emplace_back(camera.background[b],
+                       fmt::format("recording.json cameras[{}].background[{}]", c, b));
+    }
+  }
+  return out;
+}
+
+// ReadRecording checks the PNG headers only; decoding every frame and background, as a capture
+// upload does, keeps a corrupt PNG from failing a job later.
+Status ValidateStagedRecording(const fs::path& dir) {
+  SOFTID_ASSIGN_OR_RETURN(const recording::Recording recording, recording::ReadRecording(dir));
+  for (int c = 0; c < recording.NumCameras(); ++c) {
+    const recording::RecordingCamera& camera = recording.cameras[static_cast<size_t>(c)];
+    for (int k = 0; k < static_cast<int>(camera.frames.size()); ++k) {
+      SOFTID_RETURN_IF_ERROR(recording::LoadRecordingFrame(recording, c, k).status());
+    }
+    for (int b = 0; b < static_cast<int>(camera.background.size()); ++b) {
+      SOFTID_RETURN_IF_ERROR(recording::LoadBackgroundFrame(recording, c, b).status());
+    }
+  }
+  return Status::Ok();
 }
 
 }  // namespace
@@ -41,13 +90,21 @@ std::string CaptureReference(const capture::Capture& capture, const std::string&
 ServiceResult<std::unique_ptr<CaptureUpload>> CaptureUpload::Begin(UploadManifest manifest,
                                                                    const fs::path& staging_root,
                                                                    const UploadLimits& limits) {
-  // capture.json first: a malformed capture is rejected before any frame is sent.
-  Result<nlohmann::json> capture_json =
-      json::ParseUntrustedJson(manifest.capture_json, "capture_json", capture::kCaptureJsonLimits);
-  if (!capture_json.ok()) return capture_json.status();
-  Result<capture::Capture> capture =
-      capture::CaptureFromJson(*capture_json, capture::kCaptureFileName);
-  if (!capture.ok()) return capture.status();
+  if (!manifest.capture_json.empty() && !manifest.recording_json.empty()) {
+    return ServiceStatus(ServiceCode::kInvalidArgument,
+                         "capture_json, recording_json: both are set: send exactly one "
+                         "(capture_json for a capture, recording_json for a raw recording)");
+  }
+  if (manifest.capture_json.empty() && manifest.recording_json.empty()) {
+    return ServiceStatus(ServiceCode::kInvalidArgument,
+                         "capture_json, recording_json: neither is set: send exactly one "
+                         "(capture_json for a capture, recording_json for a raw recording)");
+  }
+  // The description first: a malformed one is rejected before any frame is sent.
+  ServiceResult<References> references = manifest.recording_json.empty()
+                                             ? CaptureReferences(manifest.capture_json)
+                                             : RecordingReferences(manifest.recording_json);
+  if (!references.ok()) return references.status();
 
   if (static_cast<int64_t>(manifest.files.size()) > limits.max_files) {
     return ServiceStatus(ServiceCode::kInvalidArgument,
@@ -62,9 +119,11 @@ ServiceResult<std::unique_ptr<CaptureUpload>> CaptureUpload::Begin(UploadManifes
   for (size_t i = 0; i < manifest.files.size(); ++i) {
     const store::ManifestEntry& entry = manifest.files[i];
     const std::string field = "files[" + std::to_string(i) + "]";
-    if (entry.path == capture::kCaptureFileName) {
+    // Both names: a folder holding both descriptions would be ambiguous.
+    if (entry.path == capture::kCaptureFileName || entry.path == recording::kRecordingFileName) {
       return json::Invalid(field + ".path", entry.path,
-                           "capture.json is sent as capture_json, not as a file");
+                           "capture.json and recording.json are sent as capture_json and "
+                           "recording_json, not as files");
     }
     if (entry.size_bytes > limits.max_file_bytes) {
       return json::Invalid(field + ".size_bytes", entry.size_bytes,
@@ -77,15 +136,10 @@ ServiceResult<std::unique_ptr<CaptureUpload>> CaptureUpload::Begin(UploadManifes
     return json::Invalid("files", fmt::format("{} bytes in total", total),
                          fmt::format("exceeds the limit of {} bytes", limits.max_total_bytes));
   }
-  std::vector<std::string> referenced = {capture->mesh_file};
-  for (const auto& camera : capture->cameras) {
-    referenced.insert(referenced.end(), camera.frames.begin(), camera.frames.end());
-  }
-  for (const std::string& path : referenced) {
+  for (const auto& [path, where] : *references) {
     if (!listed.contains(path)) {
-      return ServiceStatus(
-          ServiceCode::kInvalidArgument,
-          fmt::format("files: \"{}\" ({}) is not listed", path, CaptureReference(*capture, path)));
+      return ServiceStatus(ServiceCode::kInvalidArgument,
+                           fmt::format("files: \"{}\" ({}) is not listed", path, where));
     }
   }
 
@@ -97,13 +151,12 @@ ServiceResult<std::unique_ptr<CaptureUpload>> CaptureUpload::Begin(UploadManifes
                          "cannot create a staging folder: " + error.message());
   }
   std::unique_ptr<CaptureUpload> upload(new CaptureUpload(std::move(manifest), dir, limits));
-  // capture.json is staged at once; empty files are complete without a chunk.
+  // The description is staged at once; empty files are complete without a chunk.
   {
-    std::ofstream out(dir / capture::kCaptureFileName, std::ios::binary);
-    out << upload->manifest_.capture_json;
-    if (!out.flush()) {
-      return ServiceStatus(ServiceCode::kInternal, "cannot stage capture.json");
-    }
+    const std::string name(upload->description_name());
+    std::ofstream out(dir / name, std::ios::binary);
+    out << upload->description();
+    if (!out.flush()) return ServiceStatus(ServiceCode::kInternal, "cannot stage " + name);
   }
   for (const store::ManifestEntry& entry : upload->manifest_.files) {
     FileState& file = upload->files_[entry.path];
@@ -118,6 +171,14 @@ ServiceResult<std::unique_ptr<CaptureUpload>> CaptureUpload::Begin(UploadManifes
 
 CaptureUpload::CaptureUpload(UploadManifest manifest, fs::path staging_dir, UploadLimits limits)
     : manifest_(std::move(manifest)), staging_dir_(std::move(staging_dir)), limits_(limits) {}
+
+std::string_view CaptureUpload::description_name() const {
+  return is_recording() ? recording::kRecordingFileName : capture::kCaptureFileName;
+}
+
+const std::string& CaptureUpload::description() const {
+  return is_recording() ? manifest_.recording_json : manifest_.capture_json;
+}
 
 CaptureUpload::~CaptureUpload() {
   files_.clear();  // closes open streams before their folder goes
@@ -202,18 +263,19 @@ ServiceResult<std::vector<store::ManifestEntry>> CaptureUpload::Finish() {
                            fmt::format("the upload ended after {} bytes", file.received));
     }
   }
-  Result<capture::Capture> capture =
-      capture::ReadCapture(staging_dir_, capture::ReadCaptureOptions{.decode_frames = true});
-  if (!capture.ok()) {
-    // NotFound from ReadCapture would mean a staged file vanished: still the upload's fault only
+  const Status valid =
+      is_recording()
+          ? ValidateStagedRecording(staging_dir_)
+          : capture::ReadCapture(staging_dir_, capture::ReadCaptureOptions{.decode_frames = true})
+                .status();
+  if (!valid.ok()) {
+    // NotFound from the readers would mean a staged file vanished: still the upload's fault only
     // if a listed file is missing, which Begin ruled out, so report it as invalid content.
-    return ServiceStatus(ServiceCode::kInvalidArgument,
-                         RedactPath(capture.status().message(), staging_dir_));
+    return ServiceStatus(ServiceCode::kInvalidArgument, RedactPath(valid.message(), staging_dir_));
   }
   std::vector<store::ManifestEntry> stored;
-  stored.push_back({std::string(capture::kCaptureFileName),
-                    store::Sha256::Hex(manifest_.capture_json),
-                    static_cast<int64_t>(manifest_.capture_json.size())});
+  stored.push_back({std::string(description_name()), store::Sha256::Hex(description()),
+                    static_cast<int64_t>(description().size())});
   stored.insert(stored.end(), manifest_.files.begin(), manifest_.files.end());
   return stored;
 }

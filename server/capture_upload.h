@@ -1,9 +1,10 @@
 // One capture upload in progress: the manifest, then the files' bytes in chunks. Bytes go to a
 // private staging folder that is laid out exactly like the capture folder, so the complete upload
 // is validated by the same code that reads captures everywhere else (capture::ReadCapture: mesh,
-// frame PNGs, sizes, paths). Only a fully validated upload reaches the BlobStore and the JobStore
-// (JobService::FinishUpload); destroying the object removes the staging folder, so an upload that
-// failed or was cut off leaves nothing behind.
+// frame PNGs, sizes, paths). A raw recording is uploaded the same way and validated by
+// recording::ReadRecording plus a decode of every frame and background PNG. Only a fully validated
+// upload reaches the BlobStore and the JobStore (JobService::FinishUpload); destroying the object
+// removes the staging folder, so an upload that failed or was cut off leaves nothing behind.
 #pragma once
 
 #include <chrono>
@@ -40,16 +41,18 @@ struct UploadLimits {
 // What the first message of an upload declares.
 struct UploadManifest {
   std::string request_id;
-  std::string capture_json;                 // contents of capture.json
+  std::string capture_json;                 // contents of capture.json, or
+  std::string recording_json;               // contents of recording.json: exactly one is set
   std::vector<store::ManifestEntry> files;  // every other file; sizes and sha256 as declared
 };
 
 // Not thread-safe: one upload stream feeds one object.
 class CaptureUpload {
  public:
-  // Checks the manifest (capture.json parses and validates with capture::CaptureFromJson; every
-  // file it references is listed; paths, sizes and hashes are well formed and within `limits`)
-  // and creates the staging folder <staging_root>/<random>. InvalidArgument naming the field.
+  // Checks the manifest (capture.json parses and validates with capture::CaptureFromJson, or
+  // recording.json with recording::RecordingFromJson; every file it references is listed; paths,
+  // sizes and hashes are well formed and within `limits`) and creates the staging folder
+  // <staging_root>/<random>. InvalidArgument naming the field.
   static ServiceResult<std::unique_ptr<CaptureUpload>> Begin(
       UploadManifest manifest, const std::filesystem::path& staging_root,
       const UploadLimits& limits);
@@ -63,11 +66,15 @@ class CaptureUpload {
   ServiceStatus AddChunk(const std::string& path, int64_t offset_bytes, std::string_view data);
 
   // Checks every file arrived complete and validates the staged capture as a whole
-  // (capture::ReadCapture, decoding every frame). Returns the manifest to store: capture.json
-  // first, then the listed files.
+  // (capture::ReadCapture, or recording::ReadRecording; decoding every frame). Returns the
+  // manifest to store: capture.json (recording.json) first, then the listed files.
   ServiceResult<std::vector<store::ManifestEntry>> Finish();
 
   const std::string& request_id() const { return manifest_.request_id; }
+  // store::kCaptureFormat or store::kRecordingFormat, after which JSON the manifest carried.
+  std::string_view format() const {
+    return is_recording() ? store::kRecordingFormat : store::kCaptureFormat;
+  }
   // Bytes of the listed files as declared (checked by Begin against the limits).
   int64_t declared_bytes() const;
   // Keeps `slot` (a count of uploads in progress, say) until the upload is destroyed.
@@ -87,6 +94,10 @@ class CaptureUpload {
 
   CaptureUpload(UploadManifest manifest, std::filesystem::path staging_dir, UploadLimits limits);
   ServiceStatus CompleteFile(const std::string& path, FileState& file);
+  bool is_recording() const { return !manifest_.recording_json.empty(); }
+  // The name and contents of the folder's description: capture.json or recording.json.
+  std::string_view description_name() const;
+  const std::string& description() const;
 
   UploadManifest manifest_;
   std::filesystem::path staging_dir_;

@@ -108,6 +108,28 @@ grpc::Status GrpcReconstructionService::UploadCapture(
   return grpc::Status::OK;
 }
 
+grpc::Status GrpcReconstructionService::DownloadCapture(
+    grpc::ServerContext* context, const v1::DownloadCaptureRequest* request,
+    grpc::ServerWriter<v1::DownloadCaptureResponse>* writer) {
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("DownloadCapture", caller.status());
+  v1::DownloadCaptureResponse message;
+  return Reply("DownloadCapture",
+               service_->DownloadCapture(
+                   *caller, request->capture_id(),
+                   [&](const store::Capture& capture) {
+                     ToProto(capture, message.mutable_capture());
+                     return !context->IsCancelled() && writer->Write(message);
+                   },
+                   [&](const std::string& path, int64_t offset_bytes, std::string_view data) {
+                     v1::FileChunk* chunk = message.mutable_chunk();
+                     chunk->set_path(path);
+                     chunk->set_offset_bytes(offset_bytes);
+                     chunk->set_data(data.data(), data.size());
+                     return !context->IsCancelled() && writer->Write(message);
+                   }));
+}
+
 grpc::Status GrpcReconstructionService::DeleteCapture(grpc::ServerContext* context,
                                                       const v1::DeleteCaptureRequest* request,
                                                       v1::DeleteCaptureResponse* response) {
@@ -226,6 +248,7 @@ grpc::Status GrpcReconstructionService::GetResult(grpc::ServerContext* context,
   for (double cost : result->cost_history) response->add_cost_history(cost);
   for (int frame : result->cost_history_last_frame) response->add_cost_history_last_frame(frame);
   FittedParametersToProto(result->result, response);
+  if (!result->ingest.is_null()) response->set_ingest_json(result->ingest.dump());
   return grpc::Status::OK;
 }
 

@@ -14,6 +14,7 @@
 #include "core/inverse/fit_uncertainty.h"
 #include "core/inverse/job_config.h"
 #include "server/materialize_capture.h"
+#include "server/recording_ingest.h"
 #include "server/redact_paths.h"
 
 namespace softid::server {
@@ -131,6 +132,38 @@ nlohmann::json RunDiagnosis(const store::Job& job, const capture::Capture& captu
   return diagnosis::ToJson(*report);
 }
 
+// The capture the job fits, laid out in `dir` and read: the job's capture, or for a recording the
+// capture its ingest derives (ingested now, or on an earlier attempt), whose report goes to
+// `ingest_report`. Errors say which capture or stage failed.
+Result<capture::Capture> PrepareCapture(const store::Job& job, const store::Capture& stored,
+                                        const std::string& worker_id,
+                                        const JobRunnerContext& context, const fs::path& dir,
+                                        nlohmann::json* ingest_report) {
+  store::Capture fitted = stored;
+  fs::path capture_dir = dir;
+  if (stored.format == store::kRecordingFormat) {
+    Result<IngestedCapture> ingested = job.derived_capture_id.empty()
+                                           ? IngestRecording(job, stored, worker_id, context, dir)
+                                           : LoadIngestedCapture(job, context);
+    if (!ingested.ok()) return ingested.status();
+    if (!job.derived_capture_id.empty()) {
+      context.logger->info("job {}: ingest skipped: capture {} was derived on an earlier attempt",
+                           job.id, job.derived_capture_id);
+    }
+    *ingest_report = std::move(ingested->report);
+    fitted = std::move(ingested->capture);
+    capture_dir = dir / "capture";
+  }
+  if (Status laid_out = MaterializeCapture(fitted, *context.blobs, capture_dir); !laid_out.ok()) {
+    return laid_out.WithContext("capture " + fitted.id);
+  }
+  // Frames were decoded at upload (or written by the ingest); headers suffice here.
+  Result<capture::Capture> capture =
+      capture::ReadCapture(capture_dir, capture::ReadCaptureOptions{.decode_frames = false});
+  if (!capture.ok()) return capture.status().WithContext("capture " + fitted.id);
+  return capture;
+}
+
 }  // namespace
 
 const char* ToString(JobOutcome outcome) {
@@ -159,26 +192,23 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   if (!stored.ok()) return Fail(job, context, stored.status().message());
 
   WorkFolder folder(context.work_root / job.id);
-  if (Status laid_out = MaterializeCapture(*stored, *context.blobs, folder.path); !laid_out.ok()) {
-    return Fail(job, context, "capture " + job.capture_id + ": " + laid_out.message());
-  }
-  // Frames were decoded at upload; headers suffice here.
-  Result<capture::Capture> capture =
-      capture::ReadCapture(folder.path, capture::ReadCaptureOptions{.decode_frames = false});
-  if (!capture.ok()) {
-    return Fail(job, context, "capture " + job.capture_id + ": " + capture.status().message());
-  }
 
   // The heartbeat stops before the outcome is written, so it never renews a lease that the
-  // outcome just gave up (which would look like a lost lease).
+  // outcome just gave up (which would look like a lost lease). It runs during an ingest too,
+  // which can take minutes on a long recording.
   bool lost = false;
   bool cancel_requested = false;
   Result<inverse::FitResult> result = Status::Internal("the fit did not run");
+  nlohmann::json ingest_json;                          // a job on a recording only
   nlohmann::json diagnosis_json;                       // "diagnose": true only
   std::optional<inverse::FitUncertainty> uncertainty;  // "uncertainty": true (the default)
   std::string uncertainty_error;
+  Status prepared;
   {
     Heartbeat heartbeat(job, worker_id, context, cancel);
+    Result<capture::Capture> capture =
+        PrepareCapture(job, *stored, worker_id, context, folder.path, &ingest_json);
+    if (!capture.ok()) prepared = capture.status();
     inverse::FitOptions options;
     options.cancel = &cancel;
     options.on_progress = [&](const inverse::FitProgress& p) {
@@ -219,7 +249,8 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
         cancel.store(true);
       }
     };
-    result = inverse::Fit(*capture, *config, options);
+    // An ingest cannot be stopped part way: a cancel during it is seen here.
+    if (capture.ok() && !cancel.load()) result = inverse::Fit(*capture, *config, options);
     if (result.ok() && !result->cancelled && config->uncertainty) {
       Result<inverse::FitUncertainty> estimated =
           inverse::EstimateFitUncertainty(*capture, *config, *result);
@@ -238,6 +269,7 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   }
 
   if (lost) return JobOutcome::kLost;
+  if (!prepared.ok()) return Fail(job, context, prepared.message());
   // A fit that ran to its end is recorded whatever was asked meanwhile; only one that stopped
   // early is a cancel or an interruption.
   const bool stopped_early =
@@ -267,6 +299,7 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   nlohmann::json result_json =
       inverse::ToJson(*result, uncertainty ? &*uncertainty : nullptr, uncertainty_error);
   if (!diagnosis_json.is_null()) result_json["diagnosis"] = std::move(diagnosis_json);
+  if (!ingest_json.is_null()) result_json["ingest"] = std::move(ingest_json);
   if (Status completed = context.jobs->CompleteJob(job.id, result_json); !completed.ok()) {
     log->error("job {}: cannot record the result: {}", job.id, completed.message());
     context.events->Notify(job.id);

@@ -1,4 +1,5 @@
-// Runs one claimed job to its end: lays the capture out in a private folder, runs the core fit
+// Runs one claimed job to its end: lays the capture out in a private folder (a raw recording is
+// ingested into a capture first, recording_ingest.h), runs the core fit
 // with progress written to the store (and pushed to watchers) after every iteration, keeps the
 // lease alive, stops on cancel, and records the outcome. A job's failure is its state and error;
 // nothing here throws on bad input.
@@ -10,6 +11,7 @@
 #include <chrono>
 #include <filesystem>
 #include <memory>
+#include <shared_mutex>
 #include <string>
 
 #include "server/job_events.h"
@@ -36,6 +38,9 @@ struct JobRunnerContext {
   std::shared_ptr<spdlog::logger> logger;
   // Counts optimiser iterations; may be null.
   Metrics* metrics = nullptr;
+  // Held shared while the capture ingested from a recording is stored (JobServiceOptions::
+  // blob_puts); may be null when nothing removes blobs meanwhile.
+  std::shared_mutex* blob_puts = nullptr;
 };
 
 enum class JobOutcome {

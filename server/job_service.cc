@@ -36,7 +36,8 @@ JobService::JobService(store::JobStore* jobs, const store::BlobStore* blobs, Job
       events_(events),
       options_(std::move(options)),
       logger_(logger ? std::move(logger) : spdlog::default_logger()),
-      rate_limiter_(options_.quotas.requests_per_second, options_.quotas.request_burst) {}
+      rate_limiter_(options_.quotas.requests_per_second, options_.quotas.request_burst),
+      blob_puts_(options_.blob_puts != nullptr ? *options_.blob_puts : own_blob_puts_) {}
 
 JobService::StationState& JobService::Station(const std::string& station) {
   std::lock_guard lock(stations_mutex_);
@@ -136,7 +137,7 @@ ServiceResult<store::Capture> JobService::FinishUpload(const Caller& caller,
       if (!existed) added.push_back(entry.sha256);
     }
     Result<store::Capture> created =
-        jobs_->CreateCapture(*manifest, upload.request_id(), caller.station);
+        jobs_->CreateCapture(*manifest, upload.request_id(), caller.station, upload.format());
     if (!created.ok()) return FromStoreCreate(created.status());
     return *created;
   }();
@@ -146,8 +147,8 @@ ServiceResult<store::Capture> JobService::FinishUpload(const Caller& caller,
     return capture.status();
   }
   if (options_.metrics != nullptr) options_.metrics->CountUpload(true, bytes);
-  logger_->info("capture {}: stored {} files (request_id '{}')", capture->id,
-                capture->manifest.size(), capture->request_id);
+  logger_->info("capture {}: stored {} files, {} (request_id '{}')", capture->id,
+                capture->manifest.size(), capture->format, capture->request_id);
   return capture;
 }
 
@@ -269,6 +270,42 @@ ServiceStatus JobService::DeleteCapture(const Caller& caller, const std::string&
   return ServiceStatus::Ok();
 }
 
+ServiceStatus JobService::DownloadCapture(const Caller& caller, const std::string& capture_id,
+                                          const CaptureSink& send_capture,
+                                          const ChunkSink& send_chunk) {
+  Result<store::Capture> capture = jobs_->GetCapture(capture_id);
+  if (!capture.ok()) return capture.status();
+  if (!caller.Sees(capture->owner)) {
+    return ServiceStatus(ServiceCode::kNotFound, "capture " + capture_id + " not found");
+  }
+  if (!send_capture(*capture)) return ServiceStatus(ServiceCode::kCancelled, "the caller left");
+  std::string buffer(static_cast<size_t>(options_.upload_limits.max_chunk_bytes), '\0');
+  for (const store::ManifestEntry& entry : capture->manifest) {
+    Result<std::ifstream> in = blobs_->OpenBlob(entry.sha256);
+    if (!in.ok()) {
+      return ServiceStatus(ServiceCode::kInternal, "capture " + capture_id + ": \"" + entry.path +
+                                                       "\": " + in.status().message());
+    }
+    int64_t offset = 0;
+    // An empty file still gets one (empty) chunk, so the receiver creates it.
+    do {
+      in->read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+      const std::string_view data(buffer.data(), static_cast<size_t>(in->gcount()));
+      if (data.empty() && offset > 0) break;
+      if (!send_chunk(entry.path, offset, data)) {
+        return ServiceStatus(ServiceCode::kCancelled, "the caller left");
+      }
+      offset += static_cast<int64_t>(data.size());
+    } while (*in);
+    if (offset != entry.size_bytes) {
+      return ServiceStatus(ServiceCode::kInternal,
+                           fmt::format("capture {}: \"{}\": the blob has {} bytes, not {}",
+                                       capture_id, entry.path, offset, entry.size_bytes));
+    }
+  }
+  return ServiceStatus::Ok();
+}
+
 ServiceResult<std::pair<int, int>> JobService::RemoveOlderThan(std::chrono::seconds age) {
   const store::Timestamp cutoff = store::ToTimestamp(std::chrono::system_clock::now() - age);
   const Caller operator_caller = Caller::Operator();
@@ -348,7 +385,8 @@ ServiceResult<JobResult> JobService::GetResult(const Caller& caller, const std::
                          "job " + job_id + " is " + store::ToString(job->state) +
                              ": a result exists once it SUCCEEDED");
   }
-  JobResult out{job_id, *job->result, {}, {}};
+  JobResult out{job_id, *job->result, {}, {}, {}};
+  if (auto it = job->result->find("ingest"); it != job->result->end()) out.ingest = *it;
   if (auto it = job->result->find("cost_history"); it != job->result->end() && it->is_array()) {
     for (const nlohmann::json& cost : *it) {
       if (cost.is_number()) out.cost_history.push_back(cost.get<double>());

@@ -61,6 +61,10 @@ struct JobServiceOptions {
   StationQuotas quotas;
   // Where uploads are counted; may be null.
   Metrics* metrics = nullptr;
+  // Held shared from a capture's first blob put to its commit and exclusive while unreferenced
+  // blobs are removed; shared with the workers, which store the captures they ingest. Null: the
+  // service's own (nothing else puts blobs).
+  std::shared_mutex* blob_puts = nullptr;
 };
 
 // What GetResult returns.
@@ -69,6 +73,8 @@ struct JobResult {
   nlohmann::json result;                     // result.json
   std::vector<double> cost_history;          // result["cost_history"]
   std::vector<int> cost_history_last_frame;  // result["cost_history_last_frame"]
+  // result["ingest"] (the ingest report of a job on a recording); null otherwise.
+  nlohmann::json ingest;
 };
 
 class JobService {
@@ -113,6 +119,16 @@ class JobService {
   ServiceStatus WatchJob(const Caller& caller, const std::string& job_id, int from_iteration,
                          const EventSink& send, const std::function<bool()>& stop);
 
+  // The caller's capture with its manifest, then each file's bytes in chunks of at most
+  // upload_limits.max_chunk_bytes, file by file in manifest order, until done (OK) or a sink
+  // returns false (Cancelled). NotFound for another station's capture, like a missing one;
+  // Internal when a blob of it is missing (a damaged data directory).
+  using CaptureSink = std::function<bool(const store::Capture& capture)>;
+  using ChunkSink =
+      std::function<bool(const std::string& path, int64_t offset_bytes, std::string_view data)>;
+  ServiceStatus DownloadCapture(const Caller& caller, const std::string& capture_id,
+                                const CaptureSink& send_capture, const ChunkSink& send_chunk);
+
   // Counts a call against the caller's request rate: ResourceExhausted when it is over.
   ServiceStatus Admit(const Caller& caller);
   // Deletes a capture of the caller's that no job uses, with the blobs no other capture lists.
@@ -155,8 +171,9 @@ class JobService {
   std::mutex stations_mutex_;
   std::map<std::string, std::unique_ptr<StationState>> stations_;
   // Shared from an upload's first blob put to its commit; exclusive while a failed upload removes
-  // its blobs (RemoveUnreferencedBlobs).
-  std::shared_mutex blob_puts_;
+  // its blobs (RemoveUnreferencedBlobs). options_.blob_puts when given, else own_blob_puts_.
+  std::shared_mutex own_blob_puts_;
+  std::shared_mutex& blob_puts_;
 };
 
 }  // namespace softid::server

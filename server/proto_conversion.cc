@@ -52,6 +52,7 @@ void ToProto(const store::Capture& capture, v1::Capture* out) {
   out->set_num_files(static_cast<int32_t>(capture.manifest.size()));
   out->set_total_bytes(total_bytes);
   SetTimestamp(capture.created_at, out->mutable_create_time());
+  out->set_format(capture.format);
 }
 
 void ToProto(const store::CaptureListing& listing, v1::Capture* out) {
@@ -109,6 +110,7 @@ void ToProto(const store::Job& job, v1::Job* out) {
   SetTimestamp(job.created_at, out->mutable_create_time());
   if (job.started_at) SetTimestamp(*job.started_at, out->mutable_start_time());
   if (job.finished_at) SetTimestamp(*job.finished_at, out->mutable_end_time());
+  out->set_derived_capture_id(job.derived_capture_id);
 }
 
 void ToProto(const store::ProgressEvent& event, const store::Job& job, v1::JobEvent* out) {
@@ -145,6 +147,7 @@ UploadManifest FromProto(const v1::CaptureManifest& manifest) {
   UploadManifest out;
   out.request_id = manifest.request_id();
   out.capture_json = manifest.capture_json();
+  out.recording_json = manifest.recording_json();
   for (const v1::CaptureFile& file : manifest.files()) {
     out.files.push_back({file.path(), file.sha256(), file.size_bytes()});
   }

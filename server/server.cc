@@ -13,6 +13,7 @@
 #include <map>
 #include <mutex>
 #include <set>
+#include <shared_mutex>
 #include <system_error>
 #include <thread>
 
@@ -164,6 +165,8 @@ struct Server::Parts {
   std::optional<store::BlobStore> blobs;
   JobEvents events;
   Metrics metrics;  // before everything that counts into it
+  // Orders blob puts (uploads, ingests) with removals of unreferenced blobs.
+  std::shared_mutex blob_puts;
   std::unique_ptr<WorkerPool> pool;
   std::unique_ptr<JobService> service;
   std::unique_ptr<Authenticator> authenticator;
@@ -229,6 +232,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   pool_options.work_root = work;
   pool_options.worker_id_prefix = HostName() + "-" + std::to_string(::getpid());
   pool_options.metrics = &parts->metrics;
+  pool_options.blob_puts = &parts->blob_puts;
   parts->pool = std::make_unique<WorkerPool>(parts->jobs.get(), &*parts->blobs, &parts->events,
                                              pool_options, parts->logger);
 
@@ -239,6 +243,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   service_options.scratch_root = work;
   service_options.quotas = options.quotas;
   service_options.metrics = &parts->metrics;
+  service_options.blob_puts = &parts->blob_puts;
   service_options.job_limits.max_memory_bytes = options.max_job_memory_bytes;
   service_options.job_limits.max_wall_seconds =
       static_cast<double>(options.max_job_wall_time.count());

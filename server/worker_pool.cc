@@ -23,6 +23,7 @@ WorkerPool::WorkerPool(store::JobStore* jobs, const store::BlobStore* blobs, Job
   context_.cores_per_job = cores > 0 ? std::max(1, cores / std::max(1, options_.num_workers)) : 0;
   context_.logger = logger ? std::move(logger) : spdlog::default_logger();
   context_.metrics = options_.metrics;
+  context_.blob_puts = options_.blob_puts;
   if (options_.metrics != nullptr) options_.metrics->SetWorkers(options_.num_workers);
 }
 

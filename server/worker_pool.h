@@ -42,6 +42,8 @@ struct WorkerPoolOptions {
   std::string worker_id_prefix = "worker";
   // Where busy workers, queue waits, run times and iterations are counted; may be null.
   Metrics* metrics = nullptr;
+  // See JobRunnerContext::blob_puts; may be null.
+  std::shared_mutex* blob_puts = nullptr;
 };
 
 class WorkerPool {

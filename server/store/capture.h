@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <nlohmann/json.hpp>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/common/status.h"
@@ -21,12 +22,18 @@ struct ManifestEntry {
   bool operator==(const ManifestEntry&) const = default;
 };
 
+// The folder formats a stored capture can have: a capture (what a fit reads) or a raw recording
+// (a job ingests it into a capture first).
+inline constexpr std::string_view kCaptureFormat = "softid-capture/1";
+inline constexpr std::string_view kRecordingFormat = "softid-recording/1";
+
 struct Capture {
   std::string id;          // "cap-<16 hex>"
   std::string request_id;  // the client's idempotency key; empty when none was given
   std::vector<ManifestEntry> manifest;
   Timestamp created_at{};
   std::string owner;  // the station that uploaded it; empty without authentication
+  std::string format = std::string(kCaptureFormat);  // kCaptureFormat or kRecordingFormat
 
   bool operator==(const Capture&) const = default;
 };

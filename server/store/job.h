@@ -58,6 +58,9 @@ struct Job {
   std::optional<Timestamp> lease_expires_at;
   std::optional<nlohmann::json> result;  // set when SUCCEEDED
   std::string owner;  // the station that created it; empty without authentication
+  // For a job on a recording: the capture its ingest made (an ordinary capture of the same
+  // owner); empty before the ingest and for a job on a capture.
+  std::string derived_capture_id;
 
   bool operator==(const Job&) const = default;
 };

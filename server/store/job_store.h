@@ -20,6 +20,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/common/status.h"
@@ -95,15 +96,19 @@ class JobStore {
   // Records an uploaded capture whose blobs are already stored (BlobStore::Put returned).
   // InvalidArgument for an invalid manifest (see ValidateManifest).
   // `owner` is the uploading station (empty without authentication). Request ids are per
-  // station: another station's use of the same id is unrelated and invisible.
+  // station: another station's use of the same id is unrelated and invisible. `format` is
+  // kCaptureFormat or kRecordingFormat (InvalidArgument otherwise).
   virtual Result<Capture> CreateCapture(const std::vector<ManifestEntry>& manifest,
                                         const std::string& request_id,
-                                        const std::string& owner = "") = 0;
+                                        const std::string& owner = "",
+                                        std::string_view format = kCaptureFormat) = 0;
   virtual Result<Capture> GetCapture(const std::string& capture_id) = 0;
   // Deletes a capture no job refers to and returns it (its blobs are the caller's to remove
-  // when no other capture lists them). FailedPrecondition naming a job that uses it.
+  // when no other capture lists them). FailedPrecondition naming a job that uses it: as its
+  // capture, or as the capture its ingest derived (Job::derived_capture_id).
   virtual Result<Capture> DeleteCapture(const std::string& capture_id) = 0;
-  // Captures in creation order, each with its number of jobs; paginated like ListJobs.
+  // Captures in creation order, each with its number of jobs (derived ones count); paginated
+  // like ListJobs.
   virtual Result<CapturePage> ListCaptures(const ListCapturesRequest& request) = 0;
   // Captures created before `created_before` that no job refers to (retention).
   virtual Result<std::vector<std::string>> ListUnusedCaptures(Timestamp created_before) = 0;
@@ -165,6 +170,11 @@ class JobStore {
   virtual Status SaveCheckpoint(const std::string& job_id, const nlohmann::json& checkpoint) = 0;
   // The last checkpoint saved, or nullopt when none was.
   virtual Result<std::optional<nlohmann::json>> LoadCheckpoint(const std::string& job_id) = 0;
+  // Records the capture a RUNNING job's ingest derived from its recording (the capture exists).
+  // FailedPrecondition when the job is not RUNNING or not leased to `worker_id`; NotFound for an
+  // unknown capture.
+  virtual Status SetDerivedCapture(const std::string& job_id, const std::string& worker_id,
+                                   const std::string& capture_id) = 0;
   // RUNNING -> SUCCEEDED with `result`.
   virtual Status CompleteJob(const std::string& job_id, const nlohmann::json& result) = 0;
   // RUNNING -> FAILED with `error` (a failed optimisation, a bad capture, ...).

@@ -15,8 +15,10 @@ namespace {
 // Long enough for a UUID or any reasonable client key, short enough to keep the index small.
 
 constexpr std::string_view kJobColumns =
-    "id, station_request_id, capture_id, config, state, cancel_requested, attempts, error, created_at, "
-    "started_at, finished_at, lease_owner, lease_expires_at, result, released_attempts, owner";
+    "id, station_request_id, capture_id, config, state, cancel_requested, attempts, error, "
+    "created_at, "
+    "started_at, finished_at, lease_owner, lease_expires_at, result, released_attempts, owner, "
+    "derived_capture_id";
 
 constexpr std::string_view kProgressColumns =
     "seq, attempt, event, iteration, cost, gradient_norm, parameters, elapsed_s, state, message, "
@@ -67,6 +69,7 @@ Result<Job> ReadJob(const SqliteStatement& row) {
   }
   job.released_attempts = static_cast<int>(row.ColumnInt64(14));
   job.owner = row.ColumnText(15);
+  job.derived_capture_id = row.ColumnOptionalText(16).value_or("");
   return job;
 }
 
@@ -198,9 +201,10 @@ Result<Job> SqliteJobStore::LoadJob(const std::string& job_id) {
 
 Result<std::optional<Capture>> SqliteJobStore::FindCaptureByRequestId(
     const std::string& request_id, const std::string& owner) {
-  SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
-                          db_.Prepare("SELECT id, manifest, created_at, owner FROM captures "
-                                      "WHERE owner = ?1 AND station_request_id = ?2"));
+  SOFTID_ASSIGN_OR_RETURN(
+      SqliteStatement stmt,
+      db_.Prepare("SELECT id, manifest, created_at, owner, format "
+                  "FROM captures WHERE owner = ?1 AND station_request_id = ?2"));
   SOFTID_RETURN_IF_ERROR(stmt.Bind(owner, request_id));
   SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
   if (!found) return std::optional<Capture>();
@@ -212,6 +216,7 @@ Result<std::optional<Capture>> SqliteJobStore::FindCaptureByRequestId(
   SOFTID_ASSIGN_OR_RETURN(capture.manifest, ManifestFromJson(manifest));
   capture.created_at = FromUnixMicros(stmt.ColumnInt64(2));
   capture.owner = stmt.ColumnText(3);
+  capture.format = stmt.ColumnText(4);
   return std::optional<Capture>(std::move(capture));
 }
 
@@ -256,15 +261,19 @@ Result<int64_t> SqliteJobStore::AppendStateEvent(const Job& job, const std::stri
 
 Result<Capture> SqliteJobStore::CreateCapture(const std::vector<ManifestEntry>& manifest,
                                               const std::string& request_id,
-                                              const std::string& owner) {
+                                              const std::string& owner, std::string_view format) {
   SOFTID_RETURN_IF_ERROR(ValidateManifest(manifest));
+  if (format != kCaptureFormat && format != kRecordingFormat) {
+    return json::Invalid("format", std::string(format),
+                         "must be \"softid-capture/1\" or \"softid-recording/1\"");
+  }
   SOFTID_RETURN_IF_ERROR(CheckRequestId(request_id));
   return Write([&]() -> Result<Capture> {
     if (!request_id.empty()) {
       SOFTID_ASSIGN_OR_RETURN(std::optional<Capture> existing,
                               FindCaptureByRequestId(request_id, owner));
       if (existing.has_value()) {
-        if (existing->manifest != manifest) {
+        if (existing->manifest != manifest || existing->format != format) {
           return Status::FailedPrecondition("request_id '" + request_id +
                                             "' was already used to create capture " + existing->id +
                                             " with a different manifest");
@@ -278,13 +287,14 @@ Result<Capture> SqliteJobStore::CreateCapture(const std::vector<ManifestEntry>& 
     capture.manifest = manifest;
     capture.created_at = Now();
     capture.owner = owner;
+    capture.format = std::string(format);
     SOFTID_ASSIGN_OR_RETURN(
         SqliteStatement stmt,
-        db_.Prepare("INSERT INTO captures (id, station_request_id, manifest, created_at, owner) "
-                    "VALUES (?1, ?2, ?3, ?4, ?5)"));
+        db_.Prepare("INSERT INTO captures (id, station_request_id, manifest, "
+                    "created_at, owner, format) VALUES (?1, ?2, ?3, ?4, ?5, ?6)"));
     SOFTID_RETURN_IF_ERROR(stmt.Bind(capture.id, NullIfEmpty(request_id),
                                      DumpJson(ManifestToJson(manifest)),
-                                     ToUnixMicros(capture.created_at), owner));
+                                     ToUnixMicros(capture.created_at), owner, capture.format));
     SOFTID_RETURN_IF_ERROR(stmt.Run());
     return capture;
   });
@@ -295,8 +305,8 @@ Result<Capture> SqliteJobStore::GetCapture(const std::string& capture_id) {
   return Read([&]() -> Result<Capture> {
     SOFTID_ASSIGN_OR_RETURN(
         SqliteStatement stmt,
-        db_.Prepare("SELECT station_request_id, manifest, created_at, owner FROM captures "
-                    "WHERE id = ?1"));
+        db_.Prepare("SELECT station_request_id, manifest, created_at, owner, format "
+                    "FROM captures WHERE id = ?1"));
     SOFTID_RETURN_IF_ERROR(stmt.Bind(capture_id));
     SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
     if (!found) return Status::NotFound("capture " + capture_id + " not found");
@@ -308,6 +318,7 @@ Result<Capture> SqliteJobStore::GetCapture(const std::string& capture_id) {
     SOFTID_ASSIGN_OR_RETURN(capture.manifest, ManifestFromJson(manifest));
     capture.created_at = FromUnixMicros(stmt.ColumnInt64(2));
     capture.owner = stmt.ColumnText(3);
+    capture.format = stmt.ColumnText(4);
     return capture;
   });
 }
@@ -317,8 +328,10 @@ Result<Capture> SqliteJobStore::DeleteCapture(const std::string& capture_id) {
   SOFTID_ASSIGN_OR_RETURN(Capture capture, GetCapture(capture_id));
   return Write([&]() -> Result<Capture> {
     {
-      SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
-                              db_.Prepare("SELECT id FROM jobs WHERE capture_id = ?1 LIMIT 1"));
+      SOFTID_ASSIGN_OR_RETURN(
+          SqliteStatement stmt,
+          db_.Prepare("SELECT id FROM jobs WHERE capture_id = ?1 OR derived_capture_id = ?1 "
+                      "LIMIT 1"));
       SOFTID_RETURN_IF_ERROR(stmt.Bind(capture_id));
       SOFTID_ASSIGN_OR_RETURN(const bool used, stmt.Step());
       if (used) {
@@ -369,7 +382,8 @@ Result<CapturePage> SqliteJobStore::ListCaptures(const ListCapturesRequest& requ
   }
   std::string sql =
       "SELECT id, station_request_id, manifest, created_at, owner, "
-      "(SELECT count(*) FROM jobs WHERE jobs.capture_id = captures.id) FROM captures WHERE 1";
+      "(SELECT count(*) FROM jobs WHERE jobs.capture_id = captures.id "
+      "OR jobs.derived_capture_id = captures.id), format FROM captures WHERE 1";
   if (request.owner.has_value()) sql += " AND owner = ?1";
   if (after.has_value()) sql += " AND (created_at, id) > (?2, ?3)";
   sql += " ORDER BY created_at, id LIMIT ?4";  // the highest parameter: see ListJobs
@@ -396,6 +410,7 @@ Result<CapturePage> SqliteJobStore::ListCaptures(const ListCapturesRequest& requ
       listing.capture.created_at = FromUnixMicros(stmt.ColumnInt64(3));
       listing.capture.owner = stmt.ColumnText(4);
       listing.num_jobs = stmt.ColumnInt64(5);
+      listing.capture.format = stmt.ColumnText(6);
       page.captures.push_back(std::move(listing));
     }
     if (static_cast<int>(page.captures.size()) > page_size) {
@@ -411,7 +426,8 @@ Result<std::vector<std::string>> SqliteJobStore::ListUnusedCaptures(Timestamp cr
   return Read([&]() -> Result<std::vector<std::string>> {
     SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
         SELECT id FROM captures WHERE created_at < ?1
-          AND NOT EXISTS (SELECT 1 FROM jobs WHERE jobs.capture_id = captures.id)
+          AND NOT EXISTS (SELECT 1 FROM jobs WHERE jobs.capture_id = captures.id
+                                               OR jobs.derived_capture_id = captures.id)
         ORDER BY created_at, id)sql"));
     SOFTID_RETURN_IF_ERROR(stmt.Bind(ToUnixMicros(created_before)));
     return Column0(stmt);
@@ -815,6 +831,34 @@ Status SqliteJobStore::CompleteJob(const std::string& job_id, const nlohmann::js
     SOFTID_RETURN_IF_ERROR(stmt.Run());
     job.state = JobState::kSucceeded;
     return AppendStateEvent(job, "succeeded", now).status();
+  });
+}
+
+Status SqliteJobStore::SetDerivedCapture(const std::string& job_id, const std::string& worker_id,
+                                         const std::string& capture_id) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  SOFTID_RETURN_IF_ERROR(CheckResourceId(capture_id, kCaptureIdPrefix, "capture id"));
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(job_id));
+    if (job.state != JobState::kRunning) {
+      return WrongState(job, "only a RUNNING job derives a capture");
+    }
+    if (job.lease_owner != worker_id) {
+      return Status::FailedPrecondition("job " + job_id + " is leased to " + job.lease_owner +
+                                        ", not " + worker_id);
+    }
+    {
+      SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                              db_.Prepare("SELECT 1 FROM captures WHERE id = ?1"));
+      SOFTID_RETURN_IF_ERROR(stmt.Bind(capture_id));
+      SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
+      if (!found) return Status::NotFound("capture " + capture_id + " not found");
+    }
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                            db_.Prepare("UPDATE jobs SET derived_capture_id = ?2 WHERE id = ?1"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, capture_id));
+    return stmt.Run();
   });
 }
 

@@ -49,8 +49,8 @@ class SqliteJobStore final : public JobStore, public TokenStore {
   SqliteJobStore& operator=(const SqliteJobStore&) = delete;
 
   Result<Capture> CreateCapture(const std::vector<ManifestEntry>& manifest,
-                                const std::string& request_id,
-                                const std::string& owner = "") override;
+                                const std::string& request_id, const std::string& owner = "",
+                                std::string_view format = kCaptureFormat) override;
   Result<Capture> GetCapture(const std::string& capture_id) override;
   Result<Capture> DeleteCapture(const std::string& capture_id) override;
   Result<int64_t> StoredBytes(const std::string& owner) override;
@@ -82,6 +82,8 @@ class SqliteJobStore final : public JobStore, public TokenStore {
                                                   int from_iteration) override;
   Status SaveCheckpoint(const std::string& job_id, const nlohmann::json& checkpoint) override;
   Result<std::optional<nlohmann::json>> LoadCheckpoint(const std::string& job_id) override;
+  Status SetDerivedCapture(const std::string& job_id, const std::string& worker_id,
+                           const std::string& capture_id) override;
   Status CompleteJob(const std::string& job_id, const nlohmann::json& result) override;
   Status FailJob(const std::string& job_id, const std::string& error) override;
   Result<bool> IsCancelRequested(const std::string& job_id) override;

@@ -113,6 +113,17 @@ UPDATE jobs SET station_request_id = request_id, request_id = NULL WHERE request
 CREATE UNIQUE INDEX captures_by_request ON captures (owner, station_request_id);
 CREATE UNIQUE INDEX jobs_by_request ON jobs (owner, station_request_id);
 )sql",
+    // 5 -> 6: raw recordings next to captures (a capture's folder format), and the capture a
+    // job's ingest made from its recording. Existing captures are all softid-capture/1. The store
+    // keeps derived_capture_id pointing at a capture in its transactions (SetDerivedCapture checks
+    // the capture exists, DeleteCapture refuses one a job names), as a foreign key would; a
+    // foreign key column could not be dropped again (ALTER TABLE DROP COLUMN refuses it).
+    R"sql(
+ALTER TABLE captures ADD COLUMN format TEXT NOT NULL DEFAULT 'softid-capture/1'
+  CHECK (format IN ('softid-capture/1', 'softid-recording/1'));
+ALTER TABLE jobs ADD COLUMN derived_capture_id TEXT;
+CREATE INDEX jobs_by_derived_capture ON jobs (derived_capture_id);
+)sql",
 };
 
 Result<int64_t> ReadPragma(SqliteDatabase& db, std::string_view pragma) {

@@ -139,6 +139,7 @@ TEST_F(GrpcServerTest, JobRunsFromUploadToResult) {
   StartServer(/*num_workers=*/1);
   const v1::Capture capture = Upload();
   ASSERT_FALSE(capture.id().empty());
+  EXPECT_EQ(capture.format(), "softid-capture/1");
   const v1::Job job = CreateJob(capture.id(), FitConfig(/*max_iterations=*/2));
   EXPECT_EQ(job.state(), v1::QUEUED);
 
@@ -168,6 +169,10 @@ TEST_F(GrpcServerTest, JobRunsFromUploadToResult) {
   ASSERT_TRUE(json.contains("parameters"));
   EXPECT_TRUE(json["parameters"].contains("youngs_modulus"));
   EXPECT_FALSE(result.cost_history().empty());
+  EXPECT_TRUE(result.ingest_json().empty());  // a capture needs no ingest
+  v1::Job done;
+  ASSERT_TRUE(client_->GetJob(job.id(), &done).ok());
+  EXPECT_TRUE(done.derived_capture_id().empty());
 
   client::ServingStatus serving = client::ServingStatus::kUnknown;
   ASSERT_TRUE(client_->Health("", &serving).ok());

@@ -430,6 +430,53 @@ TEST_F(JobServiceTest, RetentionRemovesEndedJobsAndUnusedCapturesOlderThanTheAge
 }
 
 // A station lists only its own captures, each with its job count; an admin lists all.
+// DownloadCapture streams the manifest, then every file in order in chunks of at most 1 MiB that
+// reassemble to the stored bytes (a 2.5 MiB file in three, an empty file as one empty chunk);
+// another station's capture is NotFound and nothing is sent.
+TEST_F(JobServiceTest, DownloadCaptureStreamsEveryFileInBoundedChunks) {
+  std::string big(5 << 19, '\0');
+  for (size_t i = 0; i < big.size(); ++i) big[i] = static_cast<char>((i * 7919) >> 5);
+  const std::map<std::string, std::string> files = {
+      {"capture.json", "{}"}, {"frames/big.bin", big}, {"frames/empty.png", ""}};
+  std::vector<store::ManifestEntry> manifest;
+  for (const auto& [path, bytes] : files) {
+    Result<std::string> put = blobs_->Put(bytes);
+    ASSERT_TRUE(put.ok()) << put.status().ToString();
+    manifest.push_back({path, *put, static_cast<int64_t>(bytes.size())});
+  }
+  Result<store::Capture> stored = jobs_->CreateCapture(manifest, "", "lab-a");
+  ASSERT_TRUE(stored.ok()) << stored.status().ToString();
+
+  std::vector<store::ManifestEntry> sent_manifest;
+  std::map<std::string, std::string> received;
+  std::map<std::string, int> chunks;
+  const ServiceStatus done = service_->DownloadCapture(
+      Caller{"lab-a", false}, stored->id,
+      [&](const store::Capture& capture) {
+        sent_manifest = capture.manifest;
+        return true;
+      },
+      [&](const std::string& path, int64_t offset, std::string_view data) {
+        EXPECT_LE(data.size(), size_t{1} << 20);
+        EXPECT_EQ(offset, static_cast<int64_t>(received[path].size())) << path;
+        received[path].append(data);
+        ++chunks[path];
+        return true;
+      });
+  ASSERT_TRUE(done.ok()) << done.ToString();
+  EXPECT_EQ(sent_manifest, manifest);
+  EXPECT_EQ(received, files);
+  EXPECT_EQ(chunks["frames/big.bin"], 3);
+  EXPECT_EQ(chunks["frames/empty.png"], 1);
+
+  bool sent = false;
+  const ServiceStatus refused = service_->DownloadCapture(
+      Caller{"lab-b", false}, stored->id, [&](const store::Capture&) { return sent = true; },
+      [&](const std::string&, int64_t, std::string_view) { return sent = true; });
+  EXPECT_EQ(refused.code(), ServiceCode::kNotFound);
+  EXPECT_FALSE(sent);
+}
+
 TEST_F(JobServiceTest, CapturesAreListedPerStation) {
   const Caller lab1{"lab-1", false}, lab2{"lab-2", false}, admin{"operator", true};
   UploadFiles files = SmallCaptureFiles();

@@ -684,6 +684,43 @@ TEST_P(JobStoreConformance, CapturesListByStationWithTheirJobCounts) {
 }
 
 // CountJobs counts per state and in total.
+// A recording keeps its format; the capture a job derives from it is used by that job (not
+// deletable, counted, not unused) until the job goes, and only its worker may record it.
+TEST_P(JobStoreConformance, RecordingsAndDerivedCaptures) {
+  Result<Capture> recording =
+      store_->CreateCapture(Manifest("recording"), "", "lab-a", kRecordingFormat);
+  ASSERT_TRUE(recording.ok()) << recording.status().ToString();
+  EXPECT_EQ(store_->GetCapture(recording->id)->format, kRecordingFormat);
+  EXPECT_EQ(store_->CreateCapture(Manifest("x"), "", "lab-a", "softid-other/1").status().code(),
+            StatusCode::kInvalidArgument);
+  const Capture derived = NewCapture();
+  EXPECT_EQ(derived.format, kCaptureFormat);
+  const Job job = NewJob(recording->id);
+  EXPECT_EQ(store_->SetDerivedCapture(job.id, "worker-1", derived.id).code(),
+            StatusCode::kFailedPrecondition);  // QUEUED: no worker holds it
+  Claim("worker-1");
+  EXPECT_EQ(store_->SetDerivedCapture(job.id, "worker-2", derived.id).code(),
+            StatusCode::kFailedPrecondition);
+  EXPECT_EQ(store_->SetDerivedCapture(job.id, "worker-1", "cap-0000000000000000").code(),
+            StatusCode::kNotFound);
+  ASSERT_TRUE(store_->SetDerivedCapture(job.id, "worker-1", derived.id).ok());
+  EXPECT_EQ(store_->GetJob(job.id)->derived_capture_id, derived.id);
+
+  const Result<Capture> refused = store_->DeleteCapture(derived.id);
+  EXPECT_EQ(refused.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(refused.status().message().find(job.id), std::string::npos);
+  Result<CapturePage> page = store_->ListCaptures({});
+  ASSERT_TRUE(page.ok());
+  for (const CaptureListing& listing : page->captures) EXPECT_EQ(listing.num_jobs, 1);
+  clock_.Advance(seconds(10));
+  EXPECT_TRUE(store_->ListUnusedCaptures(ToTimestamp(clock_.Now()))->empty());
+
+  ASSERT_TRUE(store_->FailJob(job.id, "stop").ok());
+  ASSERT_TRUE(store_->DeleteJob(job.id).ok());
+  EXPECT_TRUE(store_->DeleteCapture(derived.id).ok());
+  EXPECT_TRUE(store_->DeleteCapture(recording->id).ok());
+}
+
 TEST_P(JobStoreConformance, CountJobs) {
   const Capture capture = NewCapture();
   for (int i = 0; i < 4; ++i) NewJob(capture.id);

@@ -106,7 +106,10 @@ TEST(SqliteSchema, MigratesVersion1Jobs) {
     Result<SqliteDatabase> db = SqliteDatabase::Open(path);
     ASSERT_TRUE(db.ok());
     ASSERT_TRUE(MigrateSqliteSchema(*db).ok());
-    // Back to the version 1 layout: versions 2 to 5 only added these columns, tables and indexes.
+    // Back to the version 1 layout: versions 2 to 6 only added these columns, tables and indexes.
+    ASSERT_TRUE(db->Exec("DROP INDEX jobs_by_derived_capture").ok());
+    ASSERT_TRUE(db->Exec("ALTER TABLE jobs DROP COLUMN derived_capture_id").ok());
+    ASSERT_TRUE(db->Exec("ALTER TABLE captures DROP COLUMN format").ok());
     ASSERT_TRUE(db->Exec("ALTER TABLE jobs DROP COLUMN released_attempts").ok());
     for (const char* column : {"start", "num_starts", "remaining_s"}) {
       ASSERT_TRUE(db->Exec(std::string("ALTER TABLE progress DROP COLUMN ") + column).ok());
@@ -138,10 +141,16 @@ TEST(SqliteSchema, MigratesVersion1Jobs) {
   EXPECT_EQ(job->owner, "");
   EXPECT_EQ(job->request_id, "retry-7");  // moved to the per-station key (schema 5)
   EXPECT_TRUE(*(*store)->HasJobWithRequestId("retry-7", ""));
+  EXPECT_EQ(job->derived_capture_id, "");
   ASSERT_TRUE((*store)->Close().ok());
   Result<SqliteDatabase> db = SqliteDatabase::Open(path);
   ASSERT_TRUE(db.ok());
   EXPECT_EQ(*ReadSchemaVersion(*db), kSqliteSchemaVersion);
+  // Schema 6: captures stored before it are captures, not recordings.
+  Result<SqliteStatement> format = db->Prepare("SELECT format FROM captures");
+  ASSERT_TRUE(format.ok());
+  ASSERT_TRUE(*format->Step());
+  EXPECT_EQ(format->ColumnText(0), "softid-capture/1");
 }
 
 // Some other application's SQLite file is not adopted.
