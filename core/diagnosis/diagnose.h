@@ -1,4 +1,4 @@
-// Diagnosis of left-out physics (issue 5): fit the base model, locate where and when it misses
+// Diagnosis of left-out physics: fit the base model, locate where and when it misses
 // the recording, screen the candidate extensions, refit the best with every base parameter free,
 // and decide with the pre-registered rule (decision.h).
 //

@@ -197,8 +197,8 @@ struct JobConfig {
   int refine_iterations = 0;  // [-], >= 0
 
   CostSettings cost;
-  // Run the diagnosis of left-out physics after the fit and return its report with the result
-  // (issue 5). Honoured by the callers (softid-lab fit/diagnose, the service), which call
+  // Run the diagnosis of left-out physics after the fit and return its report with the result.
+  // Honoured by the callers (softid-lab fit/diagnose, the service), which call
   // diagnosis::Diagnose; inverse::Fit itself ignores it.
   bool diagnose = false;
   // Estimate each fitted value's uncertainty after the fit (fit_uncertainty.h; 2 forward and

@@ -1,4 +1,4 @@
-// softid-lab prove-diagnosis: the concealed-effect benchmark of the diagnosis (issue 5). Each case
+// softid-lab prove-diagnosis: the concealed-effect benchmark of the diagnosis. Each case
 // synthesises a capture with an effect on (core/scenes/diagnosis_scenes.h) on a finer grid and a
 // smaller time step than the fit, with realistic depth noise, then diagnoses it with the effect
 // off, and compares the decision with the truth. Prints a confusion table (true effect vs

@@ -1,4 +1,4 @@
-// The benchmarks of `softid-lab reproduce` (issue 3): the paper's Table 1 (Weiss et al. CVPR 2020,
+// The benchmarks of `softid-lab reproduce`: the paper's Table 1 (Weiss et al. CVPR 2020,
 // falling torus, Young's modulus only) and three multi-parameter experiments, as data: which scene,
 // which cameras per row, what is fitted from which random starts, how a recovered value is scored,
 // the accuracy targets and the paper's figures to print next to ours.

@@ -1,4 +1,4 @@
-// Concealed-effect scenes for proving the diagnosis of left-out physics (issue 5): each scene
+// Concealed-effect scenes for proving the diagnosis of left-out physics: each scene
 // carries one piece of physics the base model lacks (friction on a ramp, two halves of different
 // stiffness, air drag on a light throw) or a nuisance (an initial spin), at a strength the caller
 // chooses; strength 0 is the control. The scenes are small on purpose (a fit runs ~10 cells along

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Generates softid's independent validation set with CalculiX (issue 29).
+"""Generates softid's independent validation set with CalculiX.
 
     tools/validation/make_validation_set.py --out DIR [--cases a,b,...] [--resolution coarse|fine|both]
 

@@ -201,7 +201,7 @@ def tiny_drop():
         duration=0.25, cameras=[Camera(target=(0.0, 0.0, 0.03), distance=0.35, width=96, height=72)])
 
 
-# The validation set proper, in the order of issue 29.
+# The validation set proper.
 DEFAULT_CASES = ("block-drop", "block-launch", "cube-ramp", "cube-ramp-friction", "bar-clamped",
                  "two-material", "tumble-throw")
 CASES = {c().name: c for c in (block_drop, block_launch, cube_ramp, cube_ramp_friction,
