@@ -138,13 +138,15 @@ nlohmann::json RunDiagnosis(const store::Job& job, const capture::Capture& captu
 Result<capture::Capture> PrepareCapture(const store::Job& job, const store::Capture& stored,
                                         const std::string& worker_id,
                                         const JobRunnerContext& context, const fs::path& dir,
+                                        const std::atomic<bool>& cancel,
                                         nlohmann::json* ingest_report) {
   store::Capture fitted = stored;
   fs::path capture_dir = dir;
   if (stored.format == store::kRecordingFormat) {
-    Result<IngestedCapture> ingested = job.derived_capture_id.empty()
-                                           ? IngestRecording(job, stored, worker_id, context, dir)
-                                           : LoadIngestedCapture(job, context);
+    Result<IngestedCapture> ingested =
+        job.derived_capture_id.empty()
+            ? IngestRecording(job, stored, worker_id, context, dir, &cancel)
+            : LoadIngestedCapture(job, context);
     if (!ingested.ok()) return ingested.status();
     if (!job.derived_capture_id.empty()) {
       context.logger->info("job {}: ingest skipped: capture {} was derived on an earlier attempt",
@@ -207,7 +209,7 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   {
     Heartbeat heartbeat(job, worker_id, context, cancel);
     Result<capture::Capture> capture =
-        PrepareCapture(job, *stored, worker_id, context, folder.path, &ingest_json);
+        PrepareCapture(job, *stored, worker_id, context, folder.path, cancel, &ingest_json);
     if (!capture.ok()) prepared = capture.status();
     inverse::FitOptions options;
     options.cancel = &cancel;
@@ -249,7 +251,6 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
         cancel.store(true);
       }
     };
-    // An ingest cannot be stopped part way: a cancel during it is seen here.
     if (capture.ok() && !cancel.load()) result = inverse::Fit(*capture, *config, options);
     if (result.ok() && !result->cancelled && config->uncertainty) {
       Result<inverse::FitUncertainty> estimated =
@@ -269,7 +270,9 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   }
 
   if (lost) return JobOutcome::kLost;
-  if (!prepared.ok()) return Fail(job, context, prepared.message());
+  // An ingest stopped by a cancel or a shutdown is handled as a stopped fit below.
+  const bool ingest_stopped = prepared.code() == StatusCode::kCancelled && cancel.load();
+  if (!prepared.ok() && !ingest_stopped) return Fail(job, context, prepared.message());
   // A fit that ran to its end is recorded whatever was asked meanwhile; only one that stopped
   // early is a cancel or an interruption.
   const bool stopped_early =

@@ -91,7 +91,8 @@ Result<store::Capture> StoreCaptureFolder(const store::Job& job, const fs::path&
 
 Result<IngestedCapture> IngestRecording(const store::Job& job, const store::Capture& stored,
                                         const std::string& worker_id,
-                                        const JobRunnerContext& context, const fs::path& work_dir) {
+                                        const JobRunnerContext& context, const fs::path& work_dir,
+                                        const std::atomic<bool>* cancel) {
   const fs::path recording_dir = work_dir / "recording";
   const fs::path capture_dir = work_dir / "ingested";
   auto shown = [&](const Status& status) {
@@ -105,8 +106,10 @@ Result<IngestedCapture> IngestRecording(const store::Job& job, const store::Capt
   if (!recording.ok()) return shown(recording.status()).WithContext("recording " + stored.id);
 
   IngestNotes notes(job, context);
+  ingest::IngestOptions options;
+  options.cancel = cancel;
   Result<ingest::IngestReport> report = ingest::Ingest(
-      *recording, capture_dir, ingest::IngestOptions{},
+      *recording, capture_dir, options,
       [&](std::string_view stage, int done, int total) { notes(stage, done, total); });
   if (!report.ok()) return shown(report.status());
   context.logger->info("job {}: ingested recording {}: {} frames, registration RMS {:.2g} m",

@@ -6,6 +6,7 @@
 // finished loads the capture and its report instead of ingesting again.
 #pragma once
 
+#include <atomic>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -24,11 +25,13 @@ struct IngestedCapture {
 
 // Ingests `recording` (the job's capture) in `work_dir` (a private folder the caller removes)
 // and stores the result for `job`, claimed by `worker_id`. Errors are the ingest's (they name
-// the stage, the camera and the frame) with the work folder's paths removed.
+// the stage, the camera and the frame) with the work folder's paths removed; Cancelled once
+// `cancel` is set (checked between frames), with nothing stored.
 Result<IngestedCapture> IngestRecording(const store::Job& job, const store::Capture& recording,
                                         const std::string& worker_id,
                                         const JobRunnerContext& context,
-                                        const std::filesystem::path& work_dir);
+                                        const std::filesystem::path& work_dir,
+                                        const std::atomic<bool>* cancel = nullptr);
 
 // The derived capture of a job whose ingest finished on an earlier attempt, with its report.
 Result<IngestedCapture> LoadIngestedCapture(const store::Job& job, const JobRunnerContext& context);

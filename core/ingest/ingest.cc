@@ -47,6 +47,12 @@ Result<StaticScene> CameraStaticScene(const recording::Recording& rec, int c,
   return EstimateStaticScene(images, options.static_scene);
 }
 
+Status CheckNotCancelled(const IngestOptions& options) {
+  if (options.cancel != nullptr && options.cancel->load(std::memory_order_relaxed))
+    return Status::Cancelled("ingest: cancelled");
+  return Status::Ok();
+}
+
 bool OnBorder(int pixel, int width, int height) {
   const int row = pixel / width, col = pixel % width;
   return row == 0 || col == 0 || row == height - 1 || col == width - 1;
@@ -77,6 +83,7 @@ Status SegmentCamera(const recording::Recording& rec, int c, double object_radiu
   ObjectTracker tracker(object_radius_m, options.tracking);
   int frames_on_border = 0;
   for (int k = 0; k < n; ++k) {
+    SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
     SOFTID_ASSIGN_OR_RETURN(DepthImage image, recording::LoadRecordingFrame(rec, c, k));
     SOFTID_ASSIGN_OR_RETURN(Foreground fg,
                             SegmentForeground(image, view->scene, view->rays, options.foreground));
@@ -326,6 +333,7 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
         views[c].scene,
         CameraStaticScene(rec, c, options, &report.cameras[c].static_from_background));
     if (progress) progress("static scene", c + 1, rec.NumCameras());
+    SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
   }
   // 2. The floor and the world frame.
   SOFTID_RETURN_IF_ERROR(FloorAndWorld(rec, options, &views, &report));
@@ -341,6 +349,7 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
   // 4. The mesh's pose at the release.
   SOFTID_RETURN_IF_ERROR(PoseMesh(rec, mesh_S, options, views, &report));
   if (progress) progress("registration", 1, 1);
+  SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
   // 5. The capture, and a picture of what the ingest saw.
   SOFTID_RETURN_IF_ERROR(WriteIngestedCapture(rec, mesh_S, options, views, capture_dir, &report));
   SOFTID_RETURN_IF_ERROR(

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <atomic>
 #include <filesystem>
 #include <functional>
 #include <nlohmann/json_fwd.hpp>
@@ -34,6 +35,9 @@ struct IngestOptions {
   int max_static_frames = 64;
   // Frames of different cameras this close in time form one capture frame [s].
   double same_time_s = 1e-4;
+  // Checked between frames and stages; once set, Ingest stops with Cancelled and writes no
+  // capture.json. Not owned; null: never cancelled.
+  const std::atomic<bool>* cancel = nullptr;
 
   Status Validate() const;
 };
@@ -73,7 +77,7 @@ using IngestProgress = std::function<void(std::string_view stage, int done, int 
 // interpolation; frame_times) plus ingest.json and ingest.png (contact_sheet.h). Errors name the
 // stage, the camera and the frame: no foreground, the object on the image border in every frame of
 // every camera, a mesh whose size cannot match the object's points, a registration that does not
-// converge (overlap and RMS), no floor.
+// converge (overlap and RMS), no floor. Cancelled when options.cancel is set meanwhile.
 Result<IngestReport> Ingest(const recording::Recording& recording,
                             const std::filesystem::path& capture_dir,
                             const IngestOptions& options = {}, const IngestProgress& progress = {});

@@ -375,6 +375,35 @@ TEST_F(RecordingJobTest, RecordingJobIngestsFitsAndItsDerivedCaptureDownloads) {
 
 // A job retried after a lost worker that had finished the ingest fits the derived capture
 // without ingesting again.
+// A cancel while the recording is being ingested stops the ingest part way: the job ends
+// CANCELLED without a derived capture and without fitting.
+TEST_F(RecordingJobTest, CancelDuringTheIngestStopsIt) {
+  StartServer(/*num_workers=*/1);
+  const v1::Capture recording = UploadOk(*a_, Recording());
+  v1::CreateJobRequest request;
+  request.set_capture_id(recording.id());
+  request.set_config_json(ShortFitConfig());
+  v1::Job job;
+  ASSERT_TRUE(a_->CreateJob(request, &job).ok());
+  bool cancelled = false;
+  int iterations = 0;
+  const grpc::Status watched = a_->WatchJob(job.id(), 0, [&](const v1::JobEvent& event) {
+    iterations += event.kind() == v1::JobEvent::ITERATION ? 1 : 0;
+    if (!cancelled && event.message().rfind("ingest: segmentation", 0) == 0) {
+      v1::Job ignored;
+      EXPECT_TRUE(a_->CancelJob(job.id(), &ignored).ok());
+      cancelled = true;
+    }
+  });
+  ASSERT_TRUE(watched.ok()) << watched.error_message();
+  ASSERT_TRUE(cancelled);
+  ASSERT_TRUE(a_->GetJob(job.id(), &job).ok());
+  EXPECT_EQ(job.state(), v1::CANCELLED) << job.error();
+  EXPECT_TRUE(job.derived_capture_id().empty());
+  EXPECT_EQ(iterations, 0);
+  EXPECT_EQ(NumCaptures(*a_), 1);  // the recording alone
+}
+
 TEST_F(RecordingJobTest, RetriedJobWithADerivedCaptureSkipsTheIngest) {
   StartServer(/*num_workers=*/1);
   const v1::Capture recording = UploadOk(*a_, Recording());

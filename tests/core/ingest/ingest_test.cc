@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -17,7 +18,6 @@
 #include "core/capture/capture.h"
 #include "core/capture/depth_noise.h"
 #include "core/geometry/triangle_mesh.h"
-#include "core/lab/ingest_truth.h"
 #include "core/lab/ingest_truth.h"
 #include "core/scenes/raw_recording_synthesis.h"
 #include "core/scenes/scene.h"
@@ -195,6 +195,34 @@ TEST(IngestRejects, NoObjectInTheFrames) {
   EXPECT_NE(report.status().message().find("no foreground"), std::string::npos)
       << report.status().message();
   EXPECT_NE(report.status().message().find(rec->cameras[0].frames[0].file), std::string::npos);
+  EXPECT_FALSE(fs::exists(cap.path / "capture.json"));
+}
+
+// A cancel flag set during the segmentation stops the ingest before the next frame: Cancelled,
+// no later stage runs, and no capture is written.
+TEST(Ingest, CancelStopsBetweenFramesAndWritesNoCapture) {
+  RawDir raw("cancel");
+  RawDir cap("cancel_cap");
+  WriteSmallRecording(raw);
+  Result<recording::Recording> rec = recording::ReadRecording(raw.path);
+  ASSERT_TRUE(rec.ok());
+  std::atomic<bool> cancel{false};
+  IngestOptions options;
+  options.cancel = &cancel;
+  int segmented = 0;
+  bool registered = false;
+  const Result<IngestReport> report =
+      Ingest(*rec, cap.path, options, [&](std::string_view stage, int done, int) {
+        if (stage == "segmentation") {
+          segmented = done;
+          if (done == 2) cancel.store(true);
+        }
+        registered = registered || stage == "registration";
+      });
+  ASSERT_FALSE(report.ok());
+  EXPECT_EQ(report.status().code(), StatusCode::kCancelled) << report.status().ToString();
+  EXPECT_EQ(segmented, 2);
+  EXPECT_FALSE(registered);
   EXPECT_FALSE(fs::exists(cap.path / "capture.json"));
 }
 
