@@ -39,6 +39,27 @@ double MedianOf(std::vector<float> values) {
   return values[mid];
 }
 
+// The least-squares plane of `points` again and again on those within 2.5 robust sigmas of it:
+// what stands just above the floor (an object's underside, a box's foot, a wall's corner) lies
+// within RANSAC's threshold but on one side only, and pulled the plane up and over.
+FloorPlane TrimmedPlane(const std::vector<Eigen::Vector3d>& points, const Eigen::Vector3d& up) {
+  FloorPlane plane = FitPlane(points, up);
+  std::vector<Eigen::Vector3d> kept;
+  std::vector<float> distances;
+  for (int round = 0; round < 3; ++round) {
+    distances.clear();
+    for (const Eigen::Vector3d& p : points) distances.push_back(std::abs(plane.SignedDistance(p)));
+    const double limit = 2.5 * 1.4826 * MedianOf(distances);
+    kept.clear();
+    for (const Eigen::Vector3d& p : points) {
+      if (std::abs(plane.SignedDistance(p)) <= limit) kept.push_back(p);
+    }
+    if (kept.size() < 3) break;
+    plane = FitPlane(kept, up);
+  }
+  return plane;
+}
+
 }  // namespace
 
 Status FloorPlaneOptions::Validate() const {
@@ -83,7 +104,7 @@ Result<FloorPlane> FindFloorPlane(const std::vector<Eigen::Vector3d>& points_C,
     std::vector<Eigen::Vector3d> plane_points;
     plane_points.reserve(inliers.size());
     for (const size_t i : inliers) plane_points.push_back(remaining.points_[i]);
-    FloorPlane plane = FitPlane(plane_points, up);
+    FloorPlane plane = TrimmedPlane(plane_points, up);
     const double tilt_cos = plane.normal_C.dot(up);
     seen +=
         fmt::format("{}{} points at {:.0f} deg from up", seen.empty() ? "" : ", ", inliers.size(),

@@ -137,7 +137,7 @@ void IngestAndCompare(int background_frames, const Bounds& bounds) {
 // is behind them; they are marked as maybe the object and join its region where its depth
 // continues (without that: IoU 0.93 at the worst frame).
 TEST(Ingest, RawRecordingAgainstItsTruth) {
-  IngestAndCompare(0, {.min_iou = 0.97, .max_floor_mm = 1.5});
+  IngestAndCompare(0, {.min_iou = 0.97});
 }
 
 TEST(Ingest, RawRecordingWithBackgroundFramesAgainstItsTruth) {
