@@ -44,7 +44,8 @@ Result<StaticScene> CameraStaticScene(const recording::Recording& rec, int c,
       images.push_back(std::move(image));
     }
   }
-  return EstimateStaticScene(images, options.static_scene);
+  return *from_background ? EstimateEmptyScene(images, options.static_scene)
+                          : EstimateStaticScene(images, options.static_scene);
 }
 
 Status CheckNotCancelled(const IngestOptions& options) {

@@ -16,26 +16,28 @@ float Median(std::vector<float>& values) {
   return values[mid];
 }
 
+constexpr double kDepthBinRatio = 1.03;  // depth bins 3 % wide
+constexpr size_t kMinPixelsPerBin = 20;
+
+int DepthBin(float z) {
+  return static_cast<int>(std::floor(std::log(z) / std::log(kDepthBinRatio)));
+}
+
 // A pixel seen behind the object in few frames has a sigma from few readings, often far too
 // small. The sensor's noise depends on depth: each pixel's sigma is raised to the median sigma of
 // the pixels at its depth (bins 3 % wide, at least 20 pixels each).
 void FloorSigmaByDepth(StaticScene* scene) {
-  constexpr double kBinRatio = 1.03;
-  constexpr size_t kMinPixels = 20;
   std::map<int, std::vector<float>> bins;
-  const auto bin_of = [&](float z) {
-    return static_cast<int>(std::floor(std::log(z) / std::log(kBinRatio)));
-  };
   for (size_t p = 0; p < scene->depth_m.size(); ++p) {
-    if (scene->depth_m[p] > 0.0f) bins[bin_of(scene->depth_m[p])].push_back(scene->sigma_m[p]);
+    if (scene->depth_m[p] > 0.0f) bins[DepthBin(scene->depth_m[p])].push_back(scene->sigma_m[p]);
   }
   std::map<int, float> floor;
   for (auto& [bin, sigmas] : bins) {
-    if (sigmas.size() >= kMinPixels) floor[bin] = Median(sigmas);
+    if (sigmas.size() >= kMinPixelsPerBin) floor[bin] = Median(sigmas);
   }
   for (size_t p = 0; p < scene->depth_m.size(); ++p) {
     if (scene->depth_m[p] <= 0.0f) continue;
-    const auto it = floor.find(bin_of(scene->depth_m[p]));
+    const auto it = floor.find(DepthBin(scene->depth_m[p]));
     if (it != floor.end()) scene->sigma_m[p] = std::max(scene->sigma_m[p], it->second);
   }
 }
@@ -102,6 +104,68 @@ Result<StaticScene> EstimateStaticScene(const std::vector<capture::DepthImage>& 
     }
   }
   FloorSigmaByDepth(&scene);
+  return scene;
+}
+
+namespace {
+
+// Per 3 % depth bin (at least 20 pixels): the median over the bin's pixels of the sample variance
+// of all their readings, divided by the median of chi-square / dof for the pixel's count
+// (Wilson-Hilferty), so that it estimates the variance itself.
+std::map<int, float> NoiseByDepth(const std::vector<capture::DepthImage>& images,
+                                  const StaticScene& scene) {
+  std::map<int, std::vector<float>> variances;
+  for (size_t p = 0; p < scene.depth_m.size(); ++p) {
+    if (scene.depth_m[p] <= 0.0f) continue;
+    double sum = 0.0, squares = 0.0;
+    int count = 0;
+    for (const capture::DepthImage& image : images) {
+      const double z = image.depth[p];
+      if (z <= 0.0) continue;
+      sum += z;
+      squares += z * z;
+      ++count;
+    }
+    if (count < 2) continue;
+    const int dof = count - 1;
+    const double variance = std::max(0.0, (squares - sum * sum / count) / dof);
+    const double median_ratio = std::pow(1.0 - 2.0 / (9.0 * dof), 3);
+    variances[DepthBin(scene.depth_m[p])].push_back(static_cast<float>(variance / median_ratio));
+  }
+  std::map<int, float> sigma;
+  for (auto& [bin, values] : variances) {
+    if (values.size() >= kMinPixelsPerBin) sigma[bin] = std::sqrt(Median(values));
+  }
+  return sigma;
+}
+
+}  // namespace
+
+Result<StaticScene> EstimateEmptyScene(const std::vector<capture::DepthImage>& images,
+                                       const StaticSceneOptions& options) {
+  SOFTID_ASSIGN_OR_RETURN(StaticScene scene, EstimateStaticScene(images, options));
+  const std::map<int, float> noise = NoiseByDepth(images, scene);
+  std::vector<float> readings, cluster;
+  for (size_t p = 0; p < scene.depth_m.size(); ++p) {
+    if (scene.depth_m[p] <= 0.0f) continue;
+    const auto it = noise.find(DepthBin(scene.depth_m[p]));
+    if (it == noise.end()) continue;
+    const double window_m = 4.0 * it->second;
+    if (window_m > options.cluster_width_m) {
+      readings.clear();
+      for (const capture::DepthImage& image : images) {
+        if (image.depth[p] > 0.0f) readings.push_back(image.depth[p]);
+      }
+      // All readings are the scene: their median, and the readings within 2 sigma of it.
+      const float centre = Median(readings);
+      cluster.clear();
+      for (const float z : readings) {
+        if (std::abs(z - centre) <= 0.5 * window_m) cluster.push_back(z);
+      }
+      scene.depth_m[p] = Median(cluster);
+    }
+    scene.sigma_m[p] = std::max(scene.sigma_m[p], it->second);
+  }
   return scene;
 }
 

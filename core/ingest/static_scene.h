@@ -68,6 +68,15 @@ void MarkHiddenByTheObject(const std::vector<int>& first_object_pixels,
                            const capture::PixelRays& rays, const StaticSceneOptions& options,
                            StaticScene* scene);
 
+// The static scene from views of the empty scene (background frames): every reading shows the
+// scene, so the sensor's noise at each depth comes from all of them (per 3 % depth bin, the median
+// over its pixels of their sample variance, corrected for their reading count), where a few
+// readings' own spread says little (three frames read it at half its size). Where four times that
+// noise is wider than cluster_width_m (far from the camera), the scene is taken again with that
+// window, centred on its median; every pixel's sigma is at least the noise at its depth.
+Result<StaticScene> EstimateEmptyScene(const std::vector<capture::DepthImage>& images,
+                                       const StaticSceneOptions& options = {});
+
 // The static scene's points in the camera frame [m], unprojected along the lens's rays (same
 // size as the scene), with each point's sigma; pixels of unknown depth are left out.
 void StaticScenePoints(const StaticScene& scene, const capture::PixelRays& rays,
