@@ -14,6 +14,7 @@
 #include "core/capture/capture.h"
 #include "core/capture/depth_renderer.h"
 #include "core/common/json_fields.h"
+#include "core/geometry/hole_caps.h"
 #include "core/geometry/primitives.h"
 #include "core/recording/recording.h"
 #include "core/scenes/synthesize.h"
@@ -254,13 +255,16 @@ Result<RawSynthesisSummary> SynthesizeRawRecording(const Scene& scene,
   RawSynthesisSummary summary;
   Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = Eigen::Vector3d::Constant(-1e300);
   double reach = scene.view_radius;
+  // The real object is closed where its scan has holes: the cameras see the caps, not through.
+  geometry::HoleLoops holes;  // found on the first state's surface
   const auto record_step = [&](int step, const fem::Simulator& sim) {
     if (step == 0) {
       summary.num_elements = sim.hex_mesh().NumElements();
       summary.num_nodes = sim.hex_mesh().NumNodes();
       summary.mass = sim.total_mass();
+      holes = geometry::FindHoleLoops(sim.DeformedSurface());
     }
-    geometry::TriangleMesh surface = sim.DeformedSurface();
+    geometry::TriangleMesh surface = geometry::WithHolesCapped(sim.DeformedSurface(), holes);
     for (const auto& v : surface.vertices) {
       const Eigen::Vector3d f = floor.ToFloor(v);
       lo = lo.cwiseMin(f);

@@ -6,6 +6,7 @@
 #include "core/capture/depth_preview.h"
 #include "core/capture/depth_renderer.h"
 #include "core/common/json_fields.h"
+#include "core/geometry/hole_caps.h"
 
 namespace softid::scenes {
 
@@ -61,14 +62,17 @@ Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& 
   SynthesisSummary summary;
   const int num_frames = options.run.NumFrames(scene);
   long long valid_pixels = 0;
+  // The real object is closed where its scan has holes: the cameras see the caps, not through.
+  geometry::HoleLoops holes;  // found on the first state's surface
 
   const auto record_frame = [&](int frame, const fem::Simulator& sim) {
     if (frame == 0) {
       summary.num_elements = sim.hex_mesh().NumElements();
       summary.num_nodes = sim.hex_mesh().NumNodes();
       summary.mass = sim.total_mass();
+      holes = geometry::FindHoleLoops(sim.DeformedSurface());
     }
-    const geometry::TriangleMesh surface = sim.DeformedSurface();
+    const geometry::TriangleMesh surface = geometry::WithHolesCapped(sim.DeformedSurface(), holes);
     for (size_t c = 0; c < cameras.size(); ++c) {
       capture::DepthImage image = renderer.Render(surface, cameras[c]);
       capture::ApplyDepthNoise(options.noise, frame, static_cast<int>(c), &image);
