@@ -13,6 +13,11 @@ Status ForegroundOptions::Validate() const {
     return Status::InvalidArgument(
         fmt::format("noise_sigmas = {}: must be positive", noise_sigmas));
   }
+  if (!(join_noise_sigmas > 0.0) || !(join_noise_sigmas <= noise_sigmas)) {
+    return Status::InvalidArgument(
+        fmt::format("join_noise_sigmas = {}: must be in (0, noise_sigmas = {}]", join_noise_sigmas,
+                    noise_sigmas));
+  }
   if (!(min_margin_m >= 0.0) || !std::isfinite(min_margin_m)) {
     return Status::InvalidArgument(fmt::format("min_margin_m = {}: must be >= 0", min_margin_m));
   }
@@ -24,14 +29,136 @@ Status ForegroundOptions::Validate() const {
     return Status::InvalidArgument(
         fmt::format("min_region_pixels = {}: must be >= 1", min_region_pixels));
   }
+  if (min_enclosing_neighbours < 1 || min_enclosing_neighbours > 8) {
+    return Status::InvalidArgument(
+        fmt::format("min_enclosing_neighbours = {}: must be in [1, 8]", min_enclosing_neighbours));
+  }
   return Status::Ok();
 }
 
 namespace {
 
-// Candidate pixels: nearer than the scene, or of a scene that may be the object itself (they join
-// a region of nearer pixels but make none alone).
+// Candidate pixels: nearer than the scene, or a little nearer, or of a scene that may be the object
+// itself (the last two join a region of nearer pixels but make none alone).
 constexpr uint8_t kNearer = 1, kJoinsOnly = 2;
+
+cv::Mat1b ClassifyPixels(const capture::DepthImage& frame, const StaticScene& scene,
+                         const ForegroundOptions& options) {
+  cv::Mat1b candidates(frame.height, frame.width, uint8_t{0});
+  const double join_fraction = options.join_noise_sigmas / options.noise_sigmas;
+  for (int row = 0; row < frame.height; ++row) {
+    for (int col = 0; col < frame.width; ++col) {
+      const float z = frame.at(col, row);
+      if (z <= 0.0f) continue;
+      const float behind = scene.depth(col, row);
+      const double margin =
+          std::max(options.min_margin_m, options.noise_sigmas * scene.sigma(col, row));
+      if (behind <= 0.0f || behind - z > margin) {
+        candidates(row, col) = kNearer;
+      } else if (behind - z > join_fraction * margin ||
+                 (!scene.maybe_object.empty() && scene.maybe_object[row * frame.width + col])) {
+        candidates(row, col) = kJoinsOnly;
+      }
+    }
+  }
+  return candidates;
+}
+
+// Regions, by hysteresis: 8-connected nearer pixels whose depths join without a jump (a pixel of
+// the object and a noisy floor pixel beside its silhouette are neighbours in the image, not in
+// space) make a region when there are enough of them; it then grows into the pixels that only join.
+// A pixel that only joins never bridges two groups of nearer pixels into one region: far, noisy
+// background would otherwise become one. OpenCV's connected components know no depth, hence this
+// flood fill. `label` gets each region's index (-1 elsewhere).
+std::vector<std::vector<int>> GrowRegions(const capture::DepthImage& frame,
+                                          const cv::Mat1b& candidates,
+                                          const ForegroundOptions& options,
+                                          std::vector<int>* label) {
+  constexpr int kUnseen = -1, kDropped = -2;
+  label->assign(frame.depth.size(), kUnseen);
+  std::vector<std::vector<int>> regions;
+  std::vector<int> stack, members;
+  // Grows from `seed` over the pixels `take` admits, labelling them `id`; they go to `members`.
+  const auto flood = [&](int seed, int id, auto take) {
+    members.assign(1, seed);
+    stack.assign(1, seed);
+    (*label)[seed] = id;
+    while (!stack.empty()) {
+      const int p = stack.back();
+      stack.pop_back();
+      const int row = p / frame.width, col = p % frame.width;
+      const float z = frame.depth[p];
+      for (int dr = -1; dr <= 1; ++dr) {
+        for (int dc = -1; dc <= 1; ++dc) {
+          const int r = row + dr, c = col + dc;
+          if (r < 0 || c < 0 || r >= frame.height || c >= frame.width) continue;
+          const int q = r * frame.width + c;
+          if (!take(q, candidates(r, c))) continue;
+          if (std::abs(frame.depth[q] - z) > options.max_depth_step * z) continue;
+          (*label)[q] = id;
+          members.push_back(q);
+          stack.push_back(q);
+        }
+      }
+    }
+  };
+  for (int seed = 0; seed < static_cast<int>(label->size()); ++seed) {
+    if (candidates(seed / frame.width, seed % frame.width) != kNearer) continue;
+    if ((*label)[seed] != kUnseen) continue;
+    const int id = static_cast<int>(regions.size());
+    flood(seed, id, [&](int q, uint8_t kind) { return kind == kNearer && (*label)[q] == kUnseen; });
+    if (static_cast<int>(members.size()) < options.min_region_pixels) {
+      for (const int p : members) (*label)[p] = kDropped;
+      continue;
+    }
+    regions.push_back(members);
+  }
+  for (int id = 0; id < static_cast<int>(regions.size()); ++id) {
+    for (size_t i = 0, n = regions[id].size(); i < n; ++i) {
+      flood(regions[id][i], id,
+            [&](int q, uint8_t kind) { return kind == kJoinsOnly && (*label)[q] == kUnseen; });
+      regions[id].insert(regions[id].end(), members.begin() + 1, members.end());
+    }
+  }
+  for (int& l : *label) l = std::max(l, -1);
+  return regions;
+}
+
+// A pixel with data that is not foreground but whose neighbours mostly are, of one region, and
+// whose depth continues theirs, is that region's surface under a noisy reading: it joins. Decided
+// on the regions as grown, so that the filling never spreads; a hole through the object (a torus's)
+// is wider than one pixel and stays open.
+void FillEnclosedPixels(const capture::DepthImage& frame, const ForegroundOptions& options,
+                        std::vector<int>* label, std::vector<std::vector<int>>* regions) {
+  std::vector<std::pair<int, int>> joins;  // pixel, region
+  for (int row = 1; row + 1 < frame.height; ++row) {
+    for (int col = 1; col + 1 < frame.width; ++col) {
+      const int p = row * frame.width + col;
+      const float z = frame.depth[p];
+      if ((*label)[p] >= 0 || z <= 0.0f) continue;
+      int region = -1, count = 0;
+      bool one_region = true;
+      double depth_sum = 0.0;
+      for (int dr = -1; dr <= 1; ++dr) {
+        for (int dc = -1; dc <= 1; ++dc) {
+          const int q = p + dr * frame.width + dc;
+          if (q == p || (*label)[q] < 0) continue;
+          one_region = one_region && (region < 0 || (*label)[q] == region);
+          region = (*label)[q];
+          ++count;
+          depth_sum += frame.depth[q];
+        }
+      }
+      if (!one_region || count < options.min_enclosing_neighbours) continue;
+      if (std::abs(z - depth_sum / count) > options.max_depth_step * z) continue;
+      joins.emplace_back(p, region);
+    }
+  }
+  for (const auto& [p, region] : joins) {
+    (*label)[p] = region;
+    (*regions)[region].push_back(p);
+  }
+}
 
 }  // namespace
 
@@ -45,66 +172,26 @@ Result<Foreground> SegmentForeground(const capture::DepthImage& frame, const Sta
         fmt::format("foreground: frame {}x{}, static scene {}x{}, rays {}x{}: sizes differ",
                     frame.width, frame.height, scene.width, scene.height, rays.width, rays.height));
   }
-  cv::Mat1b candidates(frame.height, frame.width, uint8_t{0});
-  for (int row = 0; row < frame.height; ++row) {
-    for (int col = 0; col < frame.width; ++col) {
-      const float z = frame.at(col, row);
-      if (z <= 0.0f) continue;
-      const float behind = scene.depth(col, row);
-      const double margin =
-          std::max(options.min_margin_m, options.noise_sigmas * scene.sigma(col, row));
-      if (behind <= 0.0f || behind - z > margin) {
-        candidates(row, col) = kNearer;
-      } else if (!scene.maybe_object.empty() && scene.maybe_object[row * frame.width + col]) {
-        candidates(row, col) = kJoinsOnly;
-      }
-    }
-  }
-  // Regions: 8-connected candidates whose depths join without a jump (a pixel of the object and a
-  // noisy floor pixel beside its silhouette are neighbours in the image, not in space). OpenCV's
-  // connected components know no depth, hence this flood fill.
+  const cv::Mat1b candidates = ClassifyPixels(frame, scene, options);
+  std::vector<int> label;
+  std::vector<std::vector<int>> pixels = GrowRegions(frame, candidates, options, &label);
+  FillEnclosedPixels(frame, options, &label, &pixels);
   Foreground out;
   out.width = frame.width;
   out.height = frame.height;
-  out.mask.assign(static_cast<size_t>(frame.width) * frame.height, 0);
-  std::vector<int> label(out.mask.size(), -1), stack, members;
-  for (int seed = 0; seed < static_cast<int>(label.size()); ++seed) {
-    if (!candidates(seed / frame.width, seed % frame.width) || label[seed] >= 0) continue;
-    members.clear();
-    int nearer = 0;
-    stack.assign(1, seed);
-    label[seed] = seed;
-    while (!stack.empty()) {
-      const int p = stack.back();
-      stack.pop_back();
-      members.push_back(p);
-      const int row = p / frame.width, col = p % frame.width;
-      nearer += candidates(row, col) == kNearer ? 1 : 0;
-      const float z = frame.depth[p];
-      for (int dr = -1; dr <= 1; ++dr) {
-        for (int dc = -1; dc <= 1; ++dc) {
-          const int r = row + dr, c = col + dc;
-          if (r < 0 || c < 0 || r >= frame.height || c >= frame.width) continue;
-          const int q = r * frame.width + c;
-          if (label[q] >= 0 || !candidates(r, c)) continue;
-          if (std::abs(frame.depth[q] - z) > options.max_depth_step * z) continue;
-          label[q] = seed;
-          stack.push_back(q);
-        }
-      }
-    }
-    if (nearer < options.min_region_pixels) continue;
+  out.mask.assign(frame.depth.size(), 0);
+  for (std::vector<int>& members : pixels) {
     ForegroundRegion region;
-    region.pixels = members;
+    region.pixels = std::move(members);
     std::sort(region.pixels.begin(), region.pixels.end());
     for (const int p : region.pixels) {
       const Eigen::Vector2d& xy = rays.xy[p];
       region.centroid_C += frame.depth[p] * Eigen::Vector3d(xy.x(), xy.y(), 1.0);
       out.mask[p] = 1;
     }
+    region.centroid_C /= static_cast<double>(region.pixels.size());
     out.regions.push_back(std::move(region));
   }
-  for (ForegroundRegion& region : out.regions) region.centroid_C /= region.pixels.size();
   std::sort(out.regions.begin(), out.regions.end(),
             [](const ForegroundRegion& a, const ForegroundRegion& b) {
               return a.pixels.size() > b.pixels.size();

@@ -18,12 +18,21 @@ struct ForegroundOptions {
   // that pixel's noise and by more than min_margin_m (sigma from few frames can be tiny).
   double noise_sigmas = 4.0;
   double min_margin_m = 0.004;
+  // Hysteresis: a pixel nearer by more than join_noise_sigmas (and the margin scaled alike) joins
+  // a region of surely nearer pixels when its depth continues it, but makes none alone. Where the
+  // object meets the floor its pixels stand only a little in front of it; a lone noisy floor pixel
+  // beside the object is rarely this far out (2.3 % at 2 sigma, and it must touch the object).
+  double join_noise_sigmas = 2.0;  // in (0, noise_sigmas]
   // Neighbouring pixels (8-neighbourhood) belong to one region when their depths differ by at most
   // this fraction of the depth: a surface seen at 80 degrees from its normal steps about 2 % per
   // pixel at 140-pixel focal lengths; the gap between an object and the floor behind it is larger.
   double max_depth_step = 0.05;
   // Regions of fewer pixels are noise, not objects.
   int min_region_pixels = 12;
+  // A pixel with at least this many of its 8 neighbours in one region, and a depth that continues
+  // theirs, joins it whatever its reading (noise took it behind the margin). A pixel beside a
+  // straight silhouette has 3 such neighbours, one in a concave corner 5.
+  int min_enclosing_neighbours = 6;  // in [1, 8]
 
   Status Validate() const;
 };

@@ -395,6 +395,10 @@ Result<RawSynthesisSummary> SynthesizeRawRecording(const Scene& scene,
       }
       capture::ApplyDepthNoise(options.noise, kept[i], c, &image);
       ClampToRange(options.depth_scale, &image);
+      // A pixel the sensor dropped shows nothing, the object neither.
+      for (size_t px = 0; px < mask.size(); ++px) {
+        if (image.depth[px] <= 0.0f) mask[px] = 0;
+      }
       valid_pixels += image.NumValid();
       frames[c].push_back(std::move(image));
       if (options.write_true_masks) masks[c].push_back(std::move(mask));

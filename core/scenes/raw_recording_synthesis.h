@@ -52,7 +52,8 @@ struct RawSynthesisOptions {
   double drop_fraction = 0.05;
   int background_frames = 0;      // frames of the empty scene per camera, in [0, 1000]
   bool mesh_in_mm = true;         // mesh file in millimetres ("mesh_unit": "mm"), else metres
-  bool write_true_masks = false;  // truth_masks/<camera>/%06d.png, 255 where the object is seen
+  bool write_true_masks = false;  // truth_masks/<camera>/%06d.png, 255 where the object is seen and
+                                  // the sensor has a reading
   bool write_mass = true;         // mass_kg = density x rest volume in recording.json
   // Seed of the time offset, jitter, dropped frames and scanner pose (the noise has its own).
   uint64_t seed = 1;

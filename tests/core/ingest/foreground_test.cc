@@ -144,5 +144,89 @@ TEST(Foreground, MaybeObjectPixelsJoinAContinuingRegionOnly) {
   EXPECT_EQ(fg->mask[pixel(30, 15)], 0);
 }
 
+// A noise-free frame over a flat scene 2 m away with sigma 1 cm: margins 4 cm, 2 cm to join.
+struct FlatScene {
+  static constexpr int kWidth = 40, kHeight = 30;
+  StaticScene scene;
+  DepthImage frame = DepthImage::Zeros(kWidth, kHeight);
+  capture::PixelRays rays;
+
+  FlatScene() {
+    scene.width = kWidth;
+    scene.height = kHeight;
+    scene.depth_m.assign(kWidth * kHeight, 2.0f);
+    scene.sigma_m.assign(kWidth * kHeight, 0.01f);
+    frame.depth.assign(kWidth * kHeight, 2.0f);
+    capture::PinholeCamera camera;
+    camera.width = kWidth;
+    camera.height = kHeight;
+    camera.fx = camera.fy = 40.0;
+    camera.cx = 19.5;
+    camera.cy = 14.5;
+    rays = capture::ComputePixelRays(camera, {}).value();
+  }
+  static int Pixel(int col, int row) { return row * kWidth + col; }
+  void Fill(int col0, int col1, int row0, int row1, float depth) {
+    for (int row = row0; row < row1; ++row) {
+      for (int col = col0; col < col1; ++col) frame.depth[Pixel(col, row)] = depth;
+    }
+  }
+};
+
+// Hysteresis: where an object meets the floor its pixels stand only a little in front of it; they
+// join the region of surely nearer pixels they continue, but a patch of them alone is no region,
+// and they never bridge groups of nearer pixels too small to count into one.
+TEST(Foreground, PixelsALittleNearerJoinASureRegionOnly) {
+  FlatScene s;
+  s.Fill(5, 15, 5, 15, 1.9f);    // the object, 10 cm in front: sure
+  s.Fill(5, 15, 15, 18, 1.97f);  // its base, 3 cm in front: joins
+  s.Fill(25, 32, 5, 12, 1.97f);  // a patch 3 cm in front alone
+  s.Fill(25, 28, 20, 22, 1.9f);  // two groups of 6 sure pixels (fewer than 12) ...
+  s.Fill(30, 33, 20, 22, 1.9f);
+  s.Fill(28, 30, 20, 22, 1.97f);  // ... linked by pixels that only join
+  const Result<Foreground> fg = SegmentForeground(s.frame, s.scene, s.rays);
+  ASSERT_TRUE(fg.ok()) << fg.status().ToString();
+  ASSERT_EQ(fg->regions.size(), 1u);
+  EXPECT_EQ(fg->regions[0].pixels.size(), 10u * 13u);
+  EXPECT_EQ(fg->mask[FlatScene::Pixel(10, 16)], 1);
+  EXPECT_EQ(fg->mask[FlatScene::Pixel(28, 8)], 0);
+  EXPECT_EQ(fg->mask[FlatScene::Pixel(26, 20)], 0);
+}
+
+// A pixel inside a region whose reading noise took behind the margin, but whose depth continues
+// its neighbours', is the object; one on the region's edge, or in a hole wider than a pixel, is
+// not.
+TEST(Foreground, EnclosedPixelsJoinTheirRegion) {
+  FlatScene s;
+  s.Fill(5, 20, 5, 20, 1.97f);                      // an object 3 cm in front: joins ...
+  s.Fill(8, 12, 8, 12, 1.9f);                       // ... around a sure core
+  s.frame.depth[FlatScene::Pixel(15, 15)] = 1.99f;  // enclosed, 1 cm in front
+  s.frame.depth[FlatScene::Pixel(19, 12)] = 1.99f;  // on the edge
+  s.Fill(14, 17, 7, 10, 2.0f);                      // a hole of 3 x 3 pixels through the object
+  const Result<Foreground> fg = SegmentForeground(s.frame, s.scene, s.rays);
+  ASSERT_TRUE(fg.ok()) << fg.status().ToString();
+  ASSERT_EQ(fg->regions.size(), 1u);
+  EXPECT_EQ(fg->mask[FlatScene::Pixel(15, 15)], 1);
+  EXPECT_EQ(fg->mask[FlatScene::Pixel(19, 12)], 0);
+  for (int row = 7; row < 10; ++row) {
+    for (int col = 14; col < 17; ++col) EXPECT_EQ(fg->mask[FlatScene::Pixel(col, row)], 0);
+  }
+  EXPECT_EQ(fg->regions[0].pixels.size(), 15u * 15u - 1u - 9u);
+}
+
+TEST(Foreground, RejectsBadOptions) {
+  FlatScene s;
+  ForegroundOptions options;
+  options.join_noise_sigmas = 5.0;  // above noise_sigmas
+  Result<Foreground> fg = SegmentForeground(s.frame, s.scene, s.rays, options);
+  ASSERT_FALSE(fg.ok());
+  EXPECT_NE(fg.status().message().find("join_noise_sigmas = 5"), std::string::npos);
+  options = {};
+  options.min_enclosing_neighbours = 9;
+  fg = SegmentForeground(s.frame, s.scene, s.rays, options);
+  ASSERT_FALSE(fg.ok());
+  EXPECT_NE(fg.status().message().find("min_enclosing_neighbours = 9"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace softid::ingest
