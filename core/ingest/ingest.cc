@@ -214,6 +214,8 @@ nlohmann::json IngestReport::ToJson() const {
            {{"overlap", registration.overlap},
             {"rms_m", registration.rms_m},
             {"max_distance_m", registration.max_distance_m},
+            {"cameras", registration_cameras},
+            {"points", registration_points},
             {"world_from_mesh", PoseJson(X_WS)}}},
           {"time",
            {{"origin_s", time_origin_s},
@@ -250,7 +252,28 @@ Status FloorAndWorld(const recording::Recording& rec, const IngestOptions& optio
   return Status::Ok();
 }
 
-// Stage 4: the mesh's pose at the release, from camera 0's first frame.
+// The object's points at the release in camera 0's frame: camera 0's first frame, and the first
+// frame of every other camera that saw the release at the same time (a synchronised rig sees the
+// object from more sides, which pins its pose; an unsynchronised camera's first frame may show it
+// already moved).
+std::vector<Eigen::Vector3d> ReleasePoints(const recording::Recording& rec,
+                                           const IngestOptions& options,
+                                           const std::vector<CameraView>& views,
+                                           std::vector<std::string>* cameras) {
+  std::vector<Eigen::Vector3d> points = views[0].object_points_C[0];
+  cameras->assign(1, rec.cameras[0].camera.name);
+  const double t0 = rec.cameras[0].frames[0].time_s;
+  const Eigen::Isometry3d X_C0W = views[0].X_WC.inverse();
+  for (int c = 1; c < rec.NumCameras(); ++c) {
+    if (std::abs(rec.cameras[c].frames[0].time_s - t0) > options.same_time_s) continue;
+    const Eigen::Isometry3d X_C0C = X_C0W * views[c].X_WC;
+    cameras->push_back(rec.cameras[c].camera.name);
+    for (const Eigen::Vector3d& p_C : views[c].object_points_C[0]) points.push_back(X_C0C * p_C);
+  }
+  return points;
+}
+
+// Stage 4: the mesh's pose at the release, from the cameras' first frames.
 Status PoseMesh(const recording::Recording& rec, const geometry::TriangleMesh& mesh_S,
                 const IngestOptions& options, const std::vector<CameraView>& views,
                 IngestReport* report) {
@@ -263,7 +286,10 @@ Status PoseMesh(const recording::Recording& rec, const geometry::TriangleMesh& m
     std::nth_element(sigmas.begin(), sigmas.begin() + sigmas.size() / 2, sigmas.end());
     registration.noise_sigma_m = std::max<double>(sigmas[sigmas.size() / 2], 1e-4);
   }
-  Result<MeshRegistration> found = RegisterMesh(mesh_S, first, registration);
+  const std::vector<Eigen::Vector3d> points =
+      ReleasePoints(rec, options, views, &report->registration_cameras);
+  report->registration_points = static_cast<int>(points.size());
+  Result<MeshRegistration> found = RegisterMesh(mesh_S, points, registration);
   if (!found.ok()) {
     // A mesh of another object, or in another unit than declared, matches no pose.
     return Status(found.status().code(),

@@ -57,7 +57,11 @@ struct IngestReport {
   FloorPlane floor_C;             // in camera 0's frame
   WorldPlane floor_W;             // in the world frame
   bool world_from_floor = false;  // the world frame was built on the floor (no camera pose given)
-  MeshRegistration registration;  // in camera 0's frame, on its first frame
+  MeshRegistration registration;  // in camera 0's frame, on the cameras' first frames
+  // The cameras whose first frames the mesh was registered to (those that saw the release at
+  // camera 0's time), and how many of the object's points they gave.
+  std::vector<std::string> registration_cameras;
+  int registration_points = 0;
   Eigen::Isometry3d X_WS = Eigen::Isometry3d::Identity();  // mesh pose at the release
   double time_origin_s = 0.0;                              // device-clock time of t = 0
   std::vector<double> frame_times_s;

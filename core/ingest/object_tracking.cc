@@ -23,15 +23,16 @@ TrackedFrame ObjectTracker::Track(const Foreground& foreground, const Eigen::Iso
                                   double time_s) {
   TrackedFrame out;
   if (foreground.regions.empty()) return out;
+  // Before the object was found, the largest region stands for it, and the regions about it are
+  // its parts too (a ring's far side, seen past a depth jump from its near side).
+  const Eigen::Vector3d centre_W =
+      last_centre_W_ ? *last_centre_W_ : X_WC * foreground.regions.front().centroid_C;
+  const double travel_s = last_centre_W_ ? std::abs(time_s - last_time_s_) : 0.0;
+  const double reach =
+      options_.gate_radii * object_radius_m_ + options_.max_speed_m_per_s * travel_s;
   std::vector<const ForegroundRegion*> taken;
-  if (!last_centre_W_) {
-    taken.push_back(&foreground.regions.front());  // largest first
-  } else {
-    const double reach = options_.gate_radii * object_radius_m_ +
-                         options_.max_speed_m_per_s * std::abs(time_s - last_time_s_);
-    for (const ForegroundRegion& region : foreground.regions) {
-      if ((X_WC * region.centroid_C - *last_centre_W_).norm() <= reach) taken.push_back(&region);
-    }
+  for (const ForegroundRegion& region : foreground.regions) {
+    if ((X_WC * region.centroid_C - centre_W).norm() <= reach) taken.push_back(&region);
   }
   out.rejected_regions = static_cast<int>(foreground.regions.size() - taken.size());
   if (taken.empty()) return out;

@@ -1,7 +1,7 @@
 // Which foreground regions are the object, frame after frame: in the first frame the largest
-// region; afterwards every region whose centre lies within reach of where the object was (its
-// size plus the distance it can travel since), so noise, a person walking in the far background
-// or a second moving thing elsewhere do not count.
+// region and the regions within reach of it (its size); afterwards every region whose centre lies
+// within reach of where the object was (its size plus the distance it can travel since), so
+// noise, a person walking in the far background or a second moving thing elsewhere do not count.
 #pragma once
 
 #include <Eigen/Geometry>
@@ -38,7 +38,7 @@ class ObjectTracker {
   ObjectTracker(double object_radius_m, const ObjectTrackingOptions& options = {});
 
   // The object in `foreground` of a frame at `time_s` (ascending between calls), seen by a camera
-  // at X_WC. Before the object was first found, the largest region is the object.
+  // at X_WC. Before the object was first found, the largest region and those about it are.
   TrackedFrame Track(const Foreground& foreground, const Eigen::Isometry3d& X_WC, double time_s);
 
  private:

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <fstream>
@@ -53,22 +54,47 @@ void CompareMasks(const std::filesystem::path& dir, const ingest::IngestReport& 
   }
 }
 
+// The symmetry of the mesh nearest `turn` (a rigid map of the mesh's frame): ICP of the mesh onto
+// itself from `turn`. A body that `turn` maps onto itself within 0.1 % of its size (a torus turned
+// about its axis, a pillow flipped) is the same body in either pose, so the pose found is judged
+// against the true pose composed with that symmetry; otherwise the identity.
+Eigen::Isometry3d NearestSymmetry(const geometry::TriangleMesh& mesh,
+                                  const geometry::MeshDistance& rest,
+                                  const Eigen::Isometry3d& turn) {
+  const int n = static_cast<int>(mesh.vertices.size());
+  Eigen::Matrix3Xd from(3, n), to(3, n);
+  for (int i = 0; i < n; ++i) from.col(i) = mesh.vertices[i];
+  Eigen::Isometry3d symmetry = turn;
+  double rms = 0.0;
+  for (int iteration = 0; iteration < 30; ++iteration) {
+    rms = 0.0;
+    for (int i = 0; i < n; ++i) {
+      const geometry::ClosestPoint closest = rest.Closest(symmetry * mesh.vertices[i]);
+      to.col(i) = closest.point;
+      rms += closest.distance * closest.distance;
+    }
+    symmetry.matrix() = Eigen::umeyama(from, to, false);
+  }
+  const double size = mesh.Bounds().sizes().norm();
+  return std::sqrt(rms / n) <= 1e-3 * size ? symmetry : Eigen::Isometry3d::Identity();
+}
+
 Status ComparePose(const recording::Recording& rec, const ingest::IngestReport& report,
                    const Eigen::Isometry3d& X_CS_true, IngestAccuracy* out) {
   SOFTID_ASSIGN_OR_RETURN(const geometry::TriangleMesh mesh, recording::LoadRecordingMesh(rec));
-  geometry::TriangleMesh true_surface = mesh;
-  for (Eigen::Vector3d& v : true_surface.vertices) v = X_CS_true * v;
-  SOFTID_ASSIGN_OR_RETURN(const geometry::MeshDistance distance,
-                          geometry::MeshDistance::Create(true_surface));
+  SOFTID_ASSIGN_OR_RETURN(const geometry::MeshDistance rest, geometry::MeshDistance::Create(mesh));
+  const Eigen::Isometry3d& X_CS_found = report.registration.X_CS;
+  const Eigen::Isometry3d X_CS_equivalent =
+      X_CS_true * NearestSymmetry(mesh, rest, X_CS_true.inverse() * X_CS_found);
   double surface = 0.0, vertex = 0.0;
-  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
-    const Eigen::Vector3d found = report.registration.X_CS * mesh.vertices[i];
-    surface += std::pow(distance.Distance(found), 2);
-    vertex += (found - true_surface.vertices[i]).squaredNorm();
+  for (const Eigen::Vector3d& v : mesh.vertices) {
+    // The distance to the truly posed surface, measured in the mesh's frame.
+    surface += std::pow(rest.Distance(X_CS_true.inverse() * (X_CS_found * v)), 2);
+    vertex += (X_CS_found * v - X_CS_equivalent * v).squaredNorm();
   }
   out->surface_rms_m = std::sqrt(surface / mesh.vertices.size());
   out->vertex_rms_m = std::sqrt(vertex / mesh.vertices.size());
-  const Eigen::AngleAxisd turn(X_CS_true.linear().transpose() * report.registration.X_CS.linear());
+  const Eigen::AngleAxisd turn(X_CS_equivalent.linear().transpose() * X_CS_found.linear());
   out->rotation_deg = std::abs(turn.angle()) * kDegreesPerRadian;
   return Status::Ok();
 }

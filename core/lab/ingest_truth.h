@@ -22,9 +22,10 @@ struct IngestAccuracy {
   double floor_angle_deg = 0.0;
   double floor_offset_m = 0.0;
   // The posed mesh against the true pose at the release, over the mesh's vertices: the distance to
-  // the truly posed surface (a symmetric body turned about its axis is the same surface), and the
-  // distance to the same vertex with the angle between the two poses (for bodies without
-  // symmetry).
+  // the truly posed surface, and the distance to the same vertex with the angle between the two
+  // poses. A symmetric body (a torus turned about its axis, a pillow flipped) is the same body in
+  // poses its symmetry relates: the vertices and the angle are held against the true pose composed
+  // with the symmetry nearest the pose found.
   double surface_rms_m = 0.0;
   double vertex_rms_m = 0.0;
   double rotation_deg = 0.0;

@@ -37,8 +37,9 @@ struct RawDir {
   ~RawDir() { fs::remove_all(path); }
 };
 
-scenes::RawSynthesisOptions RecordingOptions(int background_frames) {
+scenes::RawSynthesisOptions RecordingOptions(int background_frames, int cameras = 1) {
   scenes::RawSynthesisOptions options;
+  options.cameras.count = cameras;
   options.run.duration = 0.4;
   options.cameras.width = 160;
   options.cameras.height = 120;
@@ -87,13 +88,15 @@ void ExpectContactSheetShowsTheObject(const fs::path& path, int frames) {
   EXPECT_GT(floor_pixels, first.total() / 10);
 }
 
-void IngestAndCompare(int background_frames, const Bounds& bounds) {
+void IngestAndCompare(int background_frames, const Bounds& bounds, int cameras = 1) {
   Result<scenes::Scene> scene = scenes::MakeBuiltinScene("torus-drop");
   ASSERT_TRUE(scene.ok());
-  RawDir raw("raw" + std::to_string(background_frames));
-  RawDir cap("cap" + std::to_string(background_frames));
+  const std::string name = std::to_string(background_frames) + "_" + std::to_string(cameras);
+  RawDir raw("raw" + name);
+  RawDir cap("cap" + name);
   ASSERT_TRUE(
-      scenes::SynthesizeRawRecording(*scene, RecordingOptions(background_frames), raw.path).ok());
+      scenes::SynthesizeRawRecording(*scene, RecordingOptions(background_frames, cameras), raw.path)
+          .ok());
   Result<recording::Recording> rec = recording::ReadRecording(raw.path);
   ASSERT_TRUE(rec.ok()) << rec.status().ToString();
   Result<IngestReport> report = Ingest(*rec, cap.path);
@@ -104,15 +107,25 @@ void IngestAndCompare(int background_frames, const Bounds& bounds) {
   // The mesh pose is judged as a surface: the torus is symmetric (turned about its axis or flipped
   // over it is the same surface, and the same body).
   std::printf(
-      "background %d: worst IoU %.4f (frame %d), floor %.3f deg %.2f mm, mesh surface %.3f "
-      "mm RMS\n",
-      background_frames, accuracy->worst_iou, accuracy->worst_iou_frame, accuracy->floor_angle_deg,
-      1e3 * accuracy->floor_offset_m, 1e3 * accuracy->surface_rms_m);
+      "%d camera(s), background %d: worst IoU %.4f (%s frame %d), floor %.3f deg %.2f mm, mesh "
+      "surface %.3f mm RMS, vertex %.3f mm RMS, %.3f deg\n",
+      cameras, background_frames, accuracy->worst_iou, accuracy->worst_iou_camera.c_str(),
+      accuracy->worst_iou_frame, accuracy->floor_angle_deg, 1e3 * accuracy->floor_offset_m,
+      1e3 * accuracy->surface_rms_m, 1e3 * accuracy->vertex_rms_m, accuracy->rotation_deg);
   EXPECT_GE(accuracy->worst_iou_frame, 0);  // the true masks were read
   EXPECT_GE(accuracy->worst_iou, bounds.min_iou);
   EXPECT_LT(accuracy->floor_angle_deg, 0.5);
   EXPECT_LT(1e3 * accuracy->floor_offset_m, bounds.max_floor_mm);
   EXPECT_LT(accuracy->surface_rms_m, 1e-3);
+  // Held against the true pose composed with the torus's symmetry nearest the pose found.
+  EXPECT_LT(accuracy->vertex_rms_m, 1e-3);
+  EXPECT_LT(accuracy->rotation_deg, 0.5);
+  // Every camera of the synthetic rig saw the release at the same time.
+  ASSERT_EQ(report->registration_cameras.size(), static_cast<size_t>(cameras));
+  for (int c = 0; c < cameras; ++c) {
+    EXPECT_EQ(report->registration_cameras[c], "cam" + std::to_string(c));
+  }
+  EXPECT_GT(report->registration_points, 30 * cameras);
 
   nlohmann::json truth;
   std::ifstream(raw.path / "truth.json") >> truth;
@@ -142,6 +155,11 @@ TEST(Ingest, RawRecordingAgainstItsTruth) {
 
 TEST(Ingest, RawRecordingWithBackgroundFramesAgainstItsTruth) {
   IngestAndCompare(3, {});
+}
+
+// Three cameras with known poses: the mesh is registered to the first frames of all three.
+TEST(Ingest, ThreeCamerasRegisterTheMeshToAllTheirFirstFrames) {
+  IngestAndCompare(0, {}, 3);
 }
 
 // A short raw recording with background frames for the refusals below.
