@@ -5,7 +5,9 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
+#include <optional>
 
 #include "core/capture/capture.h"
 #include "core/capture/pixel_rays.h"
@@ -302,6 +304,64 @@ Status PoseMesh(const recording::Recording& rec, const geometry::TriangleMesh& m
   return Status::Ok();
 }
 
+// The object's centre in every frame of camera c, world frame (frames without points: none).
+std::vector<std::optional<Eigen::Vector3d>> ObjectCentres(const CameraView& view) {
+  std::vector<std::optional<Eigen::Vector3d>> centres;
+  for (const std::vector<Eigen::Vector3d>& points : view.object_points_C) {
+    if (points.empty()) {
+      centres.emplace_back();
+      continue;
+    }
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+    for (const Eigen::Vector3d& p : points) sum += p;
+    centres.emplace_back(view.X_WC * (sum / static_cast<double>(points.size())));
+  }
+  return centres;
+}
+
+// A recording must show the object released above the floor and moving: one resting on the floor
+// at the release was never released (its rest shape is already squashed), and one that never
+// moves tells nothing of its material. Movement is judged on each camera's own centres (one
+// camera's view of the object shifts its centre), against 1 % of the mesh's size.
+Status CheckTheObjectIsReleasedAndMoves(const recording::Recording& rec,
+                                        const geometry::TriangleMesh& mesh_S,
+                                        const std::vector<CameraView>& views,
+                                        const IngestReport& report) {
+  const double size_m = mesh_S.Bounds().diagonal().norm();
+  const double tolerance_m = 0.01 * size_m;
+  const Eigen::Vector3d& up = report.floor_W.normal_W;
+  double lowest_m = std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector3d& v : mesh_S.vertices) {
+    lowest_m = std::min(lowest_m, up.dot(report.X_WS * v) - report.floor_W.offset_m);
+  }
+  double moved_m = 0.0, rose_m = 0.0;
+  for (const CameraView& view : views) {
+    const std::vector<std::optional<Eigen::Vector3d>> centres = ObjectCentres(view);
+    if (centres.empty() || !centres[0]) continue;
+    for (const auto& centre : centres) {
+      if (!centre) continue;
+      moved_m = std::max(moved_m, (*centre - *centres[0]).norm());
+      rose_m = std::max(rose_m, up.dot(*centre - *centres[0]));
+    }
+  }
+  const int frames = static_cast<int>(rec.cameras[0].frames.size());
+  if (lowest_m <= tolerance_m && rose_m <= tolerance_m) {
+    return Status::FailedPrecondition(fmt::format(
+        "ingest: the object never leaves the floor: at the release (frame 0) its lowest point is "
+        "{:.1f} mm above the floor and over {} frames its centre never rises more than {:.1f} mm "
+        "(a recording must show the object released above the floor)",
+        1e3 * lowest_m, frames, 1e3 * rose_m));
+  }
+  if (moved_m <= tolerance_m) {
+    return Status::FailedPrecondition(fmt::format(
+        "ingest: the object never moves: over {} frames its centre stays within {:.1f} mm of "
+        "where it was in frame 0 (1 % of its size is {:.1f} mm; a recording must show it released "
+        "and moving)",
+        frames, 1e3 * moved_m, 1e3 * tolerance_m));
+  }
+  return Status::Ok();
+}
+
 // Stage 5: the capture folder: one clock, the object's points on each camera's ideal pinhole.
 Status WriteIngestedCapture(const recording::Recording& rec, const geometry::TriangleMesh& mesh_S,
                             const IngestOptions& options, const std::vector<CameraView>& views,
@@ -376,6 +436,7 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
   // 4. The mesh's pose at the release.
   SOFTID_RETURN_IF_ERROR(PoseMesh(rec, mesh_S, options, views, &report));
   if (progress) progress("registration", 1, 1);
+  SOFTID_RETURN_IF_ERROR(CheckTheObjectIsReleasedAndMoves(rec, mesh_S, views, report));
   SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
   // 5. The capture, and a picture of what the ingest saw.
   SOFTID_RETURN_IF_ERROR(WriteIngestedCapture(rec, mesh_S, options, views, capture_dir, &report));

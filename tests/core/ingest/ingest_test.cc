@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <opencv2/imgcodecs.hpp>
 
@@ -213,6 +214,54 @@ TEST(IngestRejects, NoObjectInTheFrames) {
   EXPECT_NE(report.status().message().find("no foreground"), std::string::npos)
       << report.status().message();
   EXPECT_NE(report.status().message().find(rec->cameras[0].frames[0].file), std::string::npos);
+  EXPECT_FALSE(fs::exists(cap.path / "capture.json"));
+}
+
+// Every frame shows the object as at the release (frame 0 copied over the others): it never
+// moves, and the refusal says so with how far it moved.
+TEST(IngestRejects, ObjectThatNeverMoves) {
+  RawDir raw("still");
+  RawDir cap("still_cap");
+  WriteSmallRecording(raw);
+  Result<recording::Recording> rec = recording::ReadRecording(raw.path);
+  ASSERT_TRUE(rec.ok());
+  const std::vector<recording::RecordingFrame>& frames = rec->cameras[0].frames;
+  for (size_t k = 1; k < frames.size(); ++k) {
+    fs::copy_file(raw.path / frames[0].file, raw.path / frames[k].file,
+                  fs::copy_options::overwrite_existing);
+  }
+  const Result<IngestReport> report = Ingest(*rec, cap.path);
+  ASSERT_FALSE(report.ok());
+  EXPECT_EQ(report.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(report.status().message().find("never moves"), std::string::npos)
+      << report.status().message();
+  EXPECT_FALSE(fs::exists(cap.path / "capture.json"));
+}
+
+// A torus lying on the floor and pushed along it moves but was never released: refused.
+TEST(IngestRejects, ObjectThatNeverLeavesTheFloor) {
+  Result<scenes::Scene> scene = scenes::MakeBuiltinScene("torus-drop");
+  ASSERT_TRUE(scene.ok());
+  ASSERT_TRUE(scene->parameters.ground.has_value());
+  const Eigen::Vector3d up = scene->parameters.ground->normal.normalized();
+  double lowest = std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector3d& v : scene->mesh.vertices) lowest = std::min(lowest, up.dot(v));
+  scene->parameters.ground->normal = up;
+  scene->parameters.ground->offset = lowest;
+  scene->parameters.initial_velocity = 0.5 * up.unitOrthogonal();
+  RawDir raw("on_floor");
+  RawDir cap("on_floor_cap");
+  scenes::RawSynthesisOptions options = RecordingOptions(2);
+  options.run.duration = 0.2;
+  options.write_true_masks = false;
+  ASSERT_TRUE(scenes::SynthesizeRawRecording(*scene, options, raw.path).ok());
+  Result<recording::Recording> rec = recording::ReadRecording(raw.path);
+  ASSERT_TRUE(rec.ok());
+  const Result<IngestReport> report = Ingest(*rec, cap.path);
+  ASSERT_FALSE(report.ok());
+  EXPECT_EQ(report.status().code(), StatusCode::kFailedPrecondition);
+  EXPECT_NE(report.status().message().find("never leaves the floor"), std::string::npos)
+      << report.status().message();
   EXPECT_FALSE(fs::exists(cap.path / "capture.json"));
 }
 
