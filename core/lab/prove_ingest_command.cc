@@ -138,6 +138,7 @@ int RunProveIngest(const ProveIngestFlags& flags) {
       "RMS mm / deg | ingest s per 100 frames |%s\n",
       flags.fit ? " E from raw (+ initial_pose) | E from clean |" : "");
   std::printf("| --- | --- | --- | --- | --- | --- |%s\n", flags.fit ? " --- | --- |" : "");
+  std::fflush(stdout);
   int failures = 0;
   for (size_t i = 0; i < kCases.size(); ++i) {
     const IngestCase& c = kCases[i];
@@ -152,6 +153,7 @@ int RunProveIngest(const ProveIngestFlags& flags) {
                    : Result<CaseOutcome>(scene.status());
     if (!outcome.ok()) {
       std::printf("| %s | failed: %s |\n", c.name.c_str(), outcome.status().message().c_str());
+      std::fflush(stdout);
       ++failures;
       continue;
     }
