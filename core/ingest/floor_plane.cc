@@ -60,6 +60,27 @@ FloorPlane TrimmedPlane(const std::vector<Eigen::Vector3d>& points, const Eigen:
   return plane;
 }
 
+// RANSAC (Open3D) finds the plane on at most kRansacPoints of the points, taken evenly, and the
+// inliers are then all points within the threshold of it: each RANSAC trial scores every point it
+// is given, and a 640 x 480 scene has 10^5 of them (the plane from a share of them is as good).
+constexpr size_t kRansacPoints = 20000;
+
+std::vector<size_t> RansacPlaneInliers(const open3d::geometry::PointCloud& cloud, double threshold,
+                                       const FloorPlaneOptions& options) {
+  const size_t every = (cloud.points_.size() + kRansacPoints - 1) / kRansacPoints;
+  if (every <= 1) return std::get<1>(cloud.SegmentPlane(threshold, 3, options.ransac_iterations));
+  const auto [model, sample_inliers] =
+      cloud.UniformDownSample(every)->SegmentPlane(threshold, 3, options.ransac_iterations);
+  std::vector<size_t> inliers;
+  if (sample_inliers.size() < 3) return inliers;
+  for (size_t i = 0; i < cloud.points_.size(); ++i) {
+    if (std::abs(model.head<3>().dot(cloud.points_[i]) + model[3]) < threshold) {
+      inliers.push_back(i);
+    }
+  }
+  return inliers;
+}
+
 }  // namespace
 
 Status FloorPlaneOptions::Validate() const {
@@ -99,7 +120,7 @@ Result<FloorPlane> FindFloorPlane(const std::vector<Eigen::Vector3d>& points_C,
   open3d::geometry::PointCloud remaining(points_C);
   std::string seen;
   for (int k = 0; k < options.max_planes && remaining.points_.size() >= 3; ++k) {
-    const auto [model, inliers] = remaining.SegmentPlane(threshold, 3, options.ransac_iterations);
+    const std::vector<size_t> inliers = RansacPlaneInliers(remaining, threshold, options);
     if (inliers.size() < std::max<size_t>(3, min_inliers)) break;
     std::vector<Eigen::Vector3d> plane_points;
     plane_points.reserve(inliers.size());
