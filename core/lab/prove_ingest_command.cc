@@ -71,8 +71,9 @@ scenes::CameraRigOptions Rig(const ProveIngestFlags& flags, int cameras) {
   return rig;
 }
 
-// E fitted from `capture_dir` with the rest of the truth fixed (the ground comes from the capture:
-// an ingested capture's world frame may be built on its floor).
+// E fitted from `capture_dir` with the rest of the truth fixed. An ingested capture brings its
+// floor, the ground in its own world frame (built on the floor for one camera); a clean capture
+// has none and takes the true ground.
 Result<double> FitYoungsModulus(const fs::path& capture_dir, const fem::PhysicalParameters& truth,
                                 bool with_pose) {
   SOFTID_ASSIGN_OR_RETURN(const capture::Capture capture, capture::ReadCapture(capture_dir));
@@ -80,8 +81,8 @@ Result<double> FitYoungsModulus(const fs::path& capture_dir, const fem::Physical
   config.fit = {"youngs_modulus"};
   if (with_pose) config.fit.push_back("initial_pose");
   config.fixed = fem::ToJson(truth);
-  for (const char* name : {"youngs_modulus", "density", "ground", "initial_pose"})
-    config.fixed.erase(name);
+  for (const char* name : {"youngs_modulus", "density", "initial_pose"}) config.fixed.erase(name);
+  if (capture.floor) config.fixed.erase("ground");  // the capture's floor is the ground
   config.starts = 1;
   SOFTID_ASSIGN_OR_RETURN(const inverse::FitResult result, inverse::Fit(capture, config));
   return result.Best().final.youngs_modulus;
