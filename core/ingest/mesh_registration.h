@@ -28,6 +28,8 @@ struct MeshRegistrationOptions {
   // mesh) is lower than this did not converge.
   double min_overlap = 0.8;
   unsigned seed = 1;
+  // Threads refining hypotheses side by side; 0 = one per core.
+  int threads = 0;  // >= 0
 
   Status Validate() const;
 };
