@@ -11,21 +11,15 @@
 
 #include "core/capture/capture.h"
 #include "core/capture/pixel_rays.h"
+#include "core/ingest/camera_view.h"
 #include "core/ingest/contact_sheet.h"
+#include "core/ingest/release_pose.h"
 #include "core/ingest/timeline.h"
 
 namespace softid::ingest {
 namespace {
 
 using capture::DepthImage;
-
-// One camera's view: its lens, static scene, pose and the object's points per recording frame.
-struct CameraView {
-  capture::PixelRays rays;
-  StaticScene scene;
-  Eigen::Isometry3d X_WC = Eigen::Isometry3d::Identity();
-  std::vector<std::vector<Eigen::Vector3d>> object_points_C;  // per recording frame
-};
 
 Result<StaticScene> CameraStaticScene(const recording::Recording& rec, int c,
                                       const IngestOptions& options, bool* from_background) {
@@ -128,22 +122,6 @@ Status CheckSomeCameraSeesTheWholeObject(const recording::Recording& rec,
       "off (move the camera back or the object into view)",
       rec.cameras[0].camera.name, rec.cameras[0].frames.size(),
       rec.NumCameras() > 1 ? ", as in every other camera" : ""));
-}
-
-// A mesh in the wrong unit cannot match: compare its size with the spread of the object's points.
-Status CheckMeshScale(const geometry::TriangleMesh& mesh, const std::vector<Eigen::Vector3d>& seen,
-                      const std::string& camera_name) {
-  Eigen::AlignedBox3d box;
-  for (const Eigen::Vector3d& p : seen) box.extend(p);
-  const double seen_m = box.diagonal().norm();
-  const double mesh_m = mesh.Bounds().diagonal().norm();
-  if (seen_m > 1.5 * mesh_m || seen_m < 0.05 * mesh_m) {
-    return Status::FailedPrecondition(fmt::format(
-        "ingest: camera \"{}\" frame 0: the object's points span {:.3g} m but the mesh's diagonal "
-        "is {:.3g} m: the mesh's size cannot match (is mesh_unit right?)",
-        camera_name, seen_m, mesh_m));
-  }
-  return Status::Ok();
 }
 
 // The object's points drawn into the camera's ideal pinhole image: each point at its nearest
@@ -251,56 +229,6 @@ Status FloorAndWorld(const recording::Recording& rec, const IngestOptions& optio
     report->world_from_floor = true;
   }
   report->floor_W = FloorInWorld(*floor, (*views)[0].X_WC);
-  return Status::Ok();
-}
-
-// The object's points at the release in camera 0's frame: camera 0's first frame, and the first
-// frame of every other camera that saw the release at the same time (a synchronised rig sees the
-// object from more sides, which pins its pose; an unsynchronised camera's first frame may show it
-// already moved).
-std::vector<Eigen::Vector3d> ReleasePoints(const recording::Recording& rec,
-                                           const IngestOptions& options,
-                                           const std::vector<CameraView>& views,
-                                           std::vector<std::string>* cameras) {
-  std::vector<Eigen::Vector3d> points = views[0].object_points_C[0];
-  cameras->assign(1, rec.cameras[0].camera.name);
-  const double t0 = rec.cameras[0].frames[0].time_s;
-  const Eigen::Isometry3d X_C0W = views[0].X_WC.inverse();
-  for (int c = 1; c < rec.NumCameras(); ++c) {
-    if (std::abs(rec.cameras[c].frames[0].time_s - t0) > options.same_time_s) continue;
-    const Eigen::Isometry3d X_C0C = X_C0W * views[c].X_WC;
-    cameras->push_back(rec.cameras[c].camera.name);
-    for (const Eigen::Vector3d& p_C : views[c].object_points_C[0]) points.push_back(X_C0C * p_C);
-  }
-  return points;
-}
-
-// Stage 4: the mesh's pose at the release, from the cameras' first frames.
-Status PoseMesh(const recording::Recording& rec, const geometry::TriangleMesh& mesh_S,
-                const IngestOptions& options, const std::vector<CameraView>& views,
-                IngestReport* report) {
-  const std::vector<Eigen::Vector3d>& first = views[0].object_points_C[0];
-  SOFTID_RETURN_IF_ERROR(CheckMeshScale(mesh_S, first, rec.cameras[0].camera.name));
-  MeshRegistrationOptions registration = options.registration;
-  std::vector<float> sigmas = views[0].scene.sigma_m;
-  std::erase(sigmas, 0.0f);
-  if (!sigmas.empty()) {
-    std::nth_element(sigmas.begin(), sigmas.begin() + sigmas.size() / 2, sigmas.end());
-    registration.noise_sigma_m = std::max<double>(sigmas[sigmas.size() / 2], 1e-4);
-  }
-  const std::vector<Eigen::Vector3d> points =
-      ReleasePoints(rec, options, views, &report->registration_cameras);
-  report->registration_points = static_cast<int>(points.size());
-  Result<MeshRegistration> found = RegisterMesh(mesh_S, points, registration);
-  if (!found.ok()) {
-    // A mesh of another object, or in another unit than declared, matches no pose.
-    return Status(found.status().code(),
-                  fmt::format("ingest: camera \"{}\" frame 0: {} (is the mesh this object, and "
-                              "is mesh_unit right?)",
-                              rec.cameras[0].camera.name, found.status().message()));
-  }
-  report->registration = *found;
-  report->X_WS = views[0].X_WC * found->X_CS;
   return Status::Ok();
 }
 
@@ -434,7 +362,7 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
   }
   SOFTID_RETURN_IF_ERROR(CheckSomeCameraSeesTheWholeObject(rec, report));
   // 4. The mesh's pose at the release.
-  SOFTID_RETURN_IF_ERROR(PoseMesh(rec, mesh_S, options, views, &report));
+  SOFTID_RETURN_IF_ERROR(PoseMeshAtRelease(rec, mesh_S, options, views, &report));
   if (progress) progress("registration", 1, 1);
   SOFTID_RETURN_IF_ERROR(CheckTheObjectIsReleasedAndMoves(rec, mesh_S, views, report));
   SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));

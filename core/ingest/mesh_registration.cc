@@ -219,4 +219,34 @@ Result<MeshRegistration> RegisterMesh(const geometry::TriangleMesh& mesh_S,
   return best;
 }
 
+Result<MeshRegistration> RefineMeshPose(const geometry::TriangleMesh& mesh_S,
+                                        const std::vector<Eigen::Vector3d>& observed_C,
+                                        const Eigen::Isometry3d& X_CS,
+                                        const MeshRegistrationOptions& options) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  if (mesh_S.vertices.empty() || mesh_S.triangles.empty()) {
+    return Status::InvalidArgument("registration: the mesh is empty");
+  }
+  if (observed_C.size() < 30) {
+    return Status::InvalidArgument(fmt::format(
+        "registration: {} observed points of the object (at least 30)", observed_C.size()));
+  }
+  const ScopedOpenMPThreads serial(1);
+  const double voxel = mesh_S.Bounds().diagonal().norm() / options.voxels_per_diagonal;
+  const double fine_distance = std::max(3.0 * options.noise_sigma_m, 0.25 * voxel);
+  const std::shared_ptr<o3d::geometry::PointCloud> model = SampleSurface(mesh_S, 60000);
+  const o3d::geometry::PointCloud observed(observed_C);
+  const size_t every = (observed.points_.size() + kFinalPoints - 1) / kFinalPoints;
+  const reg::RegistrationResult fine = reg::RegistrationICP(
+      every <= 1 ? observed : *observed.UniformDownSample(every), *model, fine_distance,
+      X_CS.inverse().matrix(), reg::TransformationEstimationPointToPlane(),
+      reg::ICPConvergenceCriteria(1e-9, 1e-9, 60));
+  MeshRegistration out;
+  out.X_CS = Eigen::Isometry3d(fine.transformation_).inverse();
+  out.overlap = fine.fitness_;
+  out.rms_m = fine.inlier_rmse_;
+  out.max_distance_m = fine_distance;
+  return out;
+}
+
 }  // namespace softid::ingest

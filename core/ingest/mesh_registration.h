@@ -50,4 +50,13 @@ Result<MeshRegistration> RegisterMesh(const geometry::TriangleMesh& mesh_S,
                                       const std::vector<Eigen::Vector3d>& observed_C,
                                       const MeshRegistrationOptions& options = {});
 
+// The final ICP alone, from the pose X_CS: for points chosen without regard to their depths (the
+// pixels inside the posed mesh's silhouette), which a depth threshold's choice is not (near the
+// threshold it keeps the readings noise moved towards the camera). Errors as RegisterMesh's
+// argument checks; the overlap is reported, not checked.
+Result<MeshRegistration> RefineMeshPose(const geometry::TriangleMesh& mesh_S,
+                                        const std::vector<Eigen::Vector3d>& observed_C,
+                                        const Eigen::Isometry3d& X_CS,
+                                        const MeshRegistrationOptions& options = {});
+
 }  // namespace softid::ingest

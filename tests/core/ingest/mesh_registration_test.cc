@@ -113,6 +113,31 @@ TEST(MeshRegistration, ScannedBunnyFromRandomPoses) {
 
 // Points that are not the mesh (a flat patch for a lopsided body): the registration says it did
 // not converge and how far it got.
+// The final ICP alone brings a pose 3 mm and 2 degrees off back to what a full registration
+// reaches on one noisy side of the body (half a millimetre, a quarter of a degree), and reports
+// the overlap it reached.
+TEST(MeshRegistration, RefineFromANearbyPose) {
+  std::mt19937 rng(11);
+  const geometry::TriangleMesh mesh_S = LopsidedBody();
+  Eigen::Isometry3d X_CS_true = RandomPose(rng, 0.05);
+  X_CS_true.translation() += Eigen::Vector3d(0.0, 0.0, 0.7);
+  const std::vector<Eigen::Vector3d> points = Observe(mesh_S, X_CS_true, rng);
+  Eigen::Isometry3d start = X_CS_true;
+  start.translation() += Eigen::Vector3d(0.002, -0.002, 0.001);
+  start.linear() =
+      Eigen::AngleAxisd(2.0 * std::numbers::pi / 180.0, Eigen::Vector3d(1, 1, 0).normalized()) *
+      start.linear();
+  ASSERT_GT(Compare(mesh_S, start, X_CS_true).rms_m, 0.003);
+  const Result<MeshRegistration> refined = RefineMeshPose(mesh_S, points, start);
+  ASSERT_TRUE(refined.ok()) << refined.status().ToString();
+  const PoseError error = Compare(mesh_S, refined->X_CS, X_CS_true);
+  std::printf("refined: vertex RMS %.3f mm, %.3f deg\n", 1e3 * error.rms_m, error.angle_deg);
+  EXPECT_LT(error.rms_m, 5e-4);
+  EXPECT_LT(error.angle_deg, 0.25);
+  EXPECT_GT(refined->overlap, 0.95);
+  EXPECT_FALSE(RefineMeshPose(mesh_S, {}, start).ok());
+}
+
 TEST(MeshRegistration, NonConvergenceNamesOverlapAndRms) {
   std::vector<Eigen::Vector3d> patch;
   for (int i = 0; i < 40; ++i) {
