@@ -11,6 +11,7 @@
 
 #include "core/capture/capture.h"
 #include "core/capture/pixel_rays.h"
+#include "core/common/for_each_index.h"
 #include "core/ingest/camera_view.h"
 #include "core/ingest/contact_sheet.h"
 #include "core/ingest/release_pose.h"
@@ -79,32 +80,49 @@ Status SegmentCamera(const recording::Recording& rec, int c, double object_radiu
   const int n = static_cast<int>(camera.frames.size());
   ObjectTracker tracker(object_radius_m, options.tracking);
   int frames_on_border = 0;
-  for (int k = 0; k < n; ++k) {
+  // Frames are read and segmented side by side, a few per worker at a time (memory stays bounded
+  // on long recordings); tracking follows them in order.
+  const int workers = options.threads > 0 ? options.threads : CoreCount();
+  const int chunk = 2 * workers;
+  std::vector<Result<DepthImage>> images(chunk, Status::Internal("unread"));
+  std::vector<Result<Foreground>> segmented(chunk, Status::Internal("unsegmented"));
+  for (int first = 0; first < n; first += chunk) {
     SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
-    SOFTID_ASSIGN_OR_RETURN(DepthImage image, recording::LoadRecordingFrame(rec, c, k));
-    SOFTID_ASSIGN_OR_RETURN(Foreground fg,
-                            SegmentForeground(image, view->scene, view->rays, options.foreground));
-    const TrackedFrame tracked = tracker.Track(fg, view->X_WC, camera.frames[k].time_s);
-    if (k == 0 && !tracked.found) {
-      return Status::FailedPrecondition(fmt::format(
-          "ingest: camera \"{}\" frame 0 ({}): no foreground: nothing is nearer than the static "
-          "scene (is the object in view, and does it move during the recording?)",
-          camera.camera.name, camera.frames[0].file));
+    const int count = std::min(chunk, n - first);
+    ForEachIndex(count, workers, [&](size_t i) {
+      images[i] = recording::LoadRecordingFrame(rec, c, first + static_cast<int>(i));
+      segmented[i] = images[i].ok() ? SegmentForeground(*images[i], view->scene, view->rays,
+                                                        options.foreground)
+                                    : Result<Foreground>(images[i].status());
+    });
+    for (int i = 0; i < count; ++i) {
+      const int k = first + i;
+      SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
+      SOFTID_RETURN_IF_ERROR(segmented[i].status());
+      const DepthImage& image = *images[i];
+      const TrackedFrame tracked =
+          tracker.Track(*segmented[i], view->X_WC, camera.frames[k].time_s);
+      if (k == 0 && !tracked.found) {
+        return Status::FailedPrecondition(fmt::format(
+            "ingest: camera \"{}\" frame 0 ({}): no foreground: nothing is nearer than the static "
+            "scene (is the object in view, and does it move during the recording?)",
+            camera.camera.name, camera.frames[0].file));
+      }
+      std::vector<Eigen::Vector3d> points;
+      points.reserve(tracked.pixels.size());
+      bool border = false;
+      for (const int pixel : tracked.pixels) {
+        const Eigen::Vector2d& xy = view->rays.xy[pixel];
+        points.push_back(image.depth[pixel] * Eigen::Vector3d(xy.x(), xy.y(), 1.0));
+        border = border || OnBorder(pixel, image.width, image.height);
+      }
+      frames_on_border += border ? 1 : 0;
+      report->object_pixels.push_back(static_cast<int>(tracked.pixels.size()));
+      report->rejected_regions.push_back(tracked.rejected_regions);
+      report->object_masks.push_back(tracked.pixels);
+      view->object_points_C.push_back(std::move(points));
+      if (progress) progress("segmentation", k + 1, n);
     }
-    std::vector<Eigen::Vector3d> points;
-    points.reserve(tracked.pixels.size());
-    bool border = false;
-    for (const int pixel : tracked.pixels) {
-      const Eigen::Vector2d& xy = view->rays.xy[pixel];
-      points.push_back(image.depth[pixel] * Eigen::Vector3d(xy.x(), xy.y(), 1.0));
-      border = border || OnBorder(pixel, image.width, image.height);
-    }
-    frames_on_border += border ? 1 : 0;
-    report->object_pixels.push_back(static_cast<int>(tracked.pixels.size()));
-    report->rejected_regions.push_back(tracked.rejected_regions);
-    report->object_masks.push_back(tracked.pixels);
-    view->object_points_C.push_back(std::move(points));
-    if (progress) progress("segmentation", k + 1, n);
   }
   report->cut_off = frames_on_border == n;
   return Status::Ok();
@@ -169,6 +187,8 @@ Status IngestOptions::Validate() const {
   if (!(same_time_s >= 0.0) || !std::isfinite(same_time_s)) {
     return Status::InvalidArgument(fmt::format("same_time_s = {}: must be >= 0", same_time_s));
   }
+  if (threads < 0)
+    return Status::InvalidArgument(fmt::format("threads = {}: must be >= 0", threads));
   return Status::Ok();
 }
 

@@ -9,13 +9,11 @@
 #include <open3d/utility/Random.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
-#include <functional>
 #include <memory>
 #include <numbers>
-#include <thread>
 
+#include "core/common/for_each_index.h"
 #include "core/ingest/openmp_threads.h"
 
 namespace softid::ingest {
@@ -87,19 +85,6 @@ std::vector<Eigen::Matrix4d> RotationGridStarts(const geometry::TriangleMesh& me
   return starts;
 }
 
-// fn(i) for i in [0, n) on `workers` threads (the caller is one), each taking the next index.
-// (softid's process serialises OpenMP regions: see core/fem/linear_solver.cc.)
-void ForEachIndex(size_t n, int workers, const std::function<void(size_t)>& fn) {
-  std::atomic<size_t> next{0};
-  const auto work = [&] {
-    for (size_t i = next++; i < n; i = next++) fn(i);
-  };
-  std::vector<std::thread> threads;
-  for (int t = 1; t < std::min<int>(workers, static_cast<int>(n)); ++t) threads.emplace_back(work);
-  work();
-  for (std::thread& thread : threads) thread.join();
-}
-
 // At most this many observed points in the final ICP.
 constexpr size_t kFinalPoints = 20000;
 
@@ -162,9 +147,7 @@ Result<MeshRegistration> RegisterMesh(const geometry::TriangleMesh& mesh_S,
   }
   // Hypotheses are refined side by side, each ICP on one thread; results land by index, so the
   // outcome does not depend on the threads.
-  const int workers = options.threads > 0
-                          ? options.threads
-                          : std::max(1, static_cast<int>(std::thread::hardware_concurrency()));
+  const int workers = options.threads > 0 ? options.threads : CoreCount();
   std::vector<std::pair<double, Eigen::Matrix4d>> coarse(starts.size());
   ForEachIndex(starts.size(), workers, [&](size_t i) {
     const reg::RegistrationResult r = reg::RegistrationICP(
