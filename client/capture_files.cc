@@ -3,6 +3,7 @@
 #include <openssl/evp.h>
 
 #include <fstream>
+#include <initializer_list>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <set>
@@ -86,64 +87,58 @@ bool HashFiles(const std::filesystem::path& directory, const std::vector<std::st
 
 }  // namespace
 
-bool ReadCaptureFiles(const std::filesystem::path& directory, CaptureFiles* out,
-                      std::string* error) {
-  nlohmann::json json;
-  out->directory = directory;
-  if (!ReadDescription(directory, "capture.json", "capture folder", &out->capture_json, &json,
-                       error)) {
-    return false;
-  }
-  // Only the names are read here; their meaning is checked by the server.
+namespace {
+
+// The file names a description holds (only the names: their meaning is checked by the server): its
+// "mesh" and, for each camera, every entry of the arrays `lists` names, a string or an object's
+// "file".
+std::vector<std::string> NamedFiles(const nlohmann::json& json,
+                                    std::initializer_list<const char*> lists) {
   std::vector<std::string> paths;
   if (auto mesh = json.find("mesh"); mesh != json.end() && mesh->is_string()) {
     paths.push_back(mesh->get<std::string>());
   }
-  if (auto cameras = json.find("cameras"); cameras != json.end() && cameras->is_array()) {
-    for (const nlohmann::json& camera : *cameras) {
-      if (!camera.is_object()) continue;
-      auto frames = camera.find("frames");
-      if (frames == camera.end() || !frames->is_array()) continue;
-      for (const nlohmann::json& frame : *frames) {
-        if (frame.is_string()) paths.push_back(frame.get<std::string>());
+  auto cameras = json.find("cameras");
+  if (cameras == json.end() || !cameras->is_array()) return paths;
+  for (const nlohmann::json& camera : *cameras) {
+    if (!camera.is_object()) continue;
+    for (const char* list : lists) {
+      auto entries = camera.find(list);
+      if (entries == camera.end() || !entries->is_array()) continue;
+      for (const nlohmann::json& entry : *entries) {
+        if (entry.is_string()) paths.push_back(entry.get<std::string>());
+        if (!entry.is_object()) continue;
+        if (auto file = entry.find("file"); file != entry.end() && file->is_string()) {
+          paths.push_back(file->get<std::string>());
+        }
       }
     }
   }
-  return HashFiles(directory, paths, "capture.json", out, error);
+  return paths;
+}
+
+// Reads <directory>/<name> into `text` and hashes the files it names.
+bool ReadDescribedFolder(const std::filesystem::path& directory, const std::string& name,
+                         const std::string& kind, std::initializer_list<const char*> lists,
+                         std::string* text, CaptureFiles* out, std::string* error) {
+  nlohmann::json json;
+  out->directory = directory;
+  if (!ReadDescription(directory, name, kind, text, &json, error)) return false;
+  return HashFiles(directory, NamedFiles(json, lists), name, out, error);
+}
+
+}  // namespace
+
+bool ReadCaptureFiles(const std::filesystem::path& directory, CaptureFiles* out,
+                      std::string* error) {
+  return ReadDescribedFolder(directory, "capture.json", "capture folder", {"frames"},
+                             &out->capture_json, out, error);
 }
 
 bool ReadRecordingFiles(const std::filesystem::path& directory, CaptureFiles* out,
                         std::string* error) {
-  nlohmann::json json;
-  out->directory = directory;
-  if (!ReadDescription(directory, "recording.json", "recording folder", &out->recording_json, &json,
-                       error)) {
-    return false;
-  }
-  // Only the names are read here, as for a capture: recording.json's rules are the server's.
-  std::vector<std::string> paths;
-  if (auto mesh = json.find("mesh"); mesh != json.end() && mesh->is_string()) {
-    paths.push_back(mesh->get<std::string>());
-  }
-  if (auto cameras = json.find("cameras"); cameras != json.end() && cameras->is_array()) {
-    for (const nlohmann::json& camera : *cameras) {
-      if (!camera.is_object()) continue;
-      if (auto frames = camera.find("frames"); frames != camera.end() && frames->is_array()) {
-        for (const nlohmann::json& frame : *frames) {
-          if (!frame.is_object()) continue;
-          auto file = frame.find("file");
-          if (file != frame.end() && file->is_string()) paths.push_back(file->get<std::string>());
-        }
-      }
-      if (auto background = camera.find("background");
-          background != camera.end() && background->is_array()) {
-        for (const nlohmann::json& file : *background) {
-          if (file.is_string()) paths.push_back(file.get<std::string>());
-        }
-      }
-    }
-  }
-  return HashFiles(directory, paths, "recording.json", out, error);
+  return ReadDescribedFolder(directory, "recording.json", "recording folder",
+                             {"frames", "background"}, &out->recording_json, out, error);
 }
 
 bool ReadFolderFiles(const std::filesystem::path& directory, CaptureFiles* out,
