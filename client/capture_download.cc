@@ -4,24 +4,17 @@
 #include <system_error>
 
 #include "client/capture_files.h"
+#include "proto/capture_file_path.h"
 
 namespace softid::client {
 
 namespace fs = std::filesystem;
 
 bool IsSafeRelativePath(std::string_view path) {
-  if (path.empty() || path.front() == '/') return false;
   for (const char c : path) {
-    if (c == '\\' || static_cast<unsigned char>(c) < 0x20 || c == 0x7f) return false;
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) return false;
   }
-  size_t start = 0;
-  while (start <= path.size()) {
-    const size_t end = std::min(path.find('/', start), path.size());
-    const std::string_view segment = path.substr(start, end - start);
-    if (segment.empty() || segment == "." || segment == "..") return false;
-    start = end + 1;
-  }
-  return true;
+  return api::IsSafeRelativePath(path);
 }
 
 bool IsEmptyTarget(const fs::path& directory, std::string* error) {

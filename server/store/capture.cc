@@ -4,6 +4,7 @@
 #include <string_view>
 
 #include "core/common/json_fields.h"
+#include "proto/capture_file_path.h"
 #include "server/store/sha256.h"
 
 namespace softid::server::store {
@@ -13,29 +14,13 @@ std::string EntryField(size_t index, const char* field) {
   return "manifest[" + std::to_string(index) + "]." + field;
 }
 
-// A relative '/'-separated path that cannot escape the directory it is written into.
-bool IsSafeRelativePath(std::string_view path) {
-  if (path.empty() || path.front() == '/' || path.find('\\') != std::string_view::npos ||
-      path.find('\0') != std::string_view::npos) {
-    return false;
-  }
-  size_t start = 0;
-  while (start <= path.size()) {
-    const size_t end = std::min(path.find('/', start), path.size());
-    const std::string_view segment = path.substr(start, end - start);
-    if (segment.empty() || segment == "." || segment == "..") return false;
-    start = end + 1;
-  }
-  return true;
-}
-
 // What a file system holds per name and per path; longer names would fail only when staged.
 constexpr size_t kMaxSegmentBytes = 255;
 constexpr size_t kMaxPathBytes = 1024;
 
 // Why `path` cannot be a file of a capture, or "" when it can.
 std::string PathProblem(std::string_view path) {
-  if (!IsSafeRelativePath(path)) {
+  if (!api::IsSafeRelativePath(path)) {
     return "must be a relative '/'-separated path without '.' or '..' segments";
   }
   for (const char c : path) {
