@@ -1,8 +1,10 @@
 #include "core/capture/pixel_rays.h"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <cmath>
+#include <limits>
 #include <opencv2/calib3d.hpp>
 
 namespace softid::capture {
@@ -28,6 +30,40 @@ Status ValidateDistortion(const DistortionCoefficients& distortion, std::string_
   }
   return Status::Ok();
 }
+
+namespace {
+
+// Coefficients that fold the image (the distortion polynomial turns back inside it, as wrong or
+// misordered numbers do) have no inverse there: the iteration stops on a ray that the lens does
+// not map to its pixel. Every ray is projected back; a pixel missed by more than a tenth of a
+// pixel refuses the coefficients.
+Status CheckRaysMapBack(const PinholeCamera& camera, const DistortionCoefficients& distortion,
+                        const std::vector<cv::Point2d>& pixels,
+                        const std::vector<cv::Point2d>& normalised) {
+  std::vector<cv::Point3d> rays;
+  rays.reserve(normalised.size());
+  for (const cv::Point2d& xy : normalised) rays.emplace_back(xy.x, xy.y, 1.0);
+  std::vector<cv::Point2d> back;
+  cv::projectPoints(rays, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), CameraMatrix(camera),
+                    cv::Mat(distortion), back);
+  size_t worst = 0;
+  double worst_px = 0.0;
+  for (size_t i = 0; i < back.size(); ++i) {
+    const double miss = cv::norm(back[i] - pixels[i]);
+    if (!(miss <= worst_px)) {  // NaN counts as worst
+      worst = i;
+      worst_px = std::isfinite(miss) ? miss : std::numeric_limits<double>::infinity();
+    }
+  }
+  if (worst_px <= 0.1) return Status::Ok();
+  return Status::InvalidArgument(fmt::format(
+      "distortion = [{}]: the lens model folds the image: the ray found for pixel ({}, {}) maps "
+      "back {:.3g} px away (are the coefficients in OpenCV's order k1, k2, p1, p2, k3, and for "
+      "this camera's fx, fy, cx, cy?)",
+      fmt::join(distortion, ", "), pixels[worst].x, pixels[worst].y, worst_px));
+}
+
+}  // namespace
 
 Result<PixelRays> ComputePixelRays(const PinholeCamera& camera,
                                    const DistortionCoefficients& distortion) {
@@ -59,6 +95,7 @@ Result<PixelRays> ComputePixelRays(const PinholeCamera& camera,
   for (size_t i = 0; i < normalised.size(); ++i) {
     rays.xy[i] = Eigen::Vector2d(normalised[i].x, normalised[i].y);
   }
+  SOFTID_RETURN_IF_ERROR(CheckRaysMapBack(camera, distortion, pixels, normalised));
   return rays;
 }
 

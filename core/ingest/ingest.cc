@@ -362,8 +362,13 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
   // 1. Each camera's lens and static scene.
   for (int c = 0; c < rec.NumCameras(); ++c) {
     report.cameras[c].name = rec.cameras[c].camera.name;
-    SOFTID_ASSIGN_OR_RETURN(
-        views[c].rays, capture::ComputePixelRays(rec.cameras[c].camera, rec.cameras[c].distortion));
+    Result<capture::PixelRays> rays =
+        capture::ComputePixelRays(rec.cameras[c].camera, rec.cameras[c].distortion);
+    if (!rays.ok()) {
+      return rays.status().WithContext(
+          fmt::format("ingest: camera \"{}\"", rec.cameras[c].camera.name));
+    }
+    views[c].rays = std::move(*rays);
     SOFTID_ASSIGN_OR_RETURN(
         views[c].scene,
         CameraStaticScene(rec, c, options, &report.cameras[c].static_from_background));

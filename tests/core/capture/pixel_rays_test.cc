@@ -96,5 +96,19 @@ TEST(PixelRays, RejectsBadCoefficients) {
   EXPECT_NE(nan.status().message().find("distortion[1]"), std::string::npos);
 }
 
+// k1 = -3 turns the radial polynomial back at a third of the focal length from the centre, well
+// inside the image: no ray maps to the corner pixels, and the coefficients are refused with the
+// pixel the inversion missed (coefficients in another order or for another camera do this).
+TEST(PixelRays, RejectsALensThatFoldsTheImage) {
+  const PinholeCamera camera = MakeCamera();
+  const Result<PixelRays> folded = ComputePixelRays(camera, {-3.0, 0.0, 0.0, 0.0});
+  ASSERT_FALSE(folded.ok());
+  EXPECT_EQ(folded.status().code(), StatusCode::kInvalidArgument);
+  EXPECT_NE(folded.status().message().find("folds the image"), std::string::npos)
+      << folded.status().message();
+  EXPECT_NE(folded.status().message().find("distortion = [-3, 0, 0, 0]"), std::string::npos)
+      << folded.status().message();
+}
+
 }  // namespace
 }  // namespace softid::capture
