@@ -25,21 +25,22 @@ using capture::DepthImage;
 Result<StaticScene> CameraStaticScene(const recording::Recording& rec, int c,
                                       const IngestOptions& options, bool* from_background) {
   const recording::RecordingCamera& camera = rec.cameras[c];
-  std::vector<DepthImage> images;
   *from_background = !camera.background.empty();
-  if (*from_background) {
-    for (int b = 0; b < static_cast<int>(camera.background.size()); ++b) {
-      SOFTID_ASSIGN_OR_RETURN(DepthImage image, recording::LoadBackgroundFrame(rec, c, b));
-      images.push_back(std::move(image));
-    }
-  } else {
-    const int n = static_cast<int>(camera.frames.size());
-    const int used = std::min(n, options.max_static_frames);
-    for (int i = 0; i < used; ++i) {
-      const int k = used == 1 ? 0 : static_cast<int>(std::lround(i * (n - 1.0) / (used - 1.0)));
-      SOFTID_ASSIGN_OR_RETURN(DepthImage image, recording::LoadRecordingFrame(rec, c, k));
-      images.push_back(std::move(image));
-    }
+  // The background frames, else at most max_static_frames frames spread over the recording; read
+  // side by side.
+  const int n = static_cast<int>(camera.frames.size());
+  const int count = *from_background ? static_cast<int>(camera.background.size())
+                                     : std::min(n, options.max_static_frames);
+  std::vector<Result<DepthImage>> read(count, Status::Internal("unread"));
+  ForEachIndex(count, options.threads > 0 ? options.threads : CoreCount(), [&](size_t i) {
+    const int k = count == 1 ? 0 : static_cast<int>(std::lround(i * (n - 1.0) / (count - 1.0)));
+    read[i] = *from_background ? recording::LoadBackgroundFrame(rec, c, static_cast<int>(i))
+                               : recording::LoadRecordingFrame(rec, c, k);
+  });
+  std::vector<DepthImage> images;
+  for (Result<DepthImage>& image : read) {
+    SOFTID_RETURN_IF_ERROR(image.status());
+    images.push_back(std::move(*image));
   }
   return *from_background ? EstimateEmptyScene(images, options.static_scene)
                           : EstimateStaticScene(images, options.static_scene);
