@@ -136,6 +136,93 @@ Status WriteMask(const std::filesystem::path& path, const std::vector<uint8_t>& 
   return Status::Ok();
 }
 
+// The static room of a recording: a box of clutter beside the motion where the first camera sees
+// it, a back wall and a side wall beyond the motion and every camera, and the floor slab.
+struct Room {
+  FloorBox clutter, back_wall, side_wall, floor_slab;
+  geometry::TriangleMesh mesh;
+};
+
+// lo, hi: the motion's extent, cam_lo, cam_hi: the cameras', in floor coordinates [m].
+Room BuildRoom(const FloorFrame& floor, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
+               const Eigen::Vector3d& cam_lo, const Eigen::Vector3d& cam_hi,
+               const std::vector<capture::PinholeCamera>& cameras,
+               const capture::DistortionCoefficients& distortion, double view_radius) {
+  const double size = view_radius;
+  const double gap = 0.03 + 0.1 * size;
+  const double clutter_side = std::clamp(0.35 * size, 0.03, 0.25);
+  const Eigen::Vector3d mid = 0.5 * (lo + hi);
+  FloorBox clutter;
+  clutter.size = Eigen::Vector3d(clutter_side, clutter_side, 1.4 * clutter_side);
+  const double half = 0.5 * clutter_side, z = 0.7 * clutter_side;
+  const std::vector<Eigen::Vector3d> candidates = {
+      {mid.x(), hi.y() + gap + half, z},
+      {mid.x(), lo.y() - gap - half, z},
+      {hi.x() + gap + half, mid.y(), z},
+  };
+  int side = 1;  // side of the clutter along e2 (+1 / -1); the side wall goes to the other
+  clutter.center_F = candidates[2];
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    FloorBox trial = clutter;
+    trial.center_F = candidates[i];
+    if (BoxInView(floor, trial, cameras[0], distortion)) {
+      clutter = trial;
+      side = i == 1 ? -1 : 1;
+      break;
+    }
+  }
+  const double wall_thickness = 0.05;
+  const double wall_height = std::max(1.5, 2.0 * cam_hi.z());
+  const double back = std::max({hi.x() + gap + 0.1 + 0.3 * size, clutter.center_F.x() + half + gap,
+                                cameras.size() > 1 ? cam_hi.x() + 0.15 : -1e300}) +
+                      0.5 * wall_thickness;
+  FloorBox back_wall;
+  // Side wall on the far side from the clutter, beyond the motion and (with several cameras)
+  // beyond every camera, so that it never stands between a camera and the object.
+  const double lateral_motion = side > 0 ? lo.y() - gap : -(hi.y() + gap);
+  const double lateral_cameras =
+      cameras.size() > 1 ? (side > 0 ? cam_lo.y() : -cam_hi.y()) - 0.15 : -0.15;
+  const double wall_lateral =
+      side * (std::min(lateral_motion, lateral_cameras) - 0.5 * wall_thickness);
+  const double side_start = cameras.size() > 1 ? std::min(cam_lo.x(), lo.x()) - 0.2 : lo.x() - gap;
+  FloorBox side_wall;
+  side_wall.size = Eigen::Vector3d(back - side_start, wall_thickness, wall_height);
+  side_wall.center_F = Eigen::Vector3d(0.5 * (back + side_start), wall_lateral, 0.5 * wall_height);
+  const double far_lateral = side > 0 ? std::max({hi.y(), cam_hi.y(), clutter.center_F.y()}) + 1.0
+                                      : std::min({lo.y(), cam_lo.y(), clutter.center_F.y()}) - 1.0;
+  const double lat_min = std::min(wall_lateral, far_lateral);
+  const double lat_max = std::max(wall_lateral, far_lateral);
+  back_wall.size = Eigen::Vector3d(wall_thickness, lat_max - lat_min + wall_thickness, wall_height);
+  back_wall.center_F = Eigen::Vector3d(back, 0.5 * (lat_min + lat_max), 0.5 * wall_height);
+  FloorBox floor_slab;
+  const double front = std::min(cam_lo.x(), lo.x()) - 1.0;
+  floor_slab.size = Eigen::Vector3d(back - front, lat_max - lat_min + 2.0, 0.05);
+  floor_slab.center_F =
+      Eigen::Vector3d(0.5 * (back + front), 0.5 * (lat_min + lat_max), -0.5 * floor_slab.size.z());
+
+  Room room{clutter, back_wall, side_wall, floor_slab, {}};
+  for (const FloorBox* box : {&floor_slab, &back_wall, &side_wall, &clutter}) {
+    Append(BoxMesh(floor, *box), &room.mesh);
+  }
+  return room;
+}
+
+// The frames a device delivers of num_ideal: round(drop_fraction * (num_ideal - 1)) of them
+// dropped at random, never frame 0.
+std::vector<int> KeptFrames(int num_ideal, double drop_fraction, std::mt19937_64& rng) {
+  std::vector<int> candidates(std::max(0, num_ideal - 1));
+  std::iota(candidates.begin(), candidates.end(), 1);
+  std::shuffle(candidates.begin(), candidates.end(), rng);
+  const int num_drop = static_cast<int>(std::lround(drop_fraction * (num_ideal - 1)));
+  std::vector<bool> dropped(num_ideal, false);
+  for (int i = 0; i < num_drop; ++i) dropped[candidates[i]] = true;
+  std::vector<int> kept;
+  for (int k = 0; k < num_ideal; ++k) {
+    if (!dropped[k]) kept.push_back(k);
+  }
+  return kept;
+}
+
 }  // namespace
 
 RawSynthesisOptions::RawSynthesisOptions() {
@@ -198,18 +285,7 @@ Result<RawSynthesisSummary> SynthesizeRawRecording(const Scene& scene,
     const double jitter = std::clamp(gaussian(rng), -2.0, 2.0) * options.time_jitter_s;
     true_times[k] = std::clamp(k / options.run.fps + jitter, 0.0, t_end);
   }
-  std::vector<int> kept;
-  {
-    std::vector<int> candidates(std::max(0, num_ideal - 1));
-    std::iota(candidates.begin(), candidates.end(), 1);
-    std::shuffle(candidates.begin(), candidates.end(), rng);
-    const int num_drop = static_cast<int>(std::lround(options.drop_fraction * (num_ideal - 1)));
-    std::vector<bool> dropped(num_ideal, false);
-    for (int i = 0; i < num_drop; ++i) dropped[candidates[i]] = true;
-    for (int k = 0; k < num_ideal; ++k) {
-      if (!dropped[k]) kept.push_back(k);
-    }
-  }
+  const std::vector<int> kept = KeptFrames(num_ideal, options.drop_fraction, rng);
   // Steps whose surfaces are needed: the two around each kept frame's true time.
   struct Sample {
     int step = 0;
@@ -299,63 +375,9 @@ Result<RawSynthesisSummary> SynthesizeRawRecording(const Scene& scene,
   }
 
   // The room: clutter beside the motion where the first camera sees it, walls behind.
-  const double size = scene.view_radius;
-  const double gap = 0.03 + 0.1 * size;
-  const double clutter_side = std::clamp(0.35 * size, 0.03, 0.25);
-  const Eigen::Vector3d mid = 0.5 * (lo + hi);
-  FloorBox clutter;
-  clutter.size = Eigen::Vector3d(clutter_side, clutter_side, 1.4 * clutter_side);
-  const double half = 0.5 * clutter_side, z = 0.7 * clutter_side;
-  const std::vector<Eigen::Vector3d> candidates = {
-      {mid.x(), hi.y() + gap + half, z},
-      {mid.x(), lo.y() - gap - half, z},
-      {hi.x() + gap + half, mid.y(), z},
-  };
-  int side = 1;  // side of the clutter along e2 (+1 / -1); the side wall goes to the other
-  clutter.center_F = candidates[2];
-  for (size_t i = 0; i < candidates.size(); ++i) {
-    FloorBox trial = clutter;
-    trial.center_F = candidates[i];
-    if (BoxInView(floor, trial, cameras[0], options.distortion)) {
-      clutter = trial;
-      side = i == 1 ? -1 : 1;
-      break;
-    }
-  }
-  const double wall_thickness = 0.05;
-  const double wall_height = std::max(1.5, 2.0 * cam_hi.z());
-  const double back = std::max({hi.x() + gap + 0.1 + 0.3 * size, clutter.center_F.x() + half + gap,
-                                cameras.size() > 1 ? cam_hi.x() + 0.15 : -1e300}) +
-                      0.5 * wall_thickness;
-  FloorBox back_wall;
-  // Side wall on the far side from the clutter, beyond the motion and (with several cameras)
-  // beyond every camera, so that it never stands between a camera and the object.
-  const double lateral_motion = side > 0 ? lo.y() - gap : -(hi.y() + gap);
-  const double lateral_cameras =
-      cameras.size() > 1 ? (side > 0 ? cam_lo.y() : -cam_hi.y()) - 0.15 : -0.15;
-  const double wall_lateral =
-      side * (std::min(lateral_motion, lateral_cameras) - 0.5 * wall_thickness);
-  const double side_start = cameras.size() > 1 ? std::min(cam_lo.x(), lo.x()) - 0.2 : lo.x() - gap;
-  FloorBox side_wall;
-  side_wall.size = Eigen::Vector3d(back - side_start, wall_thickness, wall_height);
-  side_wall.center_F = Eigen::Vector3d(0.5 * (back + side_start), wall_lateral, 0.5 * wall_height);
-  const double far_lateral = side > 0 ? std::max({hi.y(), cam_hi.y(), clutter.center_F.y()}) + 1.0
-                                      : std::min({lo.y(), cam_lo.y(), clutter.center_F.y()}) - 1.0;
-  const double lat_min = std::min(wall_lateral, far_lateral);
-  const double lat_max = std::max(wall_lateral, far_lateral);
-  back_wall.size = Eigen::Vector3d(wall_thickness, lat_max - lat_min + wall_thickness, wall_height);
-  back_wall.center_F = Eigen::Vector3d(back, 0.5 * (lat_min + lat_max), 0.5 * wall_height);
-  FloorBox floor_slab;
-  const double front = std::min(cam_lo.x(), lo.x()) - 1.0;
-  floor_slab.size = Eigen::Vector3d(back - front, lat_max - lat_min + 2.0, 0.05);
-  floor_slab.center_F =
-      Eigen::Vector3d(0.5 * (back + front), 0.5 * (lat_min + lat_max), -0.5 * floor_slab.size.z());
-
-  geometry::TriangleMesh room;
-  Append(BoxMesh(floor, floor_slab), &room);
-  Append(BoxMesh(floor, back_wall), &room);
-  Append(BoxMesh(floor, side_wall), &room);
-  Append(BoxMesh(floor, clutter), &room);
+  const Room room_parts =
+      BuildRoom(floor, lo, hi, cam_lo, cam_hi, cameras, options.distortion, scene.view_radius);
+  const geometry::TriangleMesh& room = room_parts.mesh;
 
   // Render: the static room once per camera, the object per frame; the nearer surface wins.
   capture::DepthRenderer renderer;
@@ -484,9 +506,9 @@ Result<RawSynthesisSummary> SynthesizeRawRecording(const Scene& scene,
       {"cameras", truth_cameras},
       {"distortion", options.distortion},
       {"mesh_unit", std::string(recording::ToString(rec.mesh_unit))},
-      {"clutter", BoxJson(floor, clutter)},
-      {"walls", {BoxJson(floor, back_wall), BoxJson(floor, side_wall)}},
-      {"floor_slab", BoxJson(floor, floor_slab)},
+      {"clutter", BoxJson(floor, room_parts.clutter)},
+      {"walls", {BoxJson(floor, room_parts.back_wall), BoxJson(floor, room_parts.side_wall)}},
+      {"floor_slab", BoxJson(floor, room_parts.floor_slab)},
       {"seed", options.seed},
   };
   {
