@@ -88,6 +88,112 @@ std::vector<Eigen::Matrix4d> RotationGridStarts(const geometry::TriangleMesh& me
 // At most this many observed points in the final ICP.
 constexpr size_t kFinalPoints = 20000;
 
+// The checks RegisterMesh and RefineMeshPose share.
+Status CheckInputs(const geometry::TriangleMesh& mesh_S,
+                   const std::vector<Eigen::Vector3d>& observed_C,
+                   const MeshRegistrationOptions& options) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  if (mesh_S.vertices.empty() || mesh_S.triangles.empty()) {
+    return Status::InvalidArgument("registration: the mesh is empty");
+  }
+  if (observed_C.size() < 30) {
+    return Status::InvalidArgument(fmt::format(
+        "registration: {} observed points of the object (at least 30)", observed_C.size()));
+  }
+  return Status::Ok();
+}
+
+// Lengths of one registration: the features' voxel and the final ICP's pairing distance.
+struct RegistrationScale {
+  double voxel_m = 0.0;
+  double fine_distance_m = 0.0;
+
+  RegistrationScale(const geometry::TriangleMesh& mesh_S, const MeshRegistrationOptions& options)
+      : voxel_m(mesh_S.Bounds().diagonal().norm() / options.voxels_per_diagonal),
+        fine_distance_m(std::max(3.0 * options.noise_sigma_m, 0.25 * voxel_m)) {}
+};
+
+reg::RegistrationResult FineIcp(const o3d::geometry::PointCloud& observed,
+                                const o3d::geometry::PointCloud& model, double distance_m,
+                                const Eigen::Matrix4d& start) {
+  return reg::RegistrationICP(observed, model, distance_m, start,
+                              reg::TransformationEstimationPointToPlane(),
+                              reg::ICPConvergenceCriteria(1e-9, 1e-9, 60));
+}
+
+// Every observed point, or kFinalPoints of them taken evenly: the pose's noise falls as one over
+// the root of the count, and is a few hundredths of a millimetre there.
+std::shared_ptr<o3d::geometry::PointCloud> FinalPoints(const o3d::geometry::PointCloud& observed) {
+  const size_t every = (observed.points_.size() + kFinalPoints - 1) / kFinalPoints;
+  return every <= 1 ? std::make_shared<o3d::geometry::PointCloud>(observed)
+                    : observed.UniformDownSample(every);
+}
+
+MeshRegistration FromIcp(const reg::RegistrationResult& icp, double distance_m) {
+  MeshRegistration out;
+  out.X_CS = Eigen::Isometry3d(icp.transformation_).inverse();
+  out.overlap = icp.fitness_;
+  out.rms_m = icp.inlier_rmse_;
+  out.max_distance_m = distance_m;
+  return out;
+}
+
+// Hypotheses (observed -> model): a grid of rotations with the model set behind the observed
+// side, and RANSAC on FPFH features (features of one side of an object match its whole surface
+// poorly, so RANSAC alone fails on some views).
+std::vector<Eigen::Matrix4d> Hypotheses(const geometry::TriangleMesh& mesh_S,
+                                        const std::vector<Eigen::Vector3d>& observed_C,
+                                        const Features& observed, const Features& model,
+                                        double voxel_m, const MeshRegistrationOptions& options) {
+  std::vector<Eigen::Matrix4d> starts = RotationGridStarts(mesh_S, observed_C, options.rotations);
+  const reg::CorrespondenceCheckerBasedOnEdgeLength edges(0.9);
+  const reg::CorrespondenceCheckerBasedOnDistance distance(1.5 * voxel_m);
+  o3d::utility::random::Seed(static_cast<int>(options.seed));
+  for (int attempt = 0; attempt < options.attempts; ++attempt) {
+    starts.push_back(reg::RegistrationRANSACBasedOnFeatureMatching(
+                         *observed.cloud, *model.cloud, *observed.fpfh, *model.fpfh,
+                         /*mutual_filter=*/true, 1.5 * voxel_m,
+                         reg::TransformationEstimationPointToPoint(false), 3, {edges, distance},
+                         reg::RANSACConvergenceCriteria(options.ransac_iterations, 0.999))
+                         .transformation_);
+  }
+  return starts;
+}
+
+// The best `keep` hypotheses after a coarse ICP on the downsampled clouds, best first. Each ICP
+// runs on one thread; results land by index, so the outcome does not depend on the threads.
+std::vector<Eigen::Matrix4d> RankHypotheses(const std::vector<Eigen::Matrix4d>& starts,
+                                            const Features& observed, const Features& model,
+                                            double voxel_m, size_t keep, int workers) {
+  std::vector<std::pair<double, Eigen::Matrix4d>> coarse(starts.size());
+  ForEachIndex(starts.size(), workers, [&](size_t i) {
+    const reg::RegistrationResult r = reg::RegistrationICP(
+        *observed.cloud, *model.cloud, 2.0 * voxel_m, starts[i],
+        reg::TransformationEstimationPointToPlane(), reg::ICPConvergenceCriteria(1e-4, 1e-4, 15));
+    coarse[i] = {r.fitness_ - r.inlier_rmse_ / (2.0 * voxel_m), r.transformation_};
+  });
+  keep = std::min(keep, coarse.size());
+  std::partial_sort(coarse.begin(), coarse.begin() + keep, coarse.end(),
+                    [](const auto& a, const auto& b) { return a.first > b.first; });
+  std::vector<Eigen::Matrix4d> best;
+  for (size_t i = 0; i < keep; ++i) best.push_back(coarse[i].second);
+  return best;
+}
+
+// Index of the refined hypothesis with the most overlap (ties within 0.1 % by the lower RMS).
+int Winner(const std::vector<reg::RegistrationResult>& refined) {
+  int winner = 0;
+  for (size_t i = 1; i < refined.size(); ++i) {
+    const reg::RegistrationResult& fine = refined[i];
+    const reg::RegistrationResult& best = refined[winner];
+    if (fine.fitness_ > best.fitness_ + 1e-3 ||
+        (fine.fitness_ > best.fitness_ - 1e-3 && fine.inlier_rmse_ < best.inlier_rmse_)) {
+      winner = static_cast<int>(i);
+    }
+  }
+  return winner;
+}
+
 }  // namespace
 
 Status MeshRegistrationOptions::Validate() const {
@@ -113,91 +219,41 @@ Status MeshRegistrationOptions::Validate() const {
 Result<MeshRegistration> RegisterMesh(const geometry::TriangleMesh& mesh_S,
                                       const std::vector<Eigen::Vector3d>& observed_C,
                                       const MeshRegistrationOptions& options) {
-  SOFTID_RETURN_IF_ERROR(options.Validate());
-  if (mesh_S.vertices.empty() || mesh_S.triangles.empty()) {
-    return Status::InvalidArgument("registration: the mesh is empty");
-  }
-  if (observed_C.size() < 30) {
-    return Status::InvalidArgument(fmt::format(
-        "registration: {} observed points of the object (at least 30)", observed_C.size()));
-  }
+  SOFTID_RETURN_IF_ERROR(CheckInputs(mesh_S, observed_C, options));
   const ScopedOpenMPThreads serial(1);
-  const double voxel = mesh_S.Bounds().diagonal().norm() / options.voxels_per_diagonal;
+  const RegistrationScale scale(mesh_S, options);
   const std::shared_ptr<o3d::geometry::PointCloud> model = SampleSurface(mesh_S, 60000);
   const o3d::geometry::PointCloud observed(observed_C);
-  const Features model_features = DownsampleWithFeatures(*model, voxel);
-  const Features observed_features = DownsampleWithFeatures(observed, voxel);
-  const reg::CorrespondenceCheckerBasedOnEdgeLength edges(0.9);
-  const reg::CorrespondenceCheckerBasedOnDistance distance(1.5 * voxel);
-  const double fine_distance = std::max(3.0 * options.noise_sigma_m, 0.25 * voxel);
-
-  // Hypotheses: RANSAC on FPFH features, and a grid of rotations with the model set behind the
-  // observed side (features of one side of an object match its whole surface poorly, so RANSAC
-  // alone fails on some views). Each is refined by ICP on the downsampled clouds; the best few by
-  // overlap then by the full clouds.
-  std::vector<Eigen::Matrix4d> starts = RotationGridStarts(mesh_S, observed_C, options.rotations);
-  o3d::utility::random::Seed(static_cast<int>(options.seed));
-  for (int attempt = 0; attempt < options.attempts; ++attempt) {
-    starts.push_back(reg::RegistrationRANSACBasedOnFeatureMatching(
-                         *observed_features.cloud, *model_features.cloud, *observed_features.fpfh,
-                         *model_features.fpfh, /*mutual_filter=*/true, 1.5 * voxel,
-                         reg::TransformationEstimationPointToPoint(false), 3, {edges, distance},
-                         reg::RANSACConvergenceCriteria(options.ransac_iterations, 0.999))
-                         .transformation_);
-  }
-  // Hypotheses are refined side by side, each ICP on one thread; results land by index, so the
-  // outcome does not depend on the threads.
+  const Features model_features = DownsampleWithFeatures(*model, scale.voxel_m);
+  const Features observed_features = DownsampleWithFeatures(observed, scale.voxel_m);
   const int workers = options.threads > 0 ? options.threads : CoreCount();
-  std::vector<std::pair<double, Eigen::Matrix4d>> coarse(starts.size());
-  ForEachIndex(starts.size(), workers, [&](size_t i) {
-    const reg::RegistrationResult r = reg::RegistrationICP(
-        *observed_features.cloud, *model_features.cloud, 2.0 * voxel, starts[i],
-        reg::TransformationEstimationPointToPlane(), reg::ICPConvergenceCriteria(1e-4, 1e-4, 15));
-    coarse[i] = {r.fitness_ - r.inlier_rmse_ / (2.0 * voxel), r.transformation_};
-  });
-  const size_t keep = std::min<size_t>(coarse.size(), 6);
-  std::partial_sort(coarse.begin(), coarse.begin() + keep, coarse.end(),
-                    [](const auto& a, const auto& b) { return a.first > b.first; });
-  MeshRegistration best;
+  const std::vector<Eigen::Matrix4d> survivors = RankHypotheses(
+      Hypotheses(mesh_S, observed_C, observed_features, model_features, scale.voxel_m, options),
+      observed_features, model_features, scale.voxel_m, /*keep=*/6, workers);
+
   // The survivors are refined on the observed cloud thinned to half a voxel (a 640 x 480 view
   // holds tens of thousands of points, and nearest-neighbour queries of all of them for every
-  // hypothesis were most of the ingest's time); the winner is refined on every point.
-  const std::shared_ptr<o3d::geometry::PointCloud> thinned = observed.VoxelDownSample(0.5 * voxel);
+  // hypothesis were most of the ingest's time); the winner is refined on the final points.
+  const std::shared_ptr<o3d::geometry::PointCloud> thinned =
+      observed.VoxelDownSample(0.5 * scale.voxel_m);
   const auto refine = [&](const o3d::geometry::PointCloud& cloud, const Eigen::Matrix4d& start) {
     const reg::RegistrationResult mid = reg::RegistrationICP(
-        cloud, *model, 1.0 * voxel, start, reg::TransformationEstimationPointToPlane());
-    return reg::RegistrationICP(cloud, *model, fine_distance, mid.transformation_,
-                                reg::TransformationEstimationPointToPlane(),
-                                reg::ICPConvergenceCriteria(1e-9, 1e-9, 60));
+        cloud, *model, scale.voxel_m, start, reg::TransformationEstimationPointToPlane());
+    return FineIcp(cloud, *model, scale.fine_distance_m, mid.transformation_);
   };
-  std::vector<reg::RegistrationResult> refined(keep);
-  ForEachIndex(keep, workers, [&](size_t i) { refined[i] = refine(*thinned, coarse[i].second); });
-  reg::RegistrationResult winner;
-  for (size_t i = 0; i < keep; ++i) {
-    const reg::RegistrationResult& fine = refined[i];
-    const bool better =
-        fine.fitness_ > winner.fitness_ + 1e-3 ||
-        (fine.fitness_ > winner.fitness_ - 1e-3 && fine.inlier_rmse_ < winner.inlier_rmse_);
-    if (i == 0 || better) {
-      winner = fine;
-      best.hypothesis = static_cast<int>(i);
-    }
-  }
-  // The winner on every point, or on kFinalPoints of them taken evenly: the pose's noise falls as
-  // one over the root of the count, and is a few hundredths of a millimetre there.
-  const size_t every = (observed.points_.size() + kFinalPoints - 1) / kFinalPoints;
-  const reg::RegistrationResult fine =
-      refine(every <= 1 ? observed : *observed.UniformDownSample(every), winner.transformation_);
-  best.X_CS = Eigen::Isometry3d(fine.transformation_).inverse();
-  best.overlap = fine.fitness_;
-  best.rms_m = fine.inlier_rmse_;
-  best.max_distance_m = fine_distance;
+  std::vector<reg::RegistrationResult> refined(survivors.size());
+  ForEachIndex(survivors.size(), workers,
+               [&](size_t i) { refined[i] = refine(*thinned, survivors[i]); });
+  const int winner = Winner(refined);
+  MeshRegistration best = FromIcp(refine(*FinalPoints(observed), refined[winner].transformation_),
+                                  scale.fine_distance_m);
+  best.hypothesis = winner;
   if (best.overlap < options.min_overlap) {
     return Status::FailedPrecondition(fmt::format(
         "registration of the mesh to the first frame did not converge: {:.0f} % of the {} object "
         "points lie within {:.1f} mm of the posed mesh (needs {:.0f} %), RMS {:.2f} mm",
-        100 * best.overlap, observed_C.size(), 1e3 * fine_distance, 100 * options.min_overlap,
-        1e3 * best.rms_m));
+        100 * best.overlap, observed_C.size(), 1e3 * scale.fine_distance_m,
+        100 * options.min_overlap, 1e3 * best.rms_m));
   }
   return best;
 }
@@ -206,30 +262,14 @@ Result<MeshRegistration> RefineMeshPose(const geometry::TriangleMesh& mesh_S,
                                         const std::vector<Eigen::Vector3d>& observed_C,
                                         const Eigen::Isometry3d& X_CS,
                                         const MeshRegistrationOptions& options) {
-  SOFTID_RETURN_IF_ERROR(options.Validate());
-  if (mesh_S.vertices.empty() || mesh_S.triangles.empty()) {
-    return Status::InvalidArgument("registration: the mesh is empty");
-  }
-  if (observed_C.size() < 30) {
-    return Status::InvalidArgument(fmt::format(
-        "registration: {} observed points of the object (at least 30)", observed_C.size()));
-  }
+  SOFTID_RETURN_IF_ERROR(CheckInputs(mesh_S, observed_C, options));
   const ScopedOpenMPThreads serial(1);
-  const double voxel = mesh_S.Bounds().diagonal().norm() / options.voxels_per_diagonal;
-  const double fine_distance = std::max(3.0 * options.noise_sigma_m, 0.25 * voxel);
+  const RegistrationScale scale(mesh_S, options);
   const std::shared_ptr<o3d::geometry::PointCloud> model = SampleSurface(mesh_S, 60000);
   const o3d::geometry::PointCloud observed(observed_C);
-  const size_t every = (observed.points_.size() + kFinalPoints - 1) / kFinalPoints;
-  const reg::RegistrationResult fine = reg::RegistrationICP(
-      every <= 1 ? observed : *observed.UniformDownSample(every), *model, fine_distance,
-      X_CS.inverse().matrix(), reg::TransformationEstimationPointToPlane(),
-      reg::ICPConvergenceCriteria(1e-9, 1e-9, 60));
-  MeshRegistration out;
-  out.X_CS = Eigen::Isometry3d(fine.transformation_).inverse();
-  out.overlap = fine.fitness_;
-  out.rms_m = fine.inlier_rmse_;
-  out.max_distance_m = fine_distance;
-  return out;
+  return FromIcp(
+      FineIcp(*FinalPoints(observed), *model, scale.fine_distance_m, X_CS.inverse().matrix()),
+      scale.fine_distance_m);
 }
 
 }  // namespace softid::ingest
