@@ -97,53 +97,6 @@ TEST(StaticScene, RejectsEmptyOrMismatchedInput) {
             std::string::npos);
 }
 
-// Pixels the scene marks maybe_object (the object may rest on them in every frame) join the
-// object's region where its depth continues into them, and make no region alone (clutter behind
-// the released object stays out).
-TEST(Foreground, MaybeObjectPixelsJoinAContinuingRegionOnly) {
-  constexpr int kWidth = 40, kHeight = 30;
-  StaticScene scene;
-  scene.width = kWidth;
-  scene.height = kHeight;
-  scene.depth_m.assign(kWidth * kHeight, 2.0f);
-  scene.sigma_m.assign(kWidth * kHeight, 0.002f);
-  scene.maybe_object.assign(kWidth * kHeight, 0);
-  DepthImage frame = DepthImage::Zeros(kWidth, kHeight);
-  frame.depth.assign(kWidth * kHeight, 2.0f);
-  const auto pixel = [](int col, int row) { return row * kWidth + col; };
-  // The object: columns 5..14 nearer than the scene; columns 15..19 the object too, but the scene
-  // there is the object itself (depth 1.5, as seen), marked maybe_object.
-  for (int row = 10; row < 20; ++row) {
-    for (int col = 5; col < 20; ++col) frame.depth[pixel(col, row)] = 1.5f;
-    for (int col = 15; col < 20; ++col) {
-      scene.depth_m[pixel(col, row)] = 1.5f;
-      scene.maybe_object[pixel(col, row)] = 1;
-    }
-  }
-  // Clutter at 1.0 m, its scene the clutter itself and marked maybe_object, apart from the object.
-  for (int row = 10; row < 20; ++row) {
-    for (int col = 28; col < 36; ++col) {
-      frame.depth[pixel(col, row)] = 1.0f;
-      scene.depth_m[pixel(col, row)] = 1.0f;
-      scene.maybe_object[pixel(col, row)] = 1;
-    }
-  }
-  capture::PinholeCamera camera;
-  camera.width = kWidth;
-  camera.height = kHeight;
-  camera.fx = camera.fy = 40.0;
-  camera.cx = 19.5;
-  camera.cy = 14.5;
-  Result<capture::PixelRays> rays = capture::ComputePixelRays(camera, {});
-  ASSERT_TRUE(rays.ok());
-  const Result<Foreground> fg = SegmentForeground(frame, scene, *rays);
-  ASSERT_TRUE(fg.ok()) << fg.status().ToString();
-  ASSERT_EQ(fg->regions.size(), 1u);
-  EXPECT_EQ(fg->regions[0].pixels.size(), 10u * 15u);
-  EXPECT_EQ(fg->mask[pixel(17, 15)], 1);
-  EXPECT_EQ(fg->mask[pixel(30, 15)], 0);
-}
-
 // A noise-free frame over a flat scene 2 m away with sigma 1 cm: margins 4 cm, 2 cm to join.
 struct FlatScene {
   static constexpr int kWidth = 40, kHeight = 30;
@@ -156,6 +109,7 @@ struct FlatScene {
     scene.height = kHeight;
     scene.depth_m.assign(kWidth * kHeight, 2.0f);
     scene.sigma_m.assign(kWidth * kHeight, 0.01f);
+    scene.maybe_object.assign(kWidth * kHeight, 0);
     frame.depth.assign(kWidth * kHeight, 2.0f);
     capture::PinholeCamera camera;
     camera.width = kWidth;
@@ -171,7 +125,36 @@ struct FlatScene {
       for (int col = col0; col < col1; ++col) frame.depth[Pixel(col, row)] = depth;
     }
   }
+  // The static scene there is at `depth` and may be the object (it rests there in every frame).
+  void MarkSceneAsObject(int col0, int col1, int row0, int row1, float depth) {
+    for (int row = row0; row < row1; ++row) {
+      for (int col = col0; col < col1; ++col) {
+        scene.depth_m[Pixel(col, row)] = depth;
+        scene.maybe_object[Pixel(col, row)] = 1;
+      }
+    }
+  }
 };
+
+// Pixels the scene marks maybe_object (the object may rest on them in every frame) join the
+// object's region where its depth continues into them, and make no region alone (clutter behind
+// the released object stays out).
+TEST(Foreground, MaybeObjectPixelsJoinAContinuingRegionOnly) {
+  FlatScene s;
+  // The object: columns 5..14 nearer than the scene; columns 15..19 the object too, but the scene
+  // there is the object itself (depth 1.5, as seen), marked maybe_object.
+  s.Fill(5, 20, 10, 20, 1.5f);
+  s.MarkSceneAsObject(15, 20, 10, 20, 1.5f);
+  // Clutter at 1.0 m, its scene the clutter itself and marked maybe_object, apart from the object.
+  s.Fill(28, 36, 10, 20, 1.0f);
+  s.MarkSceneAsObject(28, 36, 10, 20, 1.0f);
+  const Result<Foreground> fg = SegmentForeground(s.frame, s.scene, s.rays);
+  ASSERT_TRUE(fg.ok()) << fg.status().ToString();
+  ASSERT_EQ(fg->regions.size(), 1u);
+  EXPECT_EQ(fg->regions[0].pixels.size(), 10u * 15u);
+  EXPECT_EQ(fg->mask[FlatScene::Pixel(17, 15)], 1);
+  EXPECT_EQ(fg->mask[FlatScene::Pixel(30, 15)], 0);
+}
 
 // Hysteresis: where an object meets the floor its pixels stand only a little in front of it; they
 // join the region of surely nearer pixels they continue, but a patch of them alone is no region,

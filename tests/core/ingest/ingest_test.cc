@@ -176,70 +176,74 @@ fs::path WriteSmallRecording(const RawDir& dir) {
   return dir.path;
 }
 
+// A refusal: a recording spoilt one way, ingested; the error names what is wrong and nothing is
+// written.
+class IngestRejects : public ::testing::Test {
+ protected:
+  // The small recording of WriteSmallRecording, read back.
+  void WriteAndRead() {
+    WriteSmallRecording(raw_);
+    Read();
+  }
+  void Read() {
+    Result<recording::Recording> rec = recording::ReadRecording(raw_.path);
+    ASSERT_TRUE(rec.ok()) << rec.status().ToString();
+    rec_ = *std::move(rec);
+  }
+  // The ingest fails with `code`, its message holds every phrase, and no capture is written.
+  void ExpectRefused(StatusCode code, const std::vector<std::string>& phrases) {
+    const Result<IngestReport> report = Ingest(rec_, cap_.path);
+    ASSERT_FALSE(report.ok());
+    EXPECT_EQ(report.status().code(), code) << report.status().ToString();
+    for (const std::string& phrase : phrases) {
+      EXPECT_NE(report.status().message().find(phrase), std::string::npos)
+          << "no \"" << phrase << "\" in: " << report.status().message();
+    }
+    EXPECT_FALSE(fs::exists(cap_.path / "capture.json"));
+  }
+  void CopyOverFrames(const std::string& source, size_t first) {
+    const std::vector<recording::RecordingFrame>& frames = rec_.cameras[0].frames;
+    for (size_t k = first; k < frames.size(); ++k) {
+      fs::copy_file(raw_.path / source, raw_.path / frames[k].file,
+                    fs::copy_options::overwrite_existing);
+    }
+  }
+
+  RawDir raw_{::testing::UnitTest::GetInstance()->current_test_info()->name()};
+  RawDir cap_{std::string(::testing::UnitTest::GetInstance()->current_test_info()->name()) +
+              "_cap"};
+  recording::Recording rec_;
+};
+
 // A mesh three times the object's size (a wrong unit the size checks let through: one side of
 // a body spans less than its diagonal) matches no pose: refused naming the camera, the frame and
-// mesh_unit; nothing is written.
-TEST(IngestRejects, MeshWhoseSizeCannotMatchThePoints) {
-  RawDir raw("scale");
-  RawDir cap("scale_cap");
-  WriteSmallRecording(raw);
-  Result<recording::Recording> rec = recording::ReadRecording(raw.path);
-  ASSERT_TRUE(rec.ok());
-  Result<geometry::TriangleMesh> mesh = geometry::ReadTriangleMesh(raw.path / rec->mesh_file);
+// mesh_unit.
+TEST_F(IngestRejects, MeshWhoseSizeCannotMatchThePoints) {
+  WriteAndRead();
+  Result<geometry::TriangleMesh> mesh = geometry::ReadTriangleMesh(raw_.path / rec_.mesh_file);
   ASSERT_TRUE(mesh.ok());
   for (Eigen::Vector3d& v : mesh->vertices) v *= 3.0;
-  ASSERT_TRUE(geometry::WriteTriangleMeshPly(raw.path / rec->mesh_file, *mesh).ok());
-  const Result<IngestReport> report = Ingest(*rec, cap.path);
-  ASSERT_FALSE(report.ok());
-  EXPECT_EQ(report.status().code(), StatusCode::kFailedPrecondition);
-  EXPECT_NE(report.status().message().find("camera \"cam0\" frame 0"), std::string::npos)
-      << report.status().message();
-  EXPECT_NE(report.status().message().find("mesh_unit"), std::string::npos);
-  EXPECT_FALSE(fs::exists(cap.path / "capture.json"));
+  ASSERT_TRUE(geometry::WriteTriangleMeshPly(raw_.path / rec_.mesh_file, *mesh).ok());
+  ExpectRefused(StatusCode::kFailedPrecondition, {"camera \"cam0\" frame 0", "mesh_unit"});
 }
 
 // Frames that show only the empty scene: no foreground in frame 0, named with its file.
-TEST(IngestRejects, NoObjectInTheFrames) {
-  RawDir raw("empty");
-  RawDir cap("empty_cap");
-  WriteSmallRecording(raw);
-  Result<recording::Recording> rec = recording::ReadRecording(raw.path);
-  ASSERT_TRUE(rec.ok());
-  for (const recording::RecordingFrame& frame : rec->cameras[0].frames) {
-    fs::copy_file(raw.path / rec->cameras[0].background[0], raw.path / frame.file,
-                  fs::copy_options::overwrite_existing);
-  }
-  const Result<IngestReport> report = Ingest(*rec, cap.path);
-  ASSERT_FALSE(report.ok());
-  EXPECT_NE(report.status().message().find("no foreground"), std::string::npos)
-      << report.status().message();
-  EXPECT_NE(report.status().message().find(rec->cameras[0].frames[0].file), std::string::npos);
-  EXPECT_FALSE(fs::exists(cap.path / "capture.json"));
+TEST_F(IngestRejects, NoObjectInTheFrames) {
+  WriteAndRead();
+  CopyOverFrames(rec_.cameras[0].background[0], 0);
+  ExpectRefused(StatusCode::kFailedPrecondition, {"no foreground", rec_.cameras[0].frames[0].file});
 }
 
 // Every frame shows the object as at the release (frame 0 copied over the others): it never
-// moves, and the refusal says so with how far it moved.
-TEST(IngestRejects, ObjectThatNeverMoves) {
-  RawDir raw("still");
-  RawDir cap("still_cap");
-  WriteSmallRecording(raw);
-  Result<recording::Recording> rec = recording::ReadRecording(raw.path);
-  ASSERT_TRUE(rec.ok());
-  const std::vector<recording::RecordingFrame>& frames = rec->cameras[0].frames;
-  for (size_t k = 1; k < frames.size(); ++k) {
-    fs::copy_file(raw.path / frames[0].file, raw.path / frames[k].file,
-                  fs::copy_options::overwrite_existing);
-  }
-  const Result<IngestReport> report = Ingest(*rec, cap.path);
-  ASSERT_FALSE(report.ok());
-  EXPECT_EQ(report.status().code(), StatusCode::kFailedPrecondition);
-  EXPECT_NE(report.status().message().find("never moves"), std::string::npos)
-      << report.status().message();
-  EXPECT_FALSE(fs::exists(cap.path / "capture.json"));
+// moves, and the refusal says so.
+TEST_F(IngestRejects, ObjectThatNeverMoves) {
+  WriteAndRead();
+  CopyOverFrames(rec_.cameras[0].frames[0].file, 1);
+  ExpectRefused(StatusCode::kFailedPrecondition, {"never moves"});
 }
 
 // A torus lying on the floor and pushed along it moves but was never released: refused.
-TEST(IngestRejects, ObjectThatNeverLeavesTheFloor) {
+TEST_F(IngestRejects, ObjectThatNeverLeavesTheFloor) {
   Result<scenes::Scene> scene = scenes::MakeBuiltinScene("torus-drop");
   ASSERT_TRUE(scene.ok());
   ASSERT_TRUE(scene->parameters.ground.has_value());
@@ -249,20 +253,12 @@ TEST(IngestRejects, ObjectThatNeverLeavesTheFloor) {
   scene->parameters.ground->normal = up;
   scene->parameters.ground->offset = lowest;
   scene->parameters.initial_velocity = 0.5 * up.unitOrthogonal();
-  RawDir raw("on_floor");
-  RawDir cap("on_floor_cap");
   scenes::RawSynthesisOptions options = RecordingOptions(2);
   options.run.duration = 0.2;
   options.write_true_masks = false;
-  ASSERT_TRUE(scenes::SynthesizeRawRecording(*scene, options, raw.path).ok());
-  Result<recording::Recording> rec = recording::ReadRecording(raw.path);
-  ASSERT_TRUE(rec.ok());
-  const Result<IngestReport> report = Ingest(*rec, cap.path);
-  ASSERT_FALSE(report.ok());
-  EXPECT_EQ(report.status().code(), StatusCode::kFailedPrecondition);
-  EXPECT_NE(report.status().message().find("never leaves the floor"), std::string::npos)
-      << report.status().message();
-  EXPECT_FALSE(fs::exists(cap.path / "capture.json"));
+  ASSERT_TRUE(scenes::SynthesizeRawRecording(*scene, options, raw_.path).ok());
+  Read();
+  ExpectRefused(StatusCode::kFailedPrecondition, {"never leaves the floor"});
 }
 
 // A cancel flag set during the segmentation stops the ingest before the next frame: Cancelled,
