@@ -3,38 +3,19 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <opencv2/core.hpp>
-#include <opencv2/imgcodecs.hpp>
-#include <opencv2/imgproc.hpp>
+
+#include "core/diagnosis/plot_style.h"
 
 namespace softid::diagnosis {
 namespace {
 
-const cv::Scalar kBlack(0, 0, 0), kGrey(160, 160, 160), kWhite(255, 255, 255);
-const cv::Scalar kColours[] = {cv::Scalar(200, 80, 0), cv::Scalar(0, 120, 230),
-                               cv::Scalar(40, 160, 40), cv::Scalar(180, 0, 180)};
-
-Status Save(const std::filesystem::path& path, const cv::Mat& image) {
-  std::error_code ec;
-  if (path.has_parent_path()) std::filesystem::create_directories(path.parent_path(), ec);
-  try {
-    if (!cv::imwrite(path.string(), image)) return Status::IoError("cannot write " + path.string());
-  } catch (const cv::Exception& e) {
-    return Status::IoError("cannot write " + path.string() + ": " + e.what());
-  }
-  return Status::Ok();
-}
-
-std::string Short(double v) {
-  char buffer[32];
-  std::snprintf(buffer, sizeof(buffer), "%.3g", v);
-  return buffer;
-}
-
-void Text(cv::Mat& image, const std::string& text, cv::Point at, double scale = 0.45,
-          cv::Scalar colour = kBlack) {
-  cv::putText(image, text, at, cv::FONT_HERSHEY_SIMPLEX, scale, colour, 1, cv::LINE_AA);
-}
+using plot::kBlack;
+using plot::kColours;
+using plot::kGrey;
+using plot::kWhite;
+using plot::Save;
+using plot::Short;
+using plot::Text;
 
 // A plot frame mapping data (x, y) to pixels; y optionally logarithmic.
 struct Axes {
@@ -72,7 +53,8 @@ void DrawLine(cv::Mat& image, const Axes& axes, const std::vector<double>& x,
 
 Status WriteFrameMisfitPlot(const std::filesystem::path& path, const std::vector<int>& frames,
                             const std::vector<double>& before, const std::vector<double>& after,
-                            const std::vector<FrameMotion>& motion, double threshold) {
+                            const std::vector<FrameMotion>& motion, double threshold,
+                            const std::string& before_label) {
   cv::Mat image(440, 760, CV_8UC3, kWhite);
   if (frames.empty()) return Save(path, image);
   double top = threshold * 1.2;
@@ -103,7 +85,7 @@ Status WriteFrameMisfitPlot(const std::filesystem::path& path, const std::vector
   }
   std::vector<double> x(frames.begin(), frames.end());
   DrawLine(image, axes, x, before, kColours[0]);
-  Text(image, "before", {80, 428}, 0.45, kColours[0]);
+  Text(image, before_label, {80, 428}, 0.45, kColours[0]);
   if (!after.empty()) {
     DrawLine(image, axes, x, after, kColours[2]);
     Text(image, "after", {160, 428}, 0.45, kColours[2]);
@@ -171,27 +153,15 @@ Status WriteResidualPainting(const std::filesystem::path& path, const capture::C
         const int col = static_cast<int>(std::lround((*uv)[0]));
         const int row = static_cast<int>(std::lround((*uv)[1]));
         if (col < 0 || row < 0 || col >= camera.width || row >= camera.height) continue;
-        cv::Scalar colour(255, 0, 255);
-        if (residuals.matched[i]) {
-          const double t = std::clamp(std::abs(residuals.phi[i]) / sigma / 3.0, 0.0, 1.0);
-          // Blue (at the noise) -> green -> red (three times the noise floor and more).
-          colour = t < 0.5 ? cv::Scalar(255 * (1 - 2 * t), 255 * 2 * t, 0)
-                           : cv::Scalar(0, 255 * (2 - 2 * t), 255 * (2 * t - 1));
-        }
+        const cv::Scalar colour = residuals.matched[i]
+                                      ? plot::ResidualColour(std::abs(residuals.phi[i]) / sigma)
+                                      : plot::kUnmatched;
         cv::rectangle(image, cv::Rect(x0 + col * zoom, y0 + row * zoom, zoom, zoom), colour,
                       cv::FILLED);
       }
     }
   }
-  const int ly = image.rows - legend + 8;
-  for (int i = 0; i < 200; ++i) {
-    const double t = i / 199.0;
-    const cv::Scalar colour = t < 0.5 ? cv::Scalar(255 * (1 - 2 * t), 255 * 2 * t, 0)
-                                      : cv::Scalar(0, 255 * (2 - 2 * t), 255 * (2 * t - 1));
-    cv::line(image, {90 + i, ly}, {90 + i, ly + 10}, colour);
-  }
-  Text(image, "0", {84, ly + 24}, 0.4);
-  Text(image, "3+ x noise floor  (magenta: unmatched)", {300, ly + 10}, 0.4);
+  plot::DrawResidualLegend(image, 90, image.rows - legend + 8);
   Text(image, "frame " + std::to_string(frame.frame), {5, 16}, 0.5);
   return Save(path, image);
 }

@@ -10,6 +10,7 @@
 
 #include "core/capture/capture.h"
 #include "core/diagnosis/diagnose.h"
+#include "core/diagnosis/fit_report.h"
 #include "core/diagnosis/report.h"
 #include "core/inverse/fit.h"
 #include "core/inverse/fit_uncertainty.h"
@@ -26,7 +27,30 @@ struct FitFlags {
   std::string capture;
   std::string config;
   std::string out = "result.json";
+  std::string report;  // default: <out's folder>/report
+  bool no_report = false;
 };
+
+// The fit's pictures (core/diagnosis/fit_report.h) into the report folder, recorded in the
+// result as "report". A report that cannot be drawn is a warning: the fitted values stand.
+void AddFitReport(const FitFlags& flags, const FitInputs& inputs, const inverse::FitResult& fit,
+                  nlohmann::json* json) {
+  if (flags.no_report || fit.cancelled) return;
+  const std::filesystem::path out(flags.out);
+  const std::filesystem::path dir =
+      !flags.report.empty() ? std::filesystem::path(flags.report)
+                            : (out.has_parent_path() ? out.parent_path() : ".") / "report";
+  Result<diagnosis::FitReport> report =
+      diagnosis::WriteFitReport(inputs.capture, inputs.config, fit, dir);
+  if (!report.ok()) {
+    spdlog::warn("report: {}", report.status().message());
+    (*json)["report"] = {{"error", report.status().message()}};
+    return;
+  }
+  spdlog::info("report: {} pictures in {} ({:.1f} s)", report->files.size(), dir.string(),
+               report->seconds);
+  (*json)["report"] = diagnosis::ToJson(*report);
+}
 
 // result.json, with each value's uncertainty unless the config turns it off; the analysis costs
 // two forward and adjoint runs per fitted variable, logged next to the fit's own time.
@@ -79,7 +103,8 @@ int RunFit(const FitFlags& flags) {
     return result.status().code() == StatusCode::kInvalidArgument ? kExitInvalidInput
                                                                   : kExitFailure;
   }
-  const nlohmann::json json = ResultJsonWithUncertainty(inputs.capture, config, *result);
+  nlohmann::json json = ResultJsonWithUncertainty(inputs.capture, config, *result);
+  AddFitReport(flags, inputs, *result, &json);
   const Status written = WriteJsonFile(flags.out, json);
   if (!written.ok()) {
     spdlog::error("{}", written.message());
@@ -118,6 +143,9 @@ Command RegisterFit(CLI::App* app) {
   app->add_option("capture", flags->capture, "capture folder (with capture.json)")->required();
   app->add_option("-c,--config", flags->config, "job config JSON (default: fit youngs_modulus)");
   app->add_option("-o,--out", flags->out, "result JSON to write")->capture_default_str();
+  app->add_option("--report", flags->report,
+                  "folder for the fit's pictures (default: report/ next to --out)");
+  app->add_flag("--no-report", flags->no_report, "draw no pictures");
   return [flags] { return RunFit(*flags); };
 }
 

@@ -1,0 +1,175 @@
+#include "core/diagnosis/fit_report.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <memory>
+
+#include "core/common/json_fields.h"
+#include "core/diagnosis/plots.h"
+#include "core/diagnosis/residual_map.h"
+#include "core/diagnosis/surface_overlay.h"
+#include "core/inverse/objective_settings.h"
+#include "core/inverse/trajectory_objective.h"
+
+namespace softid::diagnosis {
+namespace {
+
+// Patches only label residuals for the diagnosis; the report needs none apart from one.
+constexpr int kPatches = 1;
+
+Series StartCostSeries(const inverse::StartResult& start, int index, bool best) {
+  Series out;
+  out.label = "start " + std::to_string(index + 1) + (best ? " (best)" : "");
+  out.y.push_back(start.initial_cost);
+  for (double c : start.CostHistoryOverEveryFrame()) out.y.push_back(c);
+  for (size_t i = 0; i < out.y.size(); ++i) out.x.push_back(static_cast<double>(i));
+  return out;
+}
+
+// Indices into the observed frames: the worst-fitting one and the rest spread evenly after the
+// release (frame index 0 shows the given rest pose), ascending and distinct.
+std::vector<int> SnapshotIndices(const ResidualMap& map, int count) {
+  const int n = static_cast<int>(map.frames.size());
+  int worst = 0;
+  for (int k = 0; k < n; ++k)
+    if (map.frames[k].misfit > map.frames[worst].misfit) worst = k;
+  std::vector<int> out = {worst};
+  for (int i = 1; static_cast<int>(out.size()) < std::min(count, n) && i <= 4 * count; ++i) {
+    const int k = std::min(n - 1, static_cast<int>(std::lround(i * (n - 1.0) / count)));
+    if (std::find(out.begin(), out.end(), k) == out.end()) out.push_back(k);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+// The simulated surface at each wanted observed frame (ascending indices), stepping as
+// SplitMotionPhases does: each frame at the simulation step nearest its time.
+Result<std::vector<geometry::TriangleMesh>> SurfacesAt(fem::Simulator& sim,
+                                                       const fem::PhysicalParameters& p,
+                                                       const Observations& observations,
+                                                       const std::vector<int>& wanted) {
+  try {
+    sim.SetParameters(p);
+  } catch (const std::invalid_argument& e) {
+    return Status::InvalidArgument(e.what());
+  }
+  std::vector<geometry::TriangleMesh> out;
+  int64_t step = 0;
+  for (int k : wanted) {
+    const int64_t frame_step = std::llround(observations.frames[k].time / sim.options().time_step);
+    for (; step < frame_step; ++step) {
+      if (sim.Step().diverged || !sim.state().u.allFinite())
+        return Status::FailedPrecondition("the simulation diverged at step " +
+                                          std::to_string(step + 1) + " of the fitted parameters");
+    }
+    out.push_back(sim.DeformedSurface());
+  }
+  return out;
+}
+
+// The first camera's direction of sight (the "front" view), or the world's y when level with up.
+Eigen::Vector3d FrontDirection(const capture::Capture& capture, const Eigen::Vector3d& up) {
+  if (capture.cameras.empty()) return up.unitOrthogonal();
+  const Eigen::Vector3d sight = capture.cameras[0].camera.X_WC.linear().col(2);
+  const Eigen::Vector3d level = sight - sight.dot(up) * up;
+  return level.norm() > 1e-6 ? level.normalized() : up.unitOrthogonal();
+}
+
+}  // namespace
+
+Status FitReportOptions::Validate() const {
+  if (snapshots < 1 || snapshots > 8)
+    return json::Invalid("snapshots", snapshots, "must lie in [1, 8]");
+  if (!(misfit_threshold > 0.0) || !std::isfinite(misfit_threshold))
+    return json::Invalid("misfit_threshold", misfit_threshold, "must be positive");
+  SOFTID_RETURN_IF_ERROR(noise_floor.Validate());
+  return phases.Validate();
+}
+
+Result<FitReport> WriteFitReport(const capture::Capture& capture,
+                                 const inverse::JobConfig& config_in, const inverse::FitResult& fit,
+                                 const std::filesystem::path& dir,
+                                 const FitReportOptions& options) {
+  const auto begin = std::chrono::steady_clock::now();
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  if (fit.best < 0) return Status::FailedPrecondition("the fit has no successful start to report");
+  const inverse::JobConfig config = inverse::WithFitDiscretisation(config_in, fit);
+  const fem::PhysicalParameters& p = fit.Best().final;
+  FitReport report;
+
+  std::vector<Series> series;
+  for (size_t i = 0; i < fit.starts.size(); ++i) {
+    if (!fit.starts[i].failed)
+      series.push_back(StartCostSeries(fit.starts[i], static_cast<int>(i), fit.best == int(i)));
+  }
+  SOFTID_RETURN_IF_ERROR(WriteCostHistoryPlot(dir / "cost_per_iteration.png", series));
+  report.files.push_back("cost_per_iteration.png");
+
+  SOFTID_ASSIGN_OR_RETURN(geometry::TriangleMesh mesh, capture::LoadCaptureMesh(capture));
+  SOFTID_ASSIGN_OR_RETURN(
+      Observations observations,
+      LoadObservations(capture, config.frames.first, config.frames.last, config.heldout_every));
+  std::unique_ptr<inverse::TrajectoryObjective> objective;
+  try {
+    objective = std::make_unique<inverse::TrajectoryObjective>(
+        mesh, capture.fixed_region, p, inverse::SimulationOptionsFor(config),
+        inverse::CostOptionsFor(config),
+        std::make_shared<const std::vector<inverse::ObservedFrame>>(observations.frames),
+        capture.fps, config.substeps);
+  } catch (const std::invalid_argument& e) {
+    return Status::InvalidArgument(e.what());
+  }
+  SOFTID_ASSIGN_OR_RETURN(auto matches, objective->MatchPoints(p));
+  fem::Simulator& sim = objective->simulator();
+  const Eigen::Vector3d up = -p.gravity.normalized();
+  const ResidualMap map =
+      BuildResidualMap(observations, matches, MakePatches(sim.rest_surface(), kPatches, up),
+                       config.cost.truncation_cells * sim.hex_mesh().CellSize());
+  SOFTID_ASSIGN_OR_RETURN(const NoiseFloor floor, EstimateNoiseFloor(map, options.noise_floor));
+  report.noise_floor_m = floor.sigma;
+
+  std::vector<FrameAt> times;
+  std::vector<int> frames;
+  std::vector<double> normalised;
+  for (const FrameResiduals& f : map.frames) {
+    times.push_back({f.frame, f.time});
+    frames.push_back(f.frame);
+    normalised.push_back(f.misfit / floor.sigma);
+  }
+  SOFTID_ASSIGN_OR_RETURN(const std::vector<FrameMotion> motion,
+                          SplitMotionPhases(sim, p, times, options.phases));
+  SOFTID_RETURN_IF_ERROR(WriteFrameMisfitPlot(dir / "residual_per_frame.png", frames, normalised,
+                                              {}, motion, options.misfit_threshold,
+                                              "fitted simulation"));
+  report.files.push_back("residual_per_frame.png");
+
+  const std::vector<int> wanted = SnapshotIndices(map, options.snapshots);
+  SOFTID_ASSIGN_OR_RETURN(std::vector<geometry::TriangleMesh> surfaces,
+                          SurfacesAt(sim, p, observations, wanted));
+  std::vector<SurfaceSnapshot> snapshots;
+  for (size_t i = 0; i < wanted.size(); ++i) {
+    const FrameResiduals& f = map.frames[wanted[i]];
+    snapshots.push_back({f.frame, f.time, std::move(surfaces[i]),
+                         observations.frames[wanted[i]].points, f.phi, f.matched});
+    report.snapshot_frames.push_back(f.frame);
+  }
+  SurfaceOverlayView view;
+  view.up_W = up;
+  view.front_W = FrontDirection(capture, up);
+  view.noise_floor_m = floor.sigma;
+  view.ground = p.ground;
+  SOFTID_RETURN_IF_ERROR(WriteSurfaceOverlay(dir / "surface_overlay.png", snapshots, view));
+  report.files.push_back("surface_overlay.png");
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
+  return report;
+}
+
+nlohmann::json ToJson(const FitReport& report) {
+  return {{"files", report.files},
+          {"noise_floor_m", report.noise_floor_m},
+          {"snapshot_frames", report.snapshot_frames},
+          {"seconds", report.seconds}};
+}
+
+}  // namespace softid::diagnosis
