@@ -32,19 +32,27 @@ bool IsEmptyTarget(const fs::path& directory, std::string* error) {
 }
 
 bool CaptureDownload::Begin(const v1::Capture& capture, std::string* error) {
-  if (!IsEmptyTarget(directory_, error)) return false;
+  std::vector<ExpectedFile> files;
   for (const v1::CaptureFile& file : capture.files()) {
-    if (!IsSafeRelativePath(file.path())) {
-      *error = "files: \"" + file.path() + "\": not a relative path inside the folder; refused";
+    files.push_back({file.path(), file.size_bytes(), file.sha256()});
+  }
+  return Begin(files, error);
+}
+
+bool CaptureDownload::Begin(const std::vector<ExpectedFile>& files, std::string* error) {
+  if (!IsEmptyTarget(directory_, error)) return false;
+  for (const ExpectedFile& file : files) {
+    if (!IsSafeRelativePath(file.path)) {
+      *error = "files: \"" + file.path + "\": not a relative path inside the folder; refused";
       return false;
     }
-    if (file.size_bytes() < 0 || !files_.emplace(file.path(), File{}).second) {
-      *error = "files: \"" + file.path() + "\": listed twice or with a negative size";
+    if (file.size_bytes < 0 || !files_.emplace(file.path, File{}).second) {
+      *error = "files: \"" + file.path + "\": listed twice or with a negative size";
       return false;
     }
-    File& entry = files_[file.path()];
-    entry.size_bytes = file.size_bytes();
-    entry.sha256 = file.sha256();
+    File& entry = files_[file.path];
+    entry.size_bytes = file.size_bytes;
+    entry.sha256 = file.sha256;
   }
   std::error_code code;
   created_ = !fs::exists(directory_, code);
@@ -60,7 +68,7 @@ bool CaptureDownload::Begin(const v1::Capture& capture, std::string* error) {
 bool CaptureDownload::AddChunk(const v1::FileChunk& chunk, std::string* error) {
   auto it = files_.find(chunk.path());
   if (it == files_.end()) {
-    *error = "chunk.path: \"" + chunk.path() + "\" is not a file of the capture";
+    *error = "chunk.path: \"" + chunk.path() + "\" is not a file listed for the download";
     return false;
   }
   File& file = it->second;
@@ -100,6 +108,7 @@ bool CaptureDownload::Finish(std::string* error) {
                std::to_string(file.size_bytes) + " bytes arrived";
       return false;
     }
+    if (file.sha256.empty()) continue;  // a report's file: its size is all that is listed
     std::string hex;
     int64_t size = 0;
     if (!Sha256OfFile(directory_ / path, &hex, &size) || hex != file.sha256) {

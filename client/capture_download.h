@@ -1,4 +1,5 @@
-// Writes a capture the server sends (DownloadCapture) into a local folder. The folder must not
+// Writes files the server sends (a capture by DownloadCapture, a job's report by
+// DownloadArtifact) into a local folder. The folder must not
 // exist or be empty, so nothing of the user's is overwritten; every path the server names must
 // stay inside it (relative, no "." or ".." segments), so a faulty or hostile server cannot write
 // elsewhere; each file's bytes must arrive in order and match the size and sha256 listed.
@@ -11,6 +12,7 @@
 #include <map>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "softid/v1/softid.pb.h"
 
@@ -23,6 +25,13 @@ bool IsSafeRelativePath(std::string_view path);
 // True when `directory` does not exist or is an empty folder; otherwise false with `error`.
 bool IsEmptyTarget(const std::filesystem::path& directory, std::string* error);
 
+// A file a download expects: its path inside the folder, size and (when known) sha256.
+struct ExpectedFile {
+  std::string path;
+  int64_t size_bytes = 0;
+  std::string sha256;  // lowercase hex; empty: not checked
+};
+
 class CaptureDownload {
  public:
   explicit CaptureDownload(std::filesystem::path directory) : directory_(std::move(directory)) {}
@@ -33,6 +42,7 @@ class CaptureDownload {
   // Checks the target (IsEmptyTarget) and every listed path, then creates the folder. False with
   // `error` naming the path otherwise; nothing is written then.
   bool Begin(const v1::Capture& capture, std::string* error);
+  bool Begin(const std::vector<ExpectedFile>& files, std::string* error);
   // Appends a chunk of a listed file at the offset its bytes so far end at.
   bool AddChunk(const v1::FileChunk& chunk, std::string* error);
   // Every listed file arrived complete with its listed sha256.

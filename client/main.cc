@@ -367,12 +367,20 @@ void PrintIngestSummary(const nlohmann::json& ingest, const std::string& derived
 
 // The result of a job: a table of the typed parameters with their 1-sigma (or, with --json and
 // no -o, result.json itself), after an ingest summary for a job on a recording; -o also writes
-// result.json; --truth compares with a truth.json.
+// result.json; --truth compares with a truth.json; --report downloads the job's pictures.
 int ShowResult(ReconstructionClient& client, const std::string& job_id, const std::string& out_file,
-               const std::string& truth_file, const GlobalFlags& flags) {
+               const std::string& truth_file, const std::string& report_dir,
+               const GlobalFlags& flags) {
   v1::Result r;
   const grpc::Status s = client.GetResult(job_id, &r);
   if (!s.ok()) return Report(s, flags);
+  if (!report_dir.empty()) {
+    const grpc::Status downloaded = client.DownloadReport(r, report_dir);
+    if (!downloaded.ok()) return Report(downloaded, flags);
+    if (!flags.json) {
+      std::printf("report: %d file(s) written to %s\n", r.artifacts_size(), report_dir.c_str());
+    }
+  }
   const nlohmann::json parsed = nlohmann::json::parse(r.result_json(), nullptr, false);
   if (parsed.is_discarded()) {
     std::fprintf(stderr, "softid: job %s: the server sent a result that is not JSON\n",
@@ -519,7 +527,7 @@ int main(int argc, char** argv) {
   app.add_option("--tls-key", flags.tls.key_file, "the client certificate's private key (PEM)")
       ->envname("SOFTID_TLS_KEY");
 
-  std::string capture_dir, config_file, request_id, job_id, out_file, truth_file, state;
+  std::string capture_dir, config_file, request_id, job_id, out_file, truth_file, report_dir, state;
   bool wait = false;
   std::string capture_id;
   CLI::App* submit =
@@ -547,6 +555,8 @@ int main(int argc, char** argv) {
   result->add_option("-o,--out", out_file, "also write result.json here");
   result->add_option("--truth", truth_file,
                      "print the fitted parameters next to this truth.json (softid-lab synth)");
+  result->add_option("--report", report_dir,
+                     "download the job's report (PNG plots) into this new or empty folder");
   CLI::App* list = app.add_subcommand("list", "list jobs");
   list->add_option("--state", state, "QUEUED, RUNNING, SUCCEEDED, FAILED or CANCELLED");
   CLI::App* cancel = app.add_subcommand("cancel", "cancel a job");
@@ -617,7 +627,7 @@ int main(int argc, char** argv) {
     if (!flags.json) std::cout << (job ? job_id : capture_id) << " deleted\n";
     return kExitOk;
   }
-  if (result->parsed()) return ShowResult(client, job_id, out_file, truth_file, flags);
+  if (result->parsed()) return ShowResult(client, job_id, out_file, truth_file, report_dir, flags);
   if (list->parsed()) {
     v1::ListJobsRequest request;
     if (!state.empty()) {

@@ -70,6 +70,12 @@ ReconstructionClient::ReconstructionClient(std::shared_ptr<grpc::Channel> channe
       stub_(v1::Reconstruction::NewStub(channel_)),
       options_(options) {}
 
+void ReconstructionClient::Prepare(grpc::ClientContext* context,
+                                   std::chrono::milliseconds timeout) const {
+  SetDeadline(context, timeout);
+  if (!options_.token.empty()) context->AddMetadata("authorization", "Bearer " + options_.token);
+}
+
 grpc::Status ReconstructionClient::WithRetry(
     std::chrono::milliseconds timeout,
     const std::function<grpc::Status(grpc::ClientContext*)>& call) {
@@ -77,8 +83,7 @@ grpc::Status ReconstructionClient::WithRetry(
   std::chrono::milliseconds backoff = options_.initial_backoff;
   while (true) {
     grpc::ClientContext context;
-    SetDeadline(&context, timeout);
-    if (!options_.token.empty()) context.AddMetadata("authorization", "Bearer " + options_.token);
+    Prepare(&context, timeout);
     grpc::Status status = call(&context);
     if (status.error_code() != grpc::StatusCode::UNAVAILABLE || Clock::now() + backoff > give_up) {
       return status;
@@ -167,6 +172,43 @@ grpc::Status ReconstructionClient::DownloadCapture(const std::string& capture_id
     if (!status.ok()) download.Discard();
     return status;
   });
+}
+
+grpc::Status ReconstructionClient::DownloadReport(const v1::Result& result,
+                                                  const std::filesystem::path& directory) {
+  std::vector<ExpectedFile> files;
+  for (const v1::Artifact& artifact : result.artifacts()) {
+    files.push_back({artifact.name(), artifact.size_bytes(), ""});
+  }
+  std::string error;
+  CaptureDownload download(directory);
+  if (!download.Begin(files, &error)) {
+    return grpc::Status(grpc::StatusCode::FAILED_PRECONDITION, error);
+  }
+  for (const v1::Artifact& artifact : result.artifacts()) {
+    v1::DownloadArtifactRequest request;
+    request.set_job_id(result.job_id());
+    request.set_name(artifact.name());
+    // One attempt per file: a retry after a cut would append to what arrived.
+    grpc::ClientContext context;
+    Prepare(&context, options_.upload_timeout);
+    std::unique_ptr<grpc::ClientReader<v1::FileChunk>> reader =
+        stub_->DownloadArtifact(&context, request);
+    v1::FileChunk chunk;
+    bool ok = true;
+    while (ok && reader->Read(&chunk)) ok = download.AddChunk(chunk, &error);
+    if (!ok) context.TryCancel();
+    const grpc::Status status = reader->Finish();
+    if (!ok || !status.ok()) {
+      download.Discard();
+      return ok ? status : grpc::Status(grpc::StatusCode::DATA_LOSS, error);
+    }
+  }
+  if (!download.Finish(&error)) {
+    download.Discard();
+    return grpc::Status(grpc::StatusCode::DATA_LOSS, error);
+  }
+  return grpc::Status::OK;
 }
 
 grpc::Status ReconstructionClient::CreateJob(const v1::CreateJobRequest& request, v1::Job* out) {

@@ -60,6 +60,9 @@ class ReconstructionClient {
   grpc::Status DownloadCapture(const std::string& capture_id,
                                const std::filesystem::path& directory, v1::Capture* out);
   grpc::Status GetResult(const std::string& job_id, v1::Result* out);
+  // Downloads every file of the job's report (result.artifacts, from GetResult) into `directory`
+  // (absent or empty), as DownloadCapture does: on any error nothing of it is left there.
+  grpc::Status DownloadReport(const v1::Result& result, const std::filesystem::path& directory);
   // Calls `on_event` for every event until the job is terminal (OK). Resumes after a cut from the
   // last iteration seen, skipping events already delivered (by seq).
   grpc::Status WatchJob(const std::string& job_id, int from_iteration,
@@ -68,6 +71,8 @@ class ReconstructionClient {
   grpc::Status Health(const std::string& service, ServingStatus* out);
 
  private:
+  // The call's deadline and the station's token.
+  void Prepare(grpc::ClientContext* context, std::chrono::milliseconds timeout) const;
   // Runs `call` with a fresh deadline until it returns something other than UNAVAILABLE or the
   // retry budget is spent.
   grpc::Status WithRetry(std::chrono::milliseconds timeout,

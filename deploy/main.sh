@@ -81,7 +81,8 @@ echo "== watch"
 "${softid[@]}" watch "$job"
 
 echo "== result (recovered vs truth)"
-"${softid[@]}" result "$job" -o "$work/result.json" --truth "$work/capture/truth.json"
+"${softid[@]}" result "$job" -o "$work/result.json" --truth "$work/capture/truth.json" \
+  --report "$work/report"
 
 echo "== stop softid-server (SIGTERM)"
 kill -TERM "$server_pid"
@@ -94,4 +95,4 @@ if [ "$server_status" -ne 0 ]; then
 fi
 echo "softid-server stopped cleanly"
 echo
-echo "files: $work (capture/, data/, job.json, result.json, server.log)"
+echo "files: $work (capture/, data/, job.json, result.json, report/*.png, server.log)"

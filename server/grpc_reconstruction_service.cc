@@ -249,7 +249,30 @@ grpc::Status GrpcReconstructionService::GetResult(grpc::ServerContext* context,
   for (int frame : result->cost_history_last_frame) response->add_cost_history_last_frame(frame);
   FittedParametersToProto(result->result, response);
   if (!result->ingest.is_null()) response->set_ingest_json(result->ingest.dump());
+  for (const ReportFile& file : result->artifacts) {
+    v1::Artifact* artifact = response->add_artifacts();
+    artifact->set_name(file.name);
+    artifact->set_media_type(file.media_type);
+    artifact->set_size_bytes(file.size_bytes);
+  }
   return grpc::Status::OK;
+}
+
+grpc::Status GrpcReconstructionService::DownloadArtifact(
+    grpc::ServerContext* context, const v1::DownloadArtifactRequest* request,
+    grpc::ServerWriter<v1::FileChunk>* writer) {
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("DownloadArtifact", caller.status());
+  v1::FileChunk chunk;
+  return Reply("DownloadArtifact",
+               service_->DownloadArtifact(
+                   *caller, request->job_id(), request->name(),
+                   [&](const std::string& path, int64_t offset_bytes, std::string_view data) {
+                     chunk.set_path(path);
+                     chunk.set_offset_bytes(offset_bytes);
+                     chunk.set_data(data.data(), data.size());
+                     return !context->IsCancelled() && writer->Write(chunk);
+                   }));
 }
 
 }  // namespace softid::server

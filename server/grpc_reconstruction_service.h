@@ -56,6 +56,9 @@ class GrpcReconstructionService final : public v1::Reconstruction::Service {
                         grpc::ServerWriter<v1::JobEvent>* writer) override;
   grpc::Status GetResult(grpc::ServerContext* context, const v1::GetResultRequest* request,
                          v1::Result* response) override;
+  grpc::Status DownloadArtifact(grpc::ServerContext* context,
+                                const v1::DownloadArtifactRequest* request,
+                                grpc::ServerWriter<v1::FileChunk>* writer) override;
 
  private:
   // The gRPC status of `status` for `method`, redacted and logged when it is not OK.

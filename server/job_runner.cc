@@ -9,6 +9,7 @@
 
 #include "core/capture/capture.h"
 #include "core/diagnosis/diagnose.h"
+#include "core/diagnosis/fit_report.h"
 #include "core/diagnosis/report.h"
 #include "core/inverse/fit.h"
 #include "core/inverse/fit_uncertainty.h"
@@ -106,12 +107,14 @@ struct WorkFolder {
 
 // The diagnosis of a finished fit ("diagnose": true): its stages are recorded as notes in the
 // job's progress history, and its report goes into the result as "diagnosis". A diagnosis that
-// fails leaves the fit's result standing, with {"error": ...} as its report. No plots: the
-// report's numbers are what a client downloads.
+// fails leaves the fit's result standing, with {"error": ...} as its report. Its plots go into
+// the job's report folder (report_dir/diagnosis).
 nlohmann::json RunDiagnosis(const store::Job& job, const capture::Capture& capture,
                             const inverse::JobConfig& config, const inverse::FitResult& fit,
-                            std::atomic<bool>& cancel, const JobRunnerContext& context) {
+                            std::atomic<bool>& cancel, const JobRunnerContext& context,
+                            const fs::path& report_dir) {
   diagnosis::DiagnoseOptions options;
+  if (context.reports != nullptr) options.plot_directory = report_dir / "diagnosis";
   options.fit.cancel = &cancel;
   options.on_stage = [&](const std::string& stage) {
     store::ProgressEvent note;
@@ -130,6 +133,36 @@ nlohmann::json RunDiagnosis(const store::Job& job, const capture::Capture& captu
   }
   context.logger->info("job {}: diagnosis: {}", job.id, report->decision);
   return diagnosis::ToJson(*report);
+}
+
+// The fit's pictures into `dir` (core/diagnosis/fit_report.h); what result.json records of them,
+// or {"error": ...} when they could not be drawn (the fitted values stand).
+nlohmann::json DrawReport(const store::Job& job, const capture::Capture& capture,
+                          const inverse::JobConfig& config, const inverse::FitResult& fit,
+                          std::atomic<bool>& cancel, const JobRunnerContext& context,
+                          const fs::path& dir) {
+  diagnosis::FitReportOptions options;
+  options.cancel = &cancel;
+  Result<diagnosis::FitReport> report =
+      diagnosis::WriteFitReport(capture, config, fit, dir, options);
+  if (!report.ok()) {
+    context.logger->warn("job {}: no report: {}", job.id, report.status().message());
+    return {{"error", report.status().message()}};
+  }
+  context.logger->info("job {}: report drawn in {:.1f} s", job.id, report->seconds);
+  return diagnosis::ToJson(*report);
+}
+
+// Moves the report folder (when anything was drawn) to the job's kept report, before the job is
+// marked SUCCEEDED so that a client who sees the result can download its files.
+void KeepReport(const store::Job& job, const fs::path& dir, const JobRunnerContext& context,
+                nlohmann::json* result_json) {
+  std::error_code ignored;
+  if (context.reports == nullptr || !fs::exists(dir, ignored)) return;
+  if (Status kept = context.reports->Keep(job.id, dir); !kept.ok()) {
+    context.logger->warn("job {}: report not kept: {}", job.id, kept.message());
+    (*result_json)["report"] = {{"error", "the report could not be stored"}};
+  }
 }
 
 // The capture the job fits, laid out in `dir` and read: the job's capture, or for a recording the
@@ -201,8 +234,10 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   bool lost = false;
   bool cancel_requested = false;
   Result<inverse::FitResult> result = Status::Internal("the fit did not run");
-  nlohmann::json ingest_json;                          // a job on a recording only
-  nlohmann::json diagnosis_json;                       // "diagnose": true only
+  nlohmann::json ingest_json;     // a job on a recording only
+  nlohmann::json diagnosis_json;  // "diagnose": true only
+  nlohmann::json report_json;     // the pictures (core/diagnosis/fit_report.h)
+  const fs::path report_dir = folder.path / "report";
   std::optional<inverse::FitUncertainty> uncertainty;  // "uncertainty": true (the default)
   std::string uncertainty_error;
   Status prepared;
@@ -263,7 +298,10 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
       }
     }
     if (result.ok() && !result->cancelled && config->diagnose) {
-      diagnosis_json = RunDiagnosis(job, *capture, *config, *result, cancel, context);
+      diagnosis_json = RunDiagnosis(job, *capture, *config, *result, cancel, context, report_dir);
+    }
+    if (result.ok() && !result->cancelled && !cancel.load() && context.reports != nullptr) {
+      report_json = DrawReport(job, *capture, *config, *result, cancel, context, report_dir);
     }
     lost = heartbeat.lost();
     cancel_requested = heartbeat.cancel_requested();
@@ -303,8 +341,11 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
       inverse::ToJson(*result, uncertainty ? &*uncertainty : nullptr, uncertainty_error);
   if (!diagnosis_json.is_null()) result_json["diagnosis"] = std::move(diagnosis_json);
   if (!ingest_json.is_null()) result_json["ingest"] = std::move(ingest_json);
+  if (!report_json.is_null()) result_json["report"] = std::move(report_json);
+  KeepReport(job, report_dir, context, &result_json);
   if (Status completed = context.jobs->CompleteJob(job.id, result_json); !completed.ok()) {
     log->error("job {}: cannot record the result: {}", job.id, completed.message());
+    if (context.reports != nullptr) context.reports->Remove(job.id);
     context.events->Notify(job.id);
     return JobOutcome::kFailed;
   }

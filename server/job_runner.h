@@ -15,6 +15,7 @@
 #include <string>
 
 #include "server/job_events.h"
+#include "server/job_reports.h"
 #include "server/metrics.h"
 #include "server/store/blob_store.h"
 #include "server/store/job_store.h"
@@ -41,6 +42,8 @@ struct JobRunnerContext {
   // Held shared while the capture ingested from a recording is stored (JobServiceOptions::
   // blob_puts); may be null when nothing removes blobs meanwhile.
   std::shared_mutex* blob_puts = nullptr;
+  // Where a finished job's report (its PNGs) is kept; null: no report is drawn.
+  const JobReports* reports = nullptr;
 };
 
 enum class JobOutcome {

@@ -270,6 +270,24 @@ ServiceStatus JobService::DeleteCapture(const Caller& caller, const std::string&
   return ServiceStatus::Ok();
 }
 
+namespace {
+
+// Sends the rest of `in` as chunks of `path` of at most buffer.size() bytes (an empty file as one
+// empty chunk, so the receiver creates it); *sent counts the bytes. False when `send` does.
+bool SendChunks(std::istream& in, const std::string& path, std::string& buffer,
+                const JobService::ChunkSink& send, int64_t* sent) {
+  do {
+    in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+    const std::string_view data(buffer.data(), static_cast<size_t>(in.gcount()));
+    if (data.empty() && *sent > 0) break;
+    if (!send(path, *sent, data)) return false;
+    *sent += static_cast<int64_t>(data.size());
+  } while (in);
+  return true;
+}
+
+}  // namespace
+
 ServiceStatus JobService::DownloadCapture(const Caller& caller, const std::string& capture_id,
                                           const CaptureSink& send_capture,
                                           const ChunkSink& send_chunk) {
@@ -287,21 +305,31 @@ ServiceStatus JobService::DownloadCapture(const Caller& caller, const std::strin
                                                        "\": " + in.status().message());
     }
     int64_t offset = 0;
-    // An empty file still gets one (empty) chunk, so the receiver creates it.
-    do {
-      in->read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
-      const std::string_view data(buffer.data(), static_cast<size_t>(in->gcount()));
-      if (data.empty() && offset > 0) break;
-      if (!send_chunk(entry.path, offset, data)) {
-        return ServiceStatus(ServiceCode::kCancelled, "the caller left");
-      }
-      offset += static_cast<int64_t>(data.size());
-    } while (*in);
+    if (!SendChunks(*in, entry.path, buffer, send_chunk, &offset)) {
+      return ServiceStatus(ServiceCode::kCancelled, "the caller left");
+    }
     if (offset != entry.size_bytes) {
       return ServiceStatus(ServiceCode::kInternal,
                            fmt::format("capture {}: \"{}\": the blob has {} bytes, not {}",
                                        capture_id, entry.path, offset, entry.size_bytes));
     }
+  }
+  return ServiceStatus::Ok();
+}
+
+ServiceStatus JobService::DownloadArtifact(const Caller& caller, const std::string& job_id,
+                                           const std::string& name, const ChunkSink& send_chunk) {
+  ServiceResult<JobResult> result = GetResult(caller, job_id);
+  if (!result.ok()) return result.status();
+  if (options_.reports == nullptr) {
+    return ServiceStatus(ServiceCode::kNotFound, "job " + job_id + " has no report");
+  }
+  Result<std::ifstream> in = options_.reports->Open(job_id, name);
+  if (!in.ok()) return in.status();
+  std::string buffer(static_cast<size_t>(options_.upload_limits.max_chunk_bytes), '\0');
+  int64_t sent = 0;
+  if (!SendChunks(*in, name, buffer, send_chunk, &sent)) {
+    return ServiceStatus(ServiceCode::kCancelled, "the caller left");
   }
   return ServiceStatus::Ok();
 }
@@ -372,6 +400,7 @@ ServiceStatus JobService::DeleteJob(const Caller& caller, const std::string& job
     return visible.status();
   }
   if (Status deleted = jobs_->DeleteJob(job_id); !deleted.ok()) return deleted;
+  if (options_.reports != nullptr) options_.reports->Remove(job_id);
   events_->Notify(job_id);
   logger_->info("job {}: deleted", job_id);
   return ServiceStatus::Ok();
@@ -385,7 +414,8 @@ ServiceResult<JobResult> JobService::GetResult(const Caller& caller, const std::
                          "job " + job_id + " is " + store::ToString(job->state) +
                              ": a result exists once it SUCCEEDED");
   }
-  JobResult out{job_id, *job->result, {}, {}, {}};
+  JobResult out{job_id, *job->result, {}, {}, {}, {}};
+  if (options_.reports != nullptr) out.artifacts = options_.reports->List(job_id);
   if (auto it = job->result->find("ingest"); it != job->result->end()) out.ingest = *it;
   if (auto it = job->result->find("cost_history"); it != job->result->end() && it->is_array()) {
     for (const nlohmann::json& cost : *it) {

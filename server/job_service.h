@@ -23,6 +23,7 @@
 #include "server/caller.h"
 #include "server/capture_upload.h"
 #include "server/job_events.h"
+#include "server/job_reports.h"
 #include "server/metrics.h"
 #include "server/rate_limiter.h"
 #include "server/service_status.h"
@@ -65,6 +66,8 @@ struct JobServiceOptions {
   // blobs are removed; shared with the workers, which store the captures they ingest. Null: the
   // service's own (nothing else puts blobs).
   std::shared_mutex* blob_puts = nullptr;
+  // The finished jobs' reports (served by DownloadArtifact, removed with their jobs); null: none.
+  const JobReports* reports = nullptr;
 };
 
 // What GetResult returns.
@@ -75,6 +78,7 @@ struct JobResult {
   std::vector<int> cost_history_last_frame;  // result["cost_history_last_frame"]
   // result["ingest"] (the ingest report of a job on a recording); null otherwise.
   nlohmann::json ingest;
+  std::vector<ReportFile> artifacts;  // the files of the job's report
 };
 
 class JobService {
@@ -128,6 +132,13 @@ class JobService {
       std::function<bool(const std::string& path, int64_t offset_bytes, std::string_view data)>;
   ServiceStatus DownloadCapture(const Caller& caller, const std::string& capture_id,
                                 const CaptureSink& send_capture, const ChunkSink& send_chunk);
+
+  // The bytes of file `name` of a SUCCEEDED job's report (JobResult::artifacts) in chunks of at
+  // most upload_limits.max_chunk_bytes, until done (OK) or `send_chunk` returns false
+  // (Cancelled). NotFound for a name the job's report does not list (or another station's job);
+  // FailedPrecondition unless the job SUCCEEDED.
+  ServiceStatus DownloadArtifact(const Caller& caller, const std::string& job_id,
+                                 const std::string& name, const ChunkSink& send_chunk);
 
   // Counts a call against the caller's request rate: ResourceExhausted when it is over.
   ServiceStatus Admit(const Caller& caller);

@@ -167,6 +167,7 @@ struct Server::Parts {
   Metrics metrics;  // before everything that counts into it
   // Orders blob puts (uploads, ingests) with removals of unreferenced blobs.
   std::shared_mutex blob_puts;
+  std::optional<JobReports> reports;  // <data>/reports
   std::unique_ptr<WorkerPool> pool;
   std::unique_ptr<JobService> service;
   std::unique_ptr<Authenticator> authenticator;
@@ -223,6 +224,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   }
 
   RemoveOrphanBlobs(*parts->jobs, *parts->blobs, log);
+  parts->reports.emplace(options.data_dir / "reports");
 
   WorkerPoolOptions pool_options;
   pool_options.num_workers = options.num_workers;
@@ -233,6 +235,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   pool_options.worker_id_prefix = HostName() + "-" + std::to_string(::getpid());
   pool_options.metrics = &parts->metrics;
   pool_options.blob_puts = &parts->blob_puts;
+  pool_options.reports = &*parts->reports;
   parts->pool = std::make_unique<WorkerPool>(parts->jobs.get(), &*parts->blobs, &parts->events,
                                              pool_options, parts->logger);
 
@@ -244,6 +247,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   service_options.quotas = options.quotas;
   service_options.metrics = &parts->metrics;
   service_options.blob_puts = &parts->blob_puts;
+  service_options.reports = &*parts->reports;
   service_options.job_limits.max_memory_bytes = options.max_job_memory_bytes;
   service_options.job_limits.max_wall_seconds =
       static_cast<double>(options.max_job_wall_time.count());

@@ -24,6 +24,7 @@ WorkerPool::WorkerPool(store::JobStore* jobs, const store::BlobStore* blobs, Job
   context_.logger = logger ? std::move(logger) : spdlog::default_logger();
   context_.metrics = options_.metrics;
   context_.blob_puts = options_.blob_puts;
+  context_.reports = options_.reports;
   if (options_.metrics != nullptr) options_.metrics->SetWorkers(options_.num_workers);
 }
 

@@ -44,6 +44,8 @@ struct WorkerPoolOptions {
   Metrics* metrics = nullptr;
   // See JobRunnerContext::blob_puts; may be null.
   std::shared_mutex* blob_puts = nullptr;
+  // See JobRunnerContext::reports; may be null.
+  const JobReports* reports = nullptr;
 };
 
 class WorkerPool {

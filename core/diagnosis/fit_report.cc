@@ -27,19 +27,23 @@ Series StartCostSeries(const inverse::StartResult& start, int index, bool best) 
   return out;
 }
 
-// Indices into the observed frames: the worst-fitting one and the rest spread evenly after the
-// release (frame index 0 shows the given rest pose), ascending and distinct.
+// Indices into the observed frames: `count` spread evenly after the release (index 0 shows the
+// given rest pose) up to the last, the one nearest the worst-fitting frame replaced by it;
+// ascending and distinct.
 std::vector<int> SnapshotIndices(const ResidualMap& map, int count) {
   const int n = static_cast<int>(map.frames.size());
   int worst = 0;
   for (int k = 0; k < n; ++k)
     if (map.frames[k].misfit > map.frames[worst].misfit) worst = k;
-  std::vector<int> out = {worst};
-  for (int i = 1; static_cast<int>(out.size()) < std::min(count, n) && i <= 4 * count; ++i) {
-    const int k = std::min(n - 1, static_cast<int>(std::lround(i * (n - 1.0) / count)));
-    if (std::find(out.begin(), out.end(), k) == out.end()) out.push_back(k);
-  }
+  std::vector<int> out;
+  for (int i = 1; i <= count; ++i)
+    out.push_back(static_cast<int>(std::lround(i * (n - 1.0) / count)));
+  const auto nearest = std::min_element(out.begin(), out.end(), [&](int a, int b) {
+    return std::abs(a - worst) < std::abs(b - worst);
+  });
+  *nearest = worst;
   std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
   return out;
 }
 
@@ -120,6 +124,7 @@ Result<FitReport> WriteFitReport(const capture::Capture& capture,
   } catch (const std::invalid_argument& e) {
     return Status::InvalidArgument(e.what());
   }
+  objective->SetCancelFlag(options.cancel);
   SOFTID_ASSIGN_OR_RETURN(auto matches, objective->MatchPoints(p));
   fem::Simulator& sim = objective->simulator();
   const Eigen::Vector3d up = -p.gravity.normalized();

@@ -4,6 +4,7 @@
 // server stores the folder with the job and serves its files (DownloadArtifact).
 #pragma once
 
+#include <atomic>
 #include <filesystem>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -26,6 +27,8 @@ struct FitReportOptions {
   double misfit_threshold = 1.5;
   NoiseFloorOptions noise_floor;
   MotionPhaseOptions phases;
+  // Checked during the residuals' simulation: set, the report stops with Cancelled. Null: never.
+  const std::atomic<bool>* cancel = nullptr;
 
   Status Validate() const;
 };

@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <functional>
 #include <map>
 #include <memory>
@@ -177,6 +178,59 @@ TEST_F(GrpcServerTest, JobRunsFromUploadToResult) {
   client::ServingStatus serving = client::ServingStatus::kUnknown;
   ASSERT_TRUE(client_->Health("", &serving).ok());
   EXPECT_EQ(serving, client::ServingStatus::kServing);
+}
+
+// A finished job's report: listed in the result, downloaded into a new folder as PNGs of the
+// listed sizes, refused for names it does not list (no path leaves the report), gone with the job.
+TEST_F(GrpcServerTest, ReportIsListedDownloadedAndDeletedWithTheJob) {
+  StartServer(/*num_workers=*/1);
+  const v1::Job job = CreateJob(Upload().id(), FitConfig(/*max_iterations=*/1));
+  ASSERT_TRUE(client_->WatchJob(job.id(), 0, [](const v1::JobEvent&) {}).ok());
+  v1::Result result;
+  ASSERT_TRUE(client_->GetResult(job.id(), &result).ok());
+  std::vector<std::string> names;
+  for (const v1::Artifact& artifact : result.artifacts()) {
+    names.push_back(artifact.name());
+    EXPECT_EQ(artifact.media_type(), "image/png");
+  }
+  EXPECT_EQ(names, (std::vector<std::string>{"cost_per_iteration.png", "residual_per_frame.png",
+                                             "surface_overlay.png"}));
+  EXPECT_EQ(nlohmann::json::parse(result.result_json())["report"]["files"].size(), 3u);
+
+  TempDir local;
+  const fs::path into = local.path() / "report";
+  const grpc::Status downloaded = client_->DownloadReport(result, into);
+  ASSERT_TRUE(downloaded.ok()) << downloaded.error_message();
+  for (const v1::Artifact& artifact : result.artifacts()) {
+    const fs::path file = into / artifact.name();
+    ASSERT_TRUE(fs::exists(file)) << file;
+    EXPECT_EQ(static_cast<int64_t>(fs::file_size(file)), artifact.size_bytes());
+    std::ifstream in(file, std::ios::binary);
+    std::string magic(8, '\0');
+    in.read(magic.data(), 8);
+    EXPECT_EQ(magic, std::string("\x89PNG\r\n\x1a\n", 8)) << file;
+  }
+  // A second download into the same (now full) folder is refused and leaves it as it was.
+  EXPECT_EQ(client_->DownloadReport(result, into).error_code(),
+            grpc::StatusCode::FAILED_PRECONDITION);
+
+  for (const std::string& name : {"../softid.db", "/etc/passwd", "missing.png", ""}) {
+    // The server is asked for `name` directly: the client's own path check is not what stops it.
+    v1::DownloadArtifactRequest request;
+    request.set_job_id(job.id());
+    request.set_name(name);
+    auto channel = grpc::CreateChannel("localhost:" + std::to_string(server_->port()),
+                                       grpc::InsecureChannelCredentials());
+    auto stub = v1::Reconstruction::NewStub(channel);
+    grpc::ClientContext context;
+    auto reader = stub->DownloadArtifact(&context, request);
+    v1::FileChunk chunk;
+    EXPECT_FALSE(reader->Read(&chunk)) << name;
+    EXPECT_EQ(reader->Finish().error_code(), grpc::StatusCode::NOT_FOUND) << name;
+  }
+
+  ASSERT_TRUE(client_->DeleteJob(job.id()).ok());
+  EXPECT_FALSE(fs::exists(data_.path() / "reports" / job.id()));
 }
 
 // The progress contract (softid.proto, WatchJob): every start sends iteration 0 and each of its
