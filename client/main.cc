@@ -20,11 +20,16 @@
 #include "client/capture_download.h"
 #include "client/capture_files.h"
 #include "client/channel_credentials.h"
+#include "client/progress_printer.h"
 #include "client/reconstruction_client.h"
+#include "client/text_format.h"
 
 namespace {
 
+using softid::client::Compact;
+using softid::client::ProgressPrinter;
 using softid::client::ReconstructionClient;
+using softid::client::StateName;
 namespace v1 = softid::v1;
 
 constexpr int kExitOk = 0;
@@ -83,10 +88,6 @@ int Report(const grpc::Status& status, const GlobalFlags& flags) {
   return ExitCodeOf(status);
 }
 
-std::string StateName(v1::JobState state) {
-  return v1::JobState_Name(state);
-}
-
 bool IsTerminal(v1::JobState state) {
   return state == v1::SUCCEEDED || state == v1::FAILED || state == v1::CANCELLED;
 }
@@ -118,90 +119,6 @@ void PrintJob(const v1::Job& job, const GlobalFlags& flags) {
   }
   if (!job.error().empty()) std::cout << "\n  error: " << job.error();
   std::cout << "\n";
-}
-
-std::string Compact(const nlohmann::json& value);
-
-// One live line for the job: start i of n, iteration of max, cost, current values, time left
-// (the fit's own estimate).
-class ProgressPrinter {
- public:
-  explicit ProgressPrinter(bool json) : json_(json) {}
-  void operator()(const v1::JobEvent& event) {
-    if (json_) {
-      nlohmann::json line = {{"seq", event.seq()},
-                             {"kind", v1::JobEvent::Kind_Name(event.kind())},
-                             {"iteration", event.iteration()},
-                             {"state", StateName(event.state())},
-                             {"elapsed_seconds", event.elapsed_seconds()},
-                             {"message", event.message()}};
-      if (event.kind() == v1::JobEvent::ITERATION) {
-        line["start"] = event.start();
-        line["num_starts"] = event.num_starts();
-        if (std::isfinite(event.remaining_seconds())) {
-          line["remaining_seconds"] = event.remaining_seconds();
-        }
-      }
-      if (std::isfinite(event.cost())) line["cost"] = event.cost();
-      if (!event.parameters_json().empty()) {
-        line["parameters"] = nlohmann::json::parse(event.parameters_json(), nullptr, false);
-      }
-      std::cout << line.dump() << std::endl;
-      return;
-    }
-    if (event.kind() == v1::JobEvent::STATE_CHANGE) {
-      if (on_line_) std::cout << "\n";
-      on_line_ = false;
-      std::cout << StateName(event.state());
-      if (!event.message().empty()) std::cout << ": " << event.message();
-      std::cout << std::endl;
-      return;
-    }
-    const int max = std::max(1, event.max_iterations());
-    const int width = 20;
-    const int filled = std::min(width, width * event.iteration() / max);
-    std::string values;
-    const nlohmann::json parameters =
-        nlohmann::json::parse(event.parameters_json(), nullptr, false);
-    if (parameters.is_object()) {
-      for (const auto& [name, value] : parameters.items()) {
-        values += "  " + name + "=" + Compact(value);
-      }
-    }
-    std::string left = "";
-    if (std::isfinite(event.remaining_seconds())) {
-      left = "  ~" + std::to_string(static_cast<long>(std::lround(event.remaining_seconds()))) +
-             " s left";
-    }
-    std::printf("\r\033[K[%s%s] start %d/%d  it %d/%d  cost %.4e%s%s",
-                std::string(filled, '#').c_str(), std::string(width - filled, ' ').c_str(),
-                event.start() + 1, std::max(1, event.num_starts()), event.iteration(), max,
-                event.cost(), values.c_str(), left.c_str());
-    std::fflush(stdout);
-    on_line_ = true;
-  }
-
- private:
-  bool json_;
-  bool on_line_ = false;
-};
-
-// "2.1e+04", "[0, 0, -9.81]", "n=[0, 0, 1] d=0": short forms of result.json and truth.json values.
-std::string Compact(const nlohmann::json& value) {
-  if (value.is_number()) {
-    char text[32];
-    std::snprintf(text, sizeof(text), "%.5g", value.get<double>());
-    return text;
-  }
-  if (value.is_array()) {
-    std::string out = "[";
-    for (size_t i = 0; i < value.size(); ++i) out += (i ? ", " : "") + Compact(value[i]);
-    return out + "]";
-  }
-  if (value.is_object() && value.contains("normal") && value.contains("offset")) {
-    return "n=" + Compact(value["normal"]) + " d=" + Compact(value["offset"]);
-  }
-  return value.dump();
 }
 
 // |recovered - truth| / |truth| for numbers, the same with Euclidean norms for vectors.
