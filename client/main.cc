@@ -413,6 +413,84 @@ int DownloadCapture(ReconstructionClient& client, const std::string& capture_id,
   return kExitOk;
 }
 
+// Uploads the folder (unless an uploaded capture is named) and queues a job on it; with `wait`,
+// follows it to its end.
+int Submit(ReconstructionClient& client, const std::string& capture_dir,
+           const std::string& config_file, const std::string& request_id, std::string capture_id,
+           bool wait, const GlobalFlags& flags) {
+  v1::CreateJobRequest create;
+  if (!config_file.empty()) {
+    std::ifstream in(config_file);
+    if (!in) {
+      std::fprintf(stderr, "softid: %s: cannot read the job config\n", config_file.c_str());
+      return kExitInvalidInput;
+    }
+    std::stringstream text;
+    text << in.rdbuf();
+    create.set_config_json(text.str());
+  }
+  if (capture_id.empty()) {
+    const int uploaded = UploadCaptureFolder(client, capture_dir, request_id, flags, &capture_id);
+    if (uploaded != kExitOk) return uploaded;
+  }
+  create.set_capture_id(capture_id);
+  create.set_request_id(request_id);
+  v1::Job job;
+  const grpc::Status s = client.CreateJob(create, &job);
+  if (!s.ok()) return Report(s, flags);
+  if (flags.json) {
+    std::cout << JobJson(job).dump() << "\n";
+  } else {
+    std::cout << "job " << job.id() << " " << StateName(job.state()) << " on capture " << capture_id
+              << "\n";
+  }
+  return wait ? WatchUntilDone(client, job.id(), flags) : kExitOk;
+}
+
+// The caller's jobs, all pages, optionally in one state.
+int ListJobs(ReconstructionClient& client, const std::string& state, const GlobalFlags& flags) {
+  v1::ListJobsRequest request;
+  if (!state.empty()) {
+    v1::JobState parsed;
+    if (!v1::JobState_Parse(state, &parsed) || parsed == v1::JOB_STATE_UNSPECIFIED) {
+      std::fprintf(stderr,
+                   "softid: --state = %s: must be QUEUED, RUNNING, SUCCEEDED, FAILED "
+                   "or CANCELLED\n",
+                   state.c_str());
+      return kExitInvalidInput;
+    }
+    request.set_state(parsed);
+  }
+  nlohmann::json all = nlohmann::json::array();
+  do {
+    v1::ListJobsResponse page;
+    grpc::Status s = client.ListJobs(request, &page);
+    if (!s.ok()) return Report(s, flags);
+    for (const v1::Job& job : page.jobs()) {
+      if (flags.json) {
+        all.push_back(JobJson(job));
+      } else {
+        PrintJob(job, flags);
+      }
+    }
+    request.set_page_token(page.next_page_token());
+  } while (!request.page_token().empty());
+  if (flags.json) std::cout << all.dump() << "\n";
+  return kExitOk;
+}
+
+int Health(ReconstructionClient& client, const GlobalFlags& flags) {
+  softid::client::ServingStatus serving;
+  grpc::Status s = client.Health("", &serving);
+  if (!s.ok()) return Report(s, flags);
+  if (flags.json) {
+    std::cout << nlohmann::json{{"status", ToString(serving)}}.dump() << "\n";
+  } else {
+    std::cout << ToString(serving) << "\n";
+  }
+  return serving == softid::client::ServingStatus::kServing ? kExitOk : kExitUnreachable;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -463,33 +541,52 @@ int main(int argc, char** argv) {
   submit->add_option("-c,--config", config_file, "job config JSON (default: fit youngs_modulus)");
   submit->add_option("--request-id", request_id, "idempotency key for retried submissions");
   submit->add_flag("--wait", wait, "watch the job until it ends");
+  submit->footer(
+      "Examples:\n"
+      "  softid submit capture/ --config job.json --wait\n"
+      "  softid submit recording/ --config job.json     # a raw recording: the job ingests it\n"
+      "  softid submit --capture cap-0123456789abcdef --config job2.json");
   CLI::App* status = app.add_subcommand("status", "show a job");
-  status->add_option("job", job_id)->required();
+  status->add_option("job", job_id, "the job's id (job-...)")->required();
+  status->footer("Example:\n  softid status job-0123456789abcdef");
   CLI::App* watch = app.add_subcommand("watch", "follow a job's progress until it ends");
-  watch->add_option("job", job_id)->required();
+  watch->add_option("job", job_id, "the job's id (job-...)")->required();
+  watch->footer("Example:\n  softid watch job-0123456789abcdef     # --json: one event per line");
   CLI::App* result = app.add_subcommand("result", "print or save the result of a job");
-  result->add_option("job", job_id)->required();
+  result->add_option("job", job_id, "the job's id (job-...)")->required();
   result->add_option("-o,--out", out_file, "also write result.json here");
   result->add_option("--truth", truth_file,
                      "print the fitted parameters next to this truth.json (softid-lab synth)");
   result->add_option("--report", report_dir,
                      "download the job's report (PNG plots) into this new or empty folder");
+  result->footer(
+      "Examples:\n"
+      "  softid result job-0123456789abcdef\n"
+      "  softid result job-0123456789abcdef -o result.json --report report/\n"
+      "  softid result job-0123456789abcdef --truth capture/truth.json");
   CLI::App* list = app.add_subcommand("list", "list jobs");
   list->add_option("--state", state, "QUEUED, RUNNING, SUCCEEDED, FAILED or CANCELLED");
+  list->footer("Example:\n  softid list --state RUNNING");
   CLI::App* cancel = app.add_subcommand("cancel", "cancel a job");
-  cancel->add_option("job", job_id)->required();
+  cancel->add_option("job", job_id, "the job's id (job-...)")->required();
+  cancel->footer("Example:\n  softid cancel job-0123456789abcdef");
   CLI::App* health = app.add_subcommand("health", "check that the server is serving");
+  health->footer("Example:\n  softid --server host:50051 --tls-ca ca.pem health");
   CLI::App* captures = app.add_subcommand("captures", "list uploaded captures");
+  captures->footer("Example:\n  softid captures --json");
   CLI::App* delete_job = app.add_subcommand("delete", "delete a job that is not running");
-  delete_job->add_option("job", job_id)->required();
+  delete_job->add_option("job", job_id, "the job's id (job-...)")->required();
+  delete_job->footer("Example:\n  softid delete job-0123456789abcdef");
   CLI::App* delete_capture = app.add_subcommand(
       "delete-capture", "delete an uploaded capture that no job uses (delete its jobs first)");
-  delete_capture->add_option("capture", capture_id)->required();
+  delete_capture->add_option("capture", capture_id, "the capture's id (cap-...)")->required();
+  delete_capture->footer("Example:\n  softid delete-capture cap-0123456789abcdef");
   CLI::App* download = app.add_subcommand(
       "download", "download an uploaded or derived capture's files into a new or empty folder");
-  download->add_option("capture", capture_id)->required();
+  download->add_option("capture", capture_id, "the capture's id (cap-...)")->required();
   download->add_option("-o,--out", out_file, "folder to write (must not exist or be empty)")
       ->required();
+  download->footer("Example:\n  softid download cap-0123456789abcdef -o capture/");
 
   try {
     app.parse(argc, argv);
@@ -501,33 +598,7 @@ int main(int argc, char** argv) {
   ReconstructionClient& client = *made;
 
   if (submit->parsed()) {
-    v1::CreateJobRequest create;
-    if (!config_file.empty()) {
-      std::ifstream in(config_file);
-      if (!in) {
-        std::fprintf(stderr, "softid: %s: cannot read the job config\n", config_file.c_str());
-        return kExitInvalidInput;
-      }
-      std::stringstream text;
-      text << in.rdbuf();
-      create.set_config_json(text.str());
-    }
-    if (capture_id.empty()) {
-      const int uploaded = UploadCaptureFolder(client, capture_dir, request_id, flags, &capture_id);
-      if (uploaded != kExitOk) return uploaded;
-    }
-    create.set_capture_id(capture_id);
-    create.set_request_id(request_id);
-    v1::Job job;
-    const grpc::Status s = client.CreateJob(create, &job);
-    if (!s.ok()) return Report(s, flags);
-    if (flags.json) {
-      std::cout << JobJson(job).dump() << "\n";
-    } else {
-      std::cout << "job " << job.id() << " " << StateName(job.state()) << " on capture "
-                << capture_id << "\n";
-    }
-    return wait ? WatchUntilDone(client, job.id(), flags) : kExitOk;
+    return Submit(client, capture_dir, config_file, request_id, capture_id, wait, flags);
   }
   if (status->parsed()) {
     v1::Job job;
@@ -541,40 +612,15 @@ int main(int argc, char** argv) {
     const bool job = delete_job->parsed();
     const grpc::Status s = job ? client.DeleteJob(job_id) : client.DeleteCapture(capture_id);
     if (!s.ok()) return Report(s, flags);
-    if (!flags.json) std::cout << (job ? job_id : capture_id) << " deleted\n";
+    if (flags.json) {
+      std::cout << nlohmann::json{{"deleted", job ? job_id : capture_id}}.dump() << "\n";
+    } else {
+      std::cout << (job ? job_id : capture_id) << " deleted\n";
+    }
     return kExitOk;
   }
   if (result->parsed()) return ShowResult(client, job_id, out_file, truth_file, report_dir, flags);
-  if (list->parsed()) {
-    v1::ListJobsRequest request;
-    if (!state.empty()) {
-      v1::JobState parsed;
-      if (!v1::JobState_Parse(state, &parsed) || parsed == v1::JOB_STATE_UNSPECIFIED) {
-        std::fprintf(stderr,
-                     "softid: --state = %s: must be QUEUED, RUNNING, SUCCEEDED, FAILED "
-                     "or CANCELLED\n",
-                     state.c_str());
-        return kExitInvalidInput;
-      }
-      request.set_state(parsed);
-    }
-    nlohmann::json all = nlohmann::json::array();
-    do {
-      v1::ListJobsResponse page;
-      grpc::Status s = client.ListJobs(request, &page);
-      if (!s.ok()) return Report(s, flags);
-      for (const v1::Job& job : page.jobs()) {
-        if (flags.json) {
-          all.push_back(JobJson(job));
-        } else {
-          PrintJob(job, flags);
-        }
-      }
-      request.set_page_token(page.next_page_token());
-    } while (!request.page_token().empty());
-    if (flags.json) std::cout << all.dump() << "\n";
-    return kExitOk;
-  }
+  if (list->parsed()) return ListJobs(client, state, flags);
   if (cancel->parsed()) {
     v1::Job job;
     grpc::Status s = client.CancelJob(job_id, &job);
@@ -584,16 +630,6 @@ int main(int argc, char** argv) {
   }
   if (captures->parsed()) return ListCaptures(client, flags);
   if (download->parsed()) return DownloadCapture(client, capture_id, out_file, flags);
-  if (health->parsed()) {
-    softid::client::ServingStatus serving;
-    grpc::Status s = client.Health("", &serving);
-    if (!s.ok()) return Report(s, flags);
-    if (flags.json) {
-      std::cout << nlohmann::json{{"status", ToString(serving)}}.dump() << "\n";
-    } else {
-      std::cout << ToString(serving) << "\n";
-    }
-    return serving == softid::client::ServingStatus::kServing ? kExitOk : kExitUnreachable;
-  }
+  if (health->parsed()) return Health(client, flags);
   return kExitInvalidInput;
 }

@@ -253,6 +253,10 @@ int RunBench(const BenchFlags& flags) {
 }  // namespace
 
 Command RegisterBench(CLI::App* app) {
+  app->footer(
+      "Examples:\n"
+      "  softid-lab bench --cells 3000 --repeat 3\n"
+      "  softid-lab bench --cells 10000 --threads 1   # the per-core figure");
   auto flags = std::make_shared<BenchFlags>();
   app->add_option("--cells", flags->target_cells, "target active-cell counts")
       ->capture_default_str();

@@ -57,6 +57,10 @@ int RunDiagnose(const DiagnoseFlags& flags) {
 }  // namespace
 
 Command RegisterDiagnose(CLI::App* app) {
+  app->footer(
+      "Example:\n"
+      "  softid-lab diagnose capture/ --config job.json -o out/diagnosis.json   # plots in "
+      "out/diagnosis_plots");
   auto flags = std::make_shared<DiagnoseFlags>();
   app->add_option("capture", flags->capture, "capture folder (with capture.json)")->required();
   app->add_option("-c,--config", flags->config, "job config JSON: its fit set is the base model");

@@ -139,6 +139,11 @@ int RunFit(const FitFlags& flags) {
 }  // namespace
 
 Command RegisterFit(CLI::App* app) {
+  app->footer(
+      "Examples:\n"
+      "  softid-lab fit capture/ -o out/result.json                  # fits youngs_modulus; report "
+      "in out/report\n"
+      "  softid-lab fit capture/ --config job.json -o out/result.json --report pictures/");
   auto flags = std::make_shared<FitFlags>();
   app->add_option("capture", flags->capture, "capture folder (with capture.json)")->required();
   app->add_option("-c,--config", flags->config, "job config JSON (default: fit youngs_modulus)");

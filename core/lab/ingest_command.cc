@@ -82,6 +82,9 @@ int RunIngest(const IngestFlags& flags) {
 }  // namespace
 
 Command RegisterIngest(CLI::App* app) {
+  app->footer(
+      "Example:\n"
+      "  softid-lab ingest recording/ -o capture/      # then: softid-lab fit capture/ ...");
   auto flags = std::make_shared<IngestFlags>();
   app->add_option("recording", flags->recording, "recording folder (softid-recording/1)")
       ->required();

@@ -395,6 +395,9 @@ int RunProve(const ProveFlags& flags) {
 }  // namespace
 
 Command RegisterProveDiagnosis(CLI::App* app) {
+  app->footer(
+      "Example:\n"
+      "  softid-lab prove-diagnosis --jobs 2 --out /tmp/prove [--resume]");
   auto flags = std::make_shared<ProveFlags>();
   app->add_option("--out", flags->out, "work folder (captures, reports, plots)")
       ->capture_default_str();

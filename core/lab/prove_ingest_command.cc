@@ -166,6 +166,10 @@ int RunProveIngest(const ProveIngestFlags& flags) {
 }  // namespace
 
 Command RegisterProveIngest(CLI::App* app) {
+  app->footer(
+      "Example:\n"
+      "  softid-lab prove-ingest --bunny ../shared/data/meshes/stanford_bunny_res3.ply --width 640 "
+      "--height 480");
   auto flags = std::make_shared<ProveIngestFlags>();
   app->add_option("--out", flags->out, "working folder (recordings, captures)");
   app->add_option("--bunny", flags->bunny, "the scanned bunny's mesh (OBJ/PLY/STL, metres)")

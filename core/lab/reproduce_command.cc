@@ -565,6 +565,11 @@ int RunReproduce(const ReproduceFlags& flags) {
 }  // namespace
 
 Command RegisterReproduce(CLI::App* app) {
+  app->footer(
+      "Examples:\n"
+      "  softid-lab reproduce table1 --quick\n"
+      "  softid-lab reproduce table1 --rows c1-50\n"
+      "  softid-lab reproduce pillow-ramp");
   auto flags = std::make_shared<ReproduceFlags>();
   std::string names;
   for (const std::string& n : reproduce::BenchmarkNames()) names += (names.empty() ? "" : "|") + n;

@@ -78,6 +78,9 @@ int RunSimulate(const SimulateFlags& flags) {
 }  // namespace
 
 Command RegisterSimulate(CLI::App* app) {
+  app->footer(
+      "Example:\n"
+      "  softid-lab simulate --scene bar-hanging --out surfaces/    # one PLY per frame");
   auto flags = std::make_shared<SimulateFlags>();
   flags->scene.Register(app);
   app->add_option("--out,-o", flags->out, "folder for the PLY frames")->required();

@@ -146,6 +146,12 @@ int RunSynth(const SynthFlags& flags) {
 }  // namespace
 
 Command RegisterSynth(CLI::App* app) {
+  app->footer(
+      "Examples:\n"
+      "  softid-lab synth --scene torus-drop --out capture/\n"
+      "  softid-lab synth --scene pillow-ramp --friction 0.3 --cameras 2 --realistic-noise --out "
+      "capture/\n"
+      "  softid-lab synth --scene torus-drop --raw --out recording/   # a raw recording to ingest");
   auto flags = std::make_shared<SynthFlags>();
   flags->scene.Register(app);
   app->add_option("--out,-o", flags->out, "capture folder to write")->required();
