@@ -347,12 +347,15 @@ int UploadCaptureFolder(ReconstructionClient& client, const std::string& dir,
     return kExitInvalidInput;
   }
   v1::Capture capture;
-  const grpc::Status s =
-      client.UploadCapture(files, request_id.empty() ? "" : request_id + "/capture", &capture);
+  int skipped = 0;
+  const grpc::Status s = client.UploadCapture(
+      files, request_id.empty() ? "" : request_id + "/capture", &capture, &skipped);
   if (!s.ok()) return Report(s, flags);
   if (!flags.json) {
     std::cout << (files.recording_json.empty() ? "capture " : "recording ") << capture.id()
-              << " uploaded (" << files.files.size() << " files)\n";
+              << " uploaded (" << files.files.size() << " files";
+    if (skipped > 0) std::cout << ", " << skipped << " of them already on the server";
+    std::cout << ")\n";
   }
   *capture_id = capture.id();
   return kExitOk;

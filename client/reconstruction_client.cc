@@ -93,9 +93,28 @@ grpc::Status ReconstructionClient::WithRetry(
   }
 }
 
+grpc::Status ReconstructionClient::FindCaptureFiles(const CaptureFiles& capture,
+                                                    std::set<std::string>* out) {
+  v1::FindCaptureFilesRequest request;
+  for (const v1::CaptureFile& file : capture.files) request.add_sha256(file.sha256());
+  v1::FindCaptureFilesResponse response;
+  const grpc::Status status = WithRetry(options_.call_timeout, [&](grpc::ClientContext* context) {
+    return stub_->FindCaptureFiles(context, request, &response);
+  });
+  out->clear();
+  out->insert(response.sha256().begin(), response.sha256().end());
+  return status;
+}
+
 grpc::Status ReconstructionClient::UploadCapture(const CaptureFiles& capture,
-                                                 const std::string& request_id, v1::Capture* out) {
+                                                 const std::string& request_id, v1::Capture* out,
+                                                 int* skipped) {
+  std::set<std::string> held;
+  const grpc::Status found = FindCaptureFiles(capture, &held);
+  // A server from before FindCaptureFiles: send everything.
+  if (!found.ok() && found.error_code() != grpc::StatusCode::UNIMPLEMENTED) return found;
   return WithRetry(options_.upload_timeout, [&](grpc::ClientContext* context) {
+    if (skipped != nullptr) *skipped = 0;
     std::unique_ptr<grpc::ClientWriter<v1::UploadCaptureRequest>> writer =
         stub_->UploadCapture(context, out);
     v1::UploadCaptureRequest request;
@@ -109,6 +128,10 @@ grpc::Status ReconstructionClient::UploadCapture(const CaptureFiles& capture,
     std::vector<char> buffer(static_cast<size_t>(options_.chunk_bytes));
     for (size_t i = 0; open && i < capture.files.size(); ++i) {
       const v1::CaptureFile& file = capture.files[i];
+      if (held.count(file.sha256()) > 0) {
+        if (skipped != nullptr) ++*skipped;
+        continue;
+      }
       std::ifstream in(capture.directory / file.path(), std::ios::binary);
       int64_t offset = 0;
       while (open && in) {

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <set>
 #include <string>
 
 #include "client/capture_files.h"
@@ -45,8 +46,13 @@ class ReconstructionClient {
  public:
   ReconstructionClient(std::shared_ptr<grpc::Channel> channel, ClientOptions options = {});
 
+  // Sends the manifest and the bytes of every file the server does not already hold for this
+  // station (FindCaptureFiles; an older server without it gets every file). `skipped`, when
+  // given, counts the files left out.
   grpc::Status UploadCapture(const CaptureFiles& capture, const std::string& request_id,
-                             v1::Capture* out);
+                             v1::Capture* out, int* skipped = nullptr);
+  // The hashes among the capture's files that the server holds for this station.
+  grpc::Status FindCaptureFiles(const CaptureFiles& capture, std::set<std::string>* out);
   grpc::Status CreateJob(const v1::CreateJobRequest& request, v1::Job* out);
   grpc::Status GetJob(const std::string& job_id, v1::Job* out);
   grpc::Status ListJobs(const v1::ListJobsRequest& request, v1::ListJobsResponse* out);

@@ -186,6 +186,16 @@ CaptureUpload::~CaptureUpload() {
   fs::remove_all(staging_dir_, ignored);
 }
 
+std::vector<store::ManifestEntry> CaptureUpload::FilesNotStarted() const {
+  std::vector<store::ManifestEntry> out;
+  for (const store::ManifestEntry& entry : manifest_.files) {
+    const auto it = files_.find(entry.path);
+    if (it != files_.end() && it->second.received == 0 && !it->second.complete)
+      out.push_back(entry);
+  }
+  return out;
+}
+
 ServiceStatus CaptureUpload::AddChunk(const std::string& path, int64_t offset_bytes,
                                       std::string_view data) {
   auto it = files_.find(path);

@@ -65,6 +65,10 @@ class CaptureUpload {
   // declared, or (when the file is complete) a sha256 that differs from the declared one.
   ServiceStatus AddChunk(const std::string& path, int64_t offset_bytes, std::string_view data);
 
+  // Listed files none of whose bytes have arrived (empty files arrive with the manifest): the
+  // caller may add them from a copy it holds (AddChunk) before Finish.
+  std::vector<store::ManifestEntry> FilesNotStarted() const;
+
   // Checks every file arrived complete and validates the staged capture as a whole
   // (capture::ReadCapture, or recording::ReadRecording; decoding every frame). Returns the
   // manifest to store: capture.json (recording.json) first, then the listed files.

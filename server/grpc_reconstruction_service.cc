@@ -108,6 +108,18 @@ grpc::Status GrpcReconstructionService::UploadCapture(
   return grpc::Status::OK;
 }
 
+grpc::Status GrpcReconstructionService::FindCaptureFiles(grpc::ServerContext* context,
+                                                         const v1::FindCaptureFilesRequest* request,
+                                                         v1::FindCaptureFilesResponse* response) {
+  ServiceResult<Caller> caller = Authenticate(context);
+  if (!caller.ok()) return Reply("FindCaptureFiles", caller.status());
+  const std::vector<std::string> asked(request->sha256().begin(), request->sha256().end());
+  ServiceResult<std::vector<std::string>> held = service_->FindCaptureFiles(*caller, asked);
+  if (!held.ok()) return Reply("FindCaptureFiles", held.status());
+  for (const std::string& sha256 : *held) response->add_sha256(sha256);
+  return grpc::Status::OK;
+}
+
 grpc::Status GrpcReconstructionService::DownloadCapture(
     grpc::ServerContext* context, const v1::DownloadCaptureRequest* request,
     grpc::ServerWriter<v1::DownloadCaptureResponse>* writer) {

@@ -35,6 +35,9 @@ class GrpcReconstructionService final : public v1::Reconstruction::Service {
   grpc::Status UploadCapture(grpc::ServerContext* context,
                              grpc::ServerReader<v1::UploadCaptureRequest>* reader,
                              v1::Capture* response) override;
+  grpc::Status FindCaptureFiles(grpc::ServerContext* context,
+                                const v1::FindCaptureFilesRequest* request,
+                                v1::FindCaptureFilesResponse* response) override;
   grpc::Status DownloadCapture(grpc::ServerContext* context,
                                const v1::DownloadCaptureRequest* request,
                                grpc::ServerWriter<v1::DownloadCaptureResponse>* writer) override;

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <fstream>
+#include <unordered_set>
 
 #include "core/common/untrusted_json.h"
 #include "core/inverse/job_config.h"
@@ -109,8 +110,68 @@ ServiceResult<std::unique_ptr<CaptureUpload>> JobService::BeginUpload(const Call
   return upload;
 }
 
+ServiceResult<std::vector<std::string>> JobService::FindCaptureFiles(
+    const Caller& caller, const std::vector<std::string>& sha256s) {
+  if (static_cast<int64_t>(sha256s.size()) > options_.upload_limits.max_files) {
+    return ServiceStatus(ServiceCode::kInvalidArgument,
+                         fmt::format("sha256: {} hashes (at most {})", sha256s.size(),
+                                     options_.upload_limits.max_files));
+  }
+  ServiceResult<std::unordered_set<std::string>> held = HeldFiles(caller);
+  if (!held.ok()) return held.status();
+  std::vector<std::string> out;
+  for (const std::string& sha256 : sha256s)
+    if (held->count(sha256) > 0) out.push_back(sha256);
+  return out;
+}
+
+ServiceResult<std::unordered_set<std::string>> JobService::HeldFiles(const Caller& caller) {
+  std::unordered_set<std::string> held;
+  store::ListCapturesRequest request;
+  request.page_size = store::ListJobsRequest::kMaxPageSize;  // the same bound for captures
+  do {
+    ServiceResult<store::CapturePage> page = ListCaptures(caller, request);
+    if (!page.ok()) return page.status();
+    for (const store::CaptureListing& listing : page->captures) {
+      for (const store::ManifestEntry& entry : listing.capture.manifest) held.insert(entry.sha256);
+    }
+    request.page_token = page->next_page_token;
+  } while (!request.page_token.empty());
+  return held;
+}
+
+ServiceStatus JobService::AddHeldFiles(const Caller& caller, CaptureUpload& upload) {
+  const std::vector<store::ManifestEntry> missing = upload.FilesNotStarted();
+  if (missing.empty()) return ServiceStatus::Ok();
+  ServiceResult<std::unordered_set<std::string>> held = HeldFiles(caller);
+  if (!held.ok()) return held.status();
+  std::string buffer(static_cast<size_t>(options_.upload_limits.max_chunk_bytes), '\0');
+  int added = 0;
+  for (const store::ManifestEntry& entry : missing) {
+    if (held->count(entry.sha256) == 0) continue;  // Finish names it as incomplete
+    Result<std::ifstream> in = blobs_->OpenBlob(entry.sha256);
+    if (!in.ok()) continue;
+    int64_t offset = 0;
+    while (*in) {
+      in->read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+      const std::string_view data(buffer.data(), static_cast<size_t>(in->gcount()));
+      if (data.empty()) break;
+      if (ServiceStatus fed = upload.AddChunk(entry.path, offset, data); !fed.ok()) return fed;
+      offset += static_cast<int64_t>(data.size());
+    }
+    ++added;
+  }
+  if (added > 0) logger_->info("upload: {} file(s) taken from the server's copies", added);
+  return ServiceStatus::Ok();
+}
+
 ServiceResult<store::Capture> JobService::FinishUpload(const Caller& caller,
                                                        CaptureUpload& upload) {
+  {
+    // Shared: a capture's removal cannot take the blobs away while they are read.
+    std::shared_lock puts(blob_puts_);
+    if (ServiceStatus added = AddHeldFiles(caller, upload); !added.ok()) return added;
+  }
   ServiceResult<std::vector<store::ManifestEntry>> manifest = upload.Finish();
   if (!manifest.ok()) return manifest.status();
   // Blobs before the row: a committed capture never points at a missing blob. Blobs this upload

@@ -17,6 +17,7 @@
 #include <mutex>
 #include <shared_mutex>
 #include <string>
+#include <unordered_set>
 #include <vector>
 
 #include "core/inverse/job_resources.h"
@@ -95,7 +96,13 @@ class JobService {
   // capture or job another station owns is NotFound to it, like one that does not exist.
   ServiceResult<std::unique_ptr<CaptureUpload>> BeginUpload(const Caller& caller,
                                                             UploadManifest manifest);
+  // Files the upload declared but whose bytes did not come are taken from the blobs of the
+  // caller's captures (FindCaptureFiles) before the upload is validated.
   ServiceResult<store::Capture> FinishUpload(const Caller& caller, CaptureUpload& upload);
+  // The hashes among `sha256s` that files of the caller's captures have (all captures for an
+  // admin). InvalidArgument for more than upload_limits.max_files hashes.
+  ServiceResult<std::vector<std::string>> FindCaptureFiles(const Caller& caller,
+                                                           const std::vector<std::string>& sha256s);
 
   // `config_json` empty means "{}". InvalidArgument "config_json: <field> = <value>: <reason>",
   // also for a config that does not fit the capture (frames past its end) or would exceed the
@@ -160,6 +167,11 @@ class JobService {
   ServiceResult<store::Job> VisibleJob(const Caller& caller, const std::string& job_id);
   ServiceStatus CheckJobFitsCapture(const Caller& caller, const inverse::JobConfig& config,
                                     const std::string& capture_id, const std::string& request_id);
+  // The sha256 of every file of the caller's captures (all captures for an admin).
+  ServiceResult<std::unordered_set<std::string>> HeldFiles(const Caller& caller);
+  // Feeds the upload the files it declared but was sent nothing of, from the blobs of the
+  // caller's captures that hold them.
+  ServiceStatus AddHeldFiles(const Caller& caller, CaptureUpload& upload);
   // After a failed upload: deletes those of `sha256s` that no capture refers to.
   void RemoveUnreferencedBlobs(const std::vector<std::string>& sha256s);
 

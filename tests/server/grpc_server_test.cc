@@ -12,6 +12,7 @@
 #include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <string>
 #include <thread>
 #include <vector>
@@ -178,6 +179,70 @@ TEST_F(GrpcServerTest, JobRunsFromUploadToResult) {
   client::ServingStatus serving = client::ServingStatus::kUnknown;
   ASSERT_TRUE(client_->Health("", &serving).ok());
   EXPECT_EQ(serving, client::ServingStatus::kServing);
+}
+
+// A station uploading files the server already holds for it sends only the new ones; another
+// station's copies do not count (it cannot learn what others uploaded), and a file left out that
+// the station does not hold fails the upload naming it.
+TEST_F(GrpcServerTest, UploadsLeaveOutTheFilesTheStationAlreadyStored) {
+  std::string alice, bob;
+  {
+    Result<std::unique_ptr<store::SqliteJobStore>> tokens =
+        store::SqliteJobStore::Open(data_.path() / "softid.db");
+    ASSERT_TRUE(tokens.ok()) << tokens.status().ToString();
+    alice = IssueToken(**tokens, "alice", false, std::nullopt)->secret;
+    bob = IssueToken(**tokens, "bob", false, std::nullopt)->secret;
+    ASSERT_TRUE((*tokens)->Close().ok());
+  }
+  StartServer(/*num_workers=*/0, [](ServerOptions& options) { options.auth = AuthMode::kToken; });
+  const auto client_for = [&](const std::string& token) {
+    client::ClientOptions options;
+    options.token = token;
+    return std::make_unique<ReconstructionClient>(
+        grpc::CreateChannel("localhost:" + std::to_string(server_->port()),
+                            grpc::InsecureChannelCredentials()),
+        options);
+  };
+  const client::CaptureFiles files = CaptureFiles();
+  const int num_files = static_cast<int>(files.files.size());
+  std::unique_ptr<ReconstructionClient> as_alice = client_for(alice);
+  v1::Capture first, second, bobs;
+  int skipped = -1;
+  ASSERT_TRUE(as_alice->UploadCapture(files, "", &first, &skipped).ok());
+  EXPECT_EQ(skipped, 0);
+  ASSERT_TRUE(as_alice->UploadCapture(files, "", &second, &skipped).ok());
+  EXPECT_EQ(skipped, num_files);
+  EXPECT_NE(second.id(), first.id());
+  ASSERT_EQ(second.files_size(), first.files_size());
+  for (int i = 0; i < first.files_size(); ++i) {
+    EXPECT_EQ(second.files(i).sha256(), first.files(i).sha256());
+  }
+  std::unique_ptr<ReconstructionClient> as_bob = client_for(bob);
+  std::set<std::string> held;
+  ASSERT_TRUE(as_bob->FindCaptureFiles(files, &held).ok());
+  EXPECT_TRUE(held.empty());
+  ASSERT_TRUE(as_bob->UploadCapture(files, "", &bobs, &skipped).ok());
+  EXPECT_EQ(skipped, 0);
+
+  // A manifest whose frame's bytes never come, for a frame nobody holds.
+  client::CaptureFiles forged = files;
+  forged.files.back().set_sha256(std::string(64, 'a'));
+  auto channel = grpc::CreateChannel("localhost:" + std::to_string(server_->port()),
+                                     grpc::InsecureChannelCredentials());
+  auto stub = v1::Reconstruction::NewStub(channel);
+  grpc::ClientContext context;
+  context.AddMetadata("authorization", "Bearer " + alice);
+  v1::Capture none;
+  auto writer = stub->UploadCapture(&context, &none);
+  v1::UploadCaptureRequest request;
+  request.mutable_manifest()->set_capture_json(forged.capture_json);
+  for (const v1::CaptureFile& file : forged.files) *request.mutable_manifest()->add_files() = file;
+  ASSERT_TRUE(writer->Write(request));
+  writer->WritesDone();
+  const grpc::Status refused = writer->Finish();
+  EXPECT_EQ(refused.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(refused.error_message().find(forged.files.back().path()), std::string::npos)
+      << refused.error_message();
 }
 
 // A finished job's report: listed in the result, downloaded into a new folder as PNGs of the
