@@ -61,6 +61,10 @@ void ProgressPrinter::Remember(const v1::JobEvent& event) {
   if (parameters.is_object()) {
     for (const auto& [name, value] : parameters.items()) {
       start.values += "  " + name + "=" + Compact(value);
+      const auto unit = event.parameter_units().find(name);
+      if (unit != event.parameter_units().end() && unit->second != "1") {
+        start.values += " " + unit->second;
+      }
     }
   }
   // With several starts the message begins "start k/N": the rest says the stage.

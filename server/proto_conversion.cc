@@ -4,6 +4,8 @@
 
 #include <limits>
 
+#include "core/fem/parameter_registry.h"
+
 namespace softid::server {
 namespace {
 
@@ -121,7 +123,15 @@ void ToProto(const store::ProgressEvent& event, const store::Job& job, v1::JobEv
   out->set_iteration(event.iteration);
   out->set_cost(event.cost);
   out->set_gradient_norm(event.gradient_norm);
-  if (!event.parameters.is_null()) out->set_parameters_json(event.parameters.dump());
+  if (!event.parameters.is_null()) {
+    out->set_parameters_json(event.parameters.dump());
+    if (event.parameters.is_object()) {
+      for (const auto& [name, value] : event.parameters.items()) {
+        const std::string_view unit = fem::ParameterUnit(name);
+        if (!unit.empty()) (*out->mutable_parameter_units())[name] = std::string(unit);
+      }
+    }
+  }
   // Iteration events happen while RUNNING; the store records a state only for state changes.
   out->set_state(event.state ? ToProto(*event.state) : v1::RUNNING);
   out->set_elapsed_seconds(event.elapsed_s);

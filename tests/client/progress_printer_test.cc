@@ -1,5 +1,6 @@
 // The watch line: one line for the job whatever the number of starts, showing the start with the
-// lowest cost, the iterations of all starts in its bar, and the stage without the start prefix.
+// lowest cost with its values in their units, the iterations of all starts in its bar, and the
+// stage without the start prefix.
 #include "client/progress_printer.h"
 
 #include <gtest/gtest.h>
@@ -21,6 +22,7 @@ v1::JobEvent Iteration(int start, int num_starts, int iteration, double cost, do
   event.set_parameters_json("{\"youngs_modulus\": " + std::to_string(e) + "}");
   event.set_message(message);
   event.set_remaining_seconds(12.4);
+  (*event.mutable_parameter_units())["youngs_modulus"] = "Pa";
   return event;
 }
 
@@ -35,7 +37,7 @@ TEST(ProgressPrinter, OneLineShowsTheBestStartAndEveryStartsIterations) {
   // 11 of 20 iterations: 11 of the bar's 20 marks.
   EXPECT_EQ(printer.Line(),
             "[###########         ] 2 starts, best: start 2 it 5/10 cost 1.0000e-05  "
-            "youngs_modulus=39500  [frames 0-30 (stage 3/5)]  ~12 s left");
+            "youngs_modulus=39500 Pa  [frames 0-30 (stage 3/5)]  ~12 s left");
 }
 
 TEST(ProgressPrinter, OneStartAndANewAttemptStartOver) {
@@ -51,7 +53,7 @@ TEST(ProgressPrinter, OneStartAndANewAttemptStartOver) {
   const std::string printed = testing::internal::GetCapturedStdout();
   EXPECT_NE(printed.find("\nRUNNING: started (attempt 2)\n"), std::string::npos) << printed;
   EXPECT_EQ(printer.Line(),
-            "[####                ] it 2/10 cost 8.0000e-06  youngs_modulus=41000  ~12 s left");
+            "[####                ] it 2/10 cost 8.0000e-06  youngs_modulus=41000 Pa  ~12 s left");
 }
 
 }  // namespace

@@ -1,5 +1,6 @@
-// The API's typed result: result.json's parameters as numbers with their 1-sigma and their
-// discretisation error, in the order result.json writes them; an undetermined one (null) is +inf.
+// The API's typed forms: result.json's parameters as numbers with their 1-sigma and their
+// discretisation error, in the order result.json writes them (an undetermined one, null, is +inf);
+// progress events with their parameters' units.
 #include "server/proto_conversion.h"
 
 #include <gtest/gtest.h>
@@ -54,6 +55,26 @@ TEST(ProtoConversion, FittedParametersAreTyped) {
   v1::Result none;
   FittedParametersToProto(nlohmann::json::parse(R"({"cost": 1})"), &none);
   EXPECT_EQ(none.parameters_size(), 0);
+}
+
+}  // namespace
+}  // namespace softid::server
+
+namespace softid::server {
+namespace {
+
+// An iteration event names each parameter's unit from the registry; names it does not know get
+// none (the values stand alone).
+TEST(ProtoConversion, IterationEventsCarryTheParametersUnits) {
+  store::ProgressEvent event;
+  event.kind = store::ProgressKind::kIteration;
+  event.parameters = {{"youngs_modulus", 4e4}, {"initial_velocity", {0, 0, 1}}, {"made_up", 1}};
+  store::Job job;
+  v1::JobEvent out;
+  ToProto(event, job, &out);
+  EXPECT_EQ(out.parameter_units().at("youngs_modulus"), "Pa");
+  EXPECT_EQ(out.parameter_units().at("initial_velocity"), "m/s");
+  EXPECT_EQ(out.parameter_units().count("made_up"), 0u);
 }
 
 }  // namespace
