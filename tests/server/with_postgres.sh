@@ -6,9 +6,10 @@
 # ends, whatever its exit status; COMMAND's exit status is this script's.
 #
 # PostgreSQL refuses to run as root, and CI runs as root: then initdb and the server run as an
-# unprivileged user (SOFTID_TEST_POSTGRES_USER, default nobody) owning the folder; otherwise as
-# the caller. Without the PostgreSQL 15 binaries (Debian: postgresql-15) COMMAND runs without the
-# variable, and the PostgreSQL tests skip (GTEST_SKIP) saying so.
+# unprivileged user owning the folder (SOFTID_TEST_POSTGRES_USER, default nobody; if that user does
+# not exist, a system user softid-pg-test made for it); otherwise as the caller. Without the
+# PostgreSQL 15 binaries (Debian: postgresql-15) COMMAND runs without the variable, and the
+# PostgreSQL tests skip (GTEST_SKIP) saying so.
 set -euo pipefail
 
 if [ "$#" -eq 0 ]; then
@@ -27,6 +28,12 @@ fi
 run_as=()
 if [ "$(id -u)" -eq 0 ]; then
   pg_user=${SOFTID_TEST_POSTGRES_USER:-nobody}
+  # A minimal image may lack nobody: a system user of our own, without a home or a shell.
+  if ! id "$pg_user" >/dev/null 2>&1; then
+    pg_user=softid-pg-test
+    id "$pg_user" >/dev/null 2>&1 ||
+      useradd --system --no-create-home --shell /usr/sbin/nologin "$pg_user"
+  fi
   run_as=(runuser -u "$pg_user" --)
 fi
 
