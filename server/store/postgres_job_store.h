@@ -22,8 +22,9 @@
 // never fail to serialise). A transaction that fails with a serialization failure or a deadlock
 // is retried a few times; every other failure is returned.
 //
-// Timestamps come from the injected clock, never from the server's now(): tests step the clock,
-// and every host's leases are judged by the same kind of time the SQLite store uses.
+// Timestamps come from the injected clock, never from the database server's now(): tests step the
+// clock, and both stores keep the same time. With several hosts, a lease written with one host's
+// clock is judged by another's, so their clocks must agree to well within a lease (NTP does).
 #pragma once
 
 #include <chrono>

@@ -11,6 +11,7 @@
 #include <set>
 #include <thread>
 
+#include "server/store/api_token.h"
 #include "server/store/job_store.h"
 #include "server/store/postgres_job_store.h"
 #include "server/store/sha256.h"
@@ -946,6 +947,40 @@ TEST_P(JobStoreConformance, MalformedAndUnknownIds) {
   EXPECT_EQ(store_->IsCancelRequested(unknown).status().code(), StatusCode::kNotFound);
   EXPECT_EQ(store_->AppendProgress(unknown, Iteration(0, 1)).status().code(),
             StatusCode::kNotFound);
+}
+
+// --- API tokens (the TokenStore every backend also implements)
+// ------------------------------------
+
+// Tokens are found by their secret's hash, listed oldest first, and revoked once: a second revoke
+// keeps the first time. Bad station names and hashes are refused, unknown ids NotFound.
+TEST_P(JobStoreConformance, TokensAreFoundListedAndRevoked) {
+  auto* tokens = dynamic_cast<TokenStore*>(store_.get());
+  ASSERT_NE(tokens, nullptr) << GetParam().name << " does not implement TokenStore";
+  const std::string first_hash = Sha256::Hex("first secret");
+  const Timestamp expires = ToTimestamp(clock_.Now()) + std::chrono::hours(24);
+  const Result<ApiToken> first = tokens->CreateToken("lab-1", false, expires, first_hash);
+  ASSERT_TRUE(first.ok()) << first.status().ToString();
+  EXPECT_EQ(first->id.rfind("tok-", 0), 0u);
+  EXPECT_EQ(first->expires_at, expires);
+  const Result<ApiToken> admin = tokens->CreateToken("hq", true, std::nullopt, Sha256::Hex("x"));
+  ASSERT_TRUE(admin.ok()) << admin.status().ToString();
+
+  EXPECT_EQ(**tokens->FindToken(first_hash), *first);
+  EXPECT_FALSE(tokens->FindToken(Sha256::Hex("nobody's"))->has_value());
+  EXPECT_EQ(*tokens->ListTokens(), (std::vector<ApiToken>{*first, *admin}));
+
+  ASSERT_TRUE(tokens->RevokeToken(first->id).ok());
+  const std::optional<Timestamp> revoked_at = (*tokens->FindToken(first_hash))->revoked_at;
+  ASSERT_TRUE(revoked_at.has_value());
+  ASSERT_TRUE(tokens->RevokeToken(first->id).ok());
+  EXPECT_EQ((*tokens->FindToken(first_hash))->revoked_at, revoked_at);
+  EXPECT_EQ(tokens->RevokeToken("tok-0123456789abcdef").code(), StatusCode::kNotFound);
+  EXPECT_EQ(tokens->RevokeToken("job-0123456789abcdef").code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(tokens->CreateToken("a b", false, std::nullopt, first_hash).status().code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(tokens->CreateToken("lab-2", false, std::nullopt, "nope").status().code(),
+            StatusCode::kInvalidArgument);
 }
 
 // --- Durability and concurrency ----------------------------------------------------------------
