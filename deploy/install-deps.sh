@@ -17,6 +17,9 @@ packages=(
   libopen3d-dev
   # service: gRPC, Protobuf, SQLite
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler libsqlite3-dev libssl-dev
+  # the PostgreSQL job store (--store): libpq to build; the server 15 that its tests start
+  # (tests/server/with_postgres.sh)
+  libpq-dev postgresql-15
   # utilities
   libspdlog-dev libfmt-dev nlohmann-json3-dev libcli11-dev
   # the server's /metrics endpoint (HTTP)

@@ -68,6 +68,12 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   app.add_option("--data", data_dir, "data directory (database and uploaded files)")
       ->envname("SOFTID_DATA");
+  std::string store_url;
+  app.add_option("--store", store_url,
+                 "a postgresql://user:password@host:port/database URL: keep jobs, captures and "
+                 "tokens there instead of the SQLite database under --data (uploaded files stay "
+                 "under --data)")
+      ->envname("SOFTID_STORE");
   app.add_option("--workers", options.num_workers, "jobs run in parallel (default: cores)")
       ->envname("SOFTID_WORKERS")
       ->check(CLI::NonNegativeNumber)
@@ -181,12 +187,15 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? kExitOk : kExitInvalidInput;
   }
-  if (tokens.command->parsed()) return softid::server::RunTokensCommand(tokens, data_dir);
+  if (tokens.command->parsed()) {
+    return softid::server::RunTokensCommand(tokens, data_dir, store_url);
+  }
   if (data_dir.empty()) {
     std::fprintf(stderr, "softid-server: --data is required (or SOFTID_DATA)\n");
     return kExitInvalidInput;
   }
   options.data_dir = data_dir;
+  options.store_url = store_url;
   if (auth != "auto") {
     options.auth =
         auth == "token" ? softid::server::AuthMode::kToken : softid::server::AuthMode::kNone;

@@ -24,7 +24,7 @@
 #include "server/periodic_task.h"
 #include "server/self_signed_certificate.h"
 #include "server/store/blob_store.h"
-#include "server/store/sqlite_job_store.h"
+#include "server/store/open_store.h"
 #include "server/worker_pool.h"
 
 namespace softid::server {
@@ -161,7 +161,8 @@ Status ServerOptions::Validate() const {
 struct Server::Parts {
   ServerOptions options;
   std::shared_ptr<spdlog::logger> logger;
-  std::unique_ptr<store::SqliteJobStore> jobs;
+  std::unique_ptr<store::JobStore> jobs;
+  store::TokenStore* tokens = nullptr;  // the same object as `jobs`
   std::optional<store::BlobStore> blobs;
   JobEvents events;
   Metrics metrics;  // before everything that counts into it
@@ -174,6 +175,7 @@ struct Server::Parts {
   std::unique_ptr<GrpcReconstructionService> grpc_service;
   std::unique_ptr<MetricsHttpServer> metrics_http;
   std::unique_ptr<PeriodicTask> retention;
+  std::unique_ptr<PeriodicTask> lease_sweep;  // PostgreSQL store only
   std::unique_ptr<grpc::Server> grpc_server;
   int port = 0;
   std::mutex shutdown_mutex;
@@ -207,16 +209,22 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   SOFTID_RETURN_IF_ERROR(ResetFolder(work));
   SOFTID_ASSIGN_OR_RETURN(const TlsOptions tls, ResolveTls(options, *log));
 
-  store::SqliteJobStoreOptions store_options;
-  store_options.logger = parts->logger;
-  SOFTID_ASSIGN_OR_RETURN(
-      parts->jobs, store::SqliteJobStore::Open(options.data_dir / "softid.db", store_options));
+  SOFTID_ASSIGN_OR_RETURN(store::OpenedStore opened,
+                          store::OpenStore(options.store_url, options.data_dir, parts->logger));
+  parts->jobs = std::move(opened.jobs);
+  parts->tokens = opened.tokens;
+  log->info("job store: {}", opened.description);
   SOFTID_ASSIGN_OR_RETURN(store::BlobStore blobs, store::BlobStore::Open(options.data_dir));
   parts->blobs.emplace(std::move(blobs));
-  // No worker of this process runs yet, so every RUNNING job was left by a previous one.
+  // No worker of this process runs yet, so every RUNNING job in the embedded store was left by a
+  // previous one. A PostgreSQL store may be shared: other servers' workers may be running its
+  // RUNNING jobs, and only an expired lease marks a job as lost (the lease sweep below).
+  const bool shared_store = !options.store_url.empty();
   SOFTID_ASSIGN_OR_RETURN(
       const store::RecoverySummary recovered,
-      parts->jobs->RecoverAfterCrash(options.max_attempts, store::RecoveryScope::kAllRunning));
+      parts->jobs->RecoverAfterCrash(options.max_attempts,
+                                     shared_store ? store::RecoveryScope::kExpiredLeasesOnly
+                                                  : store::RecoveryScope::kAllRunning));
   if (recovered.total() > 0) {
     log->info("recovered {} job(s) left RUNNING: {} requeued, {} failed, {} cancelled",
               recovered.total(), recovered.num_requeued, recovered.num_failed,
@@ -264,9 +272,9 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
                                                 service_options, parts->logger);
   const AuthMode auth = options.auth.value_or(
       IsLoopbackAddress(options.listen_address) ? AuthMode::kNone : AuthMode::kToken);
-  parts->authenticator = std::make_unique<Authenticator>(parts->jobs.get(), auth);
+  parts->authenticator = std::make_unique<Authenticator>(parts->tokens, auth);
   if (auth == AuthMode::kToken) {
-    Result<std::vector<store::ApiToken>> tokens = parts->jobs->ListTokens();
+    Result<std::vector<store::ApiToken>> tokens = parts->tokens->ListTokens();
     if (tokens.ok() && tokens->empty()) {
       log->warn(
           "API tokens are required but none exists: create one with `softid-server tokens "
@@ -322,6 +330,27 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
     parts->retention = std::make_unique<PeriodicTask>(
         options.retention_interval, [service, age] { (void)service->RemoveOlderThan(age); });
   }
+  if (shared_store) {
+    // A job whose worker died (here or on another server) runs again about one lease after its
+    // last heartbeat, without waiting for a restart.
+    store::JobStore* jobs = parts->jobs.get();
+    WorkerPool* workers = parts->pool.get();
+    const int max_attempts = options.max_attempts;
+    parts->lease_sweep =
+        std::make_unique<PeriodicTask>(options.lease, [jobs, workers, max_attempts, log] {
+          Result<store::RecoverySummary> swept =
+              jobs->RecoverAfterCrash(max_attempts, store::RecoveryScope::kExpiredLeasesOnly);
+          if (!swept.ok()) {
+            log->warn("lease sweep: {}", swept.status().message());
+          } else if (swept->total() > 0) {
+            log->info(
+                "lease sweep: {} job(s) whose lease expired: {} requeued, {} failed, {} "
+                "cancelled",
+                swept->total(), swept->num_requeued, swept->num_failed, swept->num_cancelled);
+            workers->Wake();
+          }
+        });
+  }
   parts->pool->Start();
   log->info(
       "softid-server listening on {} (port {}, {}, auth {}), data {}, {} worker(s), max {} queued",
@@ -354,6 +383,7 @@ Status Server::Shutdown() {
   log->info("shutting down: NOT_SERVING, no new jobs, interrupting running fits");
   parts_->grpc_server->GetHealthCheckService()->SetServingStatus(false);
   parts_->retention.reset();
+  parts_->lease_sweep.reset();
   parts_->service->StartDraining();
   parts_->pool->Stop();
   parts_->grpc_server->Shutdown(std::chrono::system_clock::now() + parts_->options.shutdown_grace);

@@ -3,7 +3,8 @@
 // and reflection, wired together. main.cc adds only flags and signals; tests start it in-process.
 //
 // Data directory layout:
-//   DIR/softid.db            jobs, captures, progress (WAL; schema migrated on start)
+//   DIR/softid.db            jobs, captures, progress (WAL; schema migrated on start); not used
+//                            with a PostgreSQL store (ServerOptions::store_url)
 //   DIR/blobs/               uploaded files, content-addressed (blob_store.h)
 //   DIR/uploads/, DIR/work/  staging of uploads and per-job capture folders; emptied on start
 //   DIR/tls/                 the self-signed certificate and key (--tls-self-signed only)
@@ -29,6 +30,10 @@ struct ServerOptions {
   // "host:port"; port 0 picks a free port (see Server::port()).
   std::string listen_address = "localhost:50051";
   std::filesystem::path data_dir;
+  // Where captures, jobs, progress and tokens live: empty for the SQLite database
+  // data_dir/softid.db, or a postgresql:// URL for a PostgreSQL database that several servers may
+  // share (--store). Blobs, staging and work folders stay under data_dir either way.
+  std::string store_url;
   int num_workers = 1;             // >= 0
   int64_t max_queued_jobs = 1000;  // >= 1
   // A job whose worker was lost (crash, kill -9, or shutdown mid-fit) is re-run until it was

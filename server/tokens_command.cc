@@ -9,7 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "server/api_tokens.h"
-#include "server/store/sqlite_job_store.h"
+#include "server/store/open_store.h"
 
 namespace softid::server {
 namespace {
@@ -67,20 +67,24 @@ void AddTokensCommand(CLI::App& app, TokensCommand* flags) {
   }
 }
 
-int RunTokensCommand(const TokensCommand& flags, const std::string& data_dir) {
-  if (data_dir.empty()) return Fail(Status::InvalidArgument("--data is required"));
-  std::error_code error;
-  std::filesystem::create_directories(data_dir, error);
-  if (error) return Fail(Status::IoError("--data " + data_dir + ": " + error.message()));
-  Result<std::unique_ptr<store::SqliteJobStore>> store =
-      store::SqliteJobStore::Open(std::filesystem::path(data_dir) / "softid.db");
-  if (!store.ok()) return Fail(store.status());
+int RunTokensCommand(const TokensCommand& flags, const std::string& data_dir,
+                     const std::string& store_url) {
+  // With --store the tokens live in that database, and --data is not needed.
+  if (store_url.empty()) {
+    if (data_dir.empty()) return Fail(Status::InvalidArgument("--data is required"));
+    std::error_code error;
+    std::filesystem::create_directories(data_dir, error);
+    if (error) return Fail(Status::IoError("--data " + data_dir + ": " + error.message()));
+  }
+  Result<store::OpenedStore> opened = store::OpenStore(store_url, data_dir);
+  if (!opened.ok()) return Fail(opened.status());
+  store::TokenStore* store = opened->tokens;
   if (flags.create->parsed()) {
     std::optional<std::chrono::seconds> lifetime;
     if (flags.expires_in_days > 0) {
       lifetime = std::chrono::seconds(static_cast<int64_t>(flags.expires_in_days * 86400.0));
     }
-    Result<IssuedToken> issued = IssueToken(**store, flags.station, flags.admin, lifetime);
+    Result<IssuedToken> issued = IssueToken(*store, flags.station, flags.admin, lifetime);
     if (!issued.ok()) return Fail(issued.status());
     if (flags.json) {
       nlohmann::json out = TokenJson(issued->token);
@@ -99,7 +103,7 @@ int RunTokensCommand(const TokensCommand& flags, const std::string& data_dir) {
     return kExitOk;
   }
   if (flags.list->parsed()) {
-    Result<std::vector<store::ApiToken>> tokens = (*store)->ListTokens();
+    Result<std::vector<store::ApiToken>> tokens = store->ListTokens();
     if (!tokens.ok()) return Fail(tokens.status());
     nlohmann::json all = nlohmann::json::array();
     for (const store::ApiToken& token : *tokens) all.push_back(TokenJson(token));
@@ -117,7 +121,7 @@ int RunTokensCommand(const TokensCommand& flags, const std::string& data_dir) {
     }
     return kExitOk;
   }
-  if (Status revoked = (*store)->RevokeToken(flags.token_id); !revoked.ok()) return Fail(revoked);
+  if (Status revoked = store->RevokeToken(flags.token_id); !revoked.ok()) return Fail(revoked);
   if (!flags.json) std::cout << "token " << flags.token_id << " revoked\n";
   return kExitOk;
 }

@@ -1,7 +1,8 @@
 // The durable job store's contract: captures, jobs, their progress history and checkpoints.
-// SqliteJobStore is the embedded single-node implementation; a PostgreSQL store (claiming with
-// SELECT ... FOR UPDATE SKIP LOCKED) is meant to implement the same interface and pass the same
-// conformance tests (tests/server/job_store_conformance_test.cc).
+// Two implementations pass the same conformance tests (tests/server/job_store_conformance_test.cc):
+// SqliteJobStore, the embedded single-node default (a file under --data), and PostgresJobStore,
+// a PostgreSQL database several servers can share (--store postgresql://..., claiming with
+// SELECT ... FOR UPDATE SKIP LOCKED). open_store.h picks one from the server's flags.
 //
 // Contract shared by every implementation:
 //  - Every call is atomic: it commits entirely or not at all. Every state transition is checked
@@ -13,6 +14,8 @@
 //    FailedPrecondition (the API layer reports it as ALREADY_EXISTS). An empty request_id means
 //    none.
 //  - Safe to call from several threads; calls may block while another process holds the lock.
+//  - Timestamps (created_at, leases, ...) come from the store's injected clock, never from the
+//    database server's, so that tests can step time and both implementations agree.
 #pragma once
 
 #include <chrono>

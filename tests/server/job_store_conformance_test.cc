@@ -1,6 +1,7 @@
 // The JobStore contract (job_store.h), written against the interface only so that every backend
-// runs the same suite: add a backend to kBackends below (a PostgreSQL one would open a database
-// on a server started by the test script).
+// runs the same suite: the embedded SQLite store, and the PostgreSQL store on a server that
+// tests/server/with_postgres.sh starts (ctest runs those cases as softid_store_tests.postgres; run
+// alone, they skip).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -10,9 +11,12 @@
 #include <set>
 #include <thread>
 
+#include "server/store/api_token.h"
 #include "server/store/job_store.h"
+#include "server/store/postgres_job_store.h"
 #include "server/store/sha256.h"
 #include "server/store/sqlite_job_store.h"
+#include "tests/server/postgres_test_server.h"
 #include "tests/server/temp_dir.h"
 
 namespace softid::server::store {
@@ -45,6 +49,10 @@ struct Backend {
   std::string name;
   // Opens the store kept in `dir`; opening the same dir again reopens the same data.
   std::function<Result<std::unique_ptr<JobStore>>(const fs::path& dir, Clock clock)> open;
+  // Removes what `open` made outside `dir`, once the test's stores are closed; may be empty.
+  std::function<Status(const fs::path& dir)> remove = nullptr;
+  // Why the backend cannot run here (the test skips), or nullopt; may be empty.
+  std::function<std::optional<std::string>()> unavailable = nullptr;
 };
 
 // Names the backend in test output instead of dumping its bytes.
@@ -60,6 +68,20 @@ const Backend kSqlite{"Sqlite",
                                                 SqliteJobStore::Open(dir / "jobs.db", options));
                         return std::unique_ptr<JobStore>(std::move(store));
                       }};
+
+// A database per test directory on the server with_postgres.sh started.
+const Backend kPostgres{"Postgres",
+                        [](const fs::path& dir, Clock clock) -> Result<std::unique_ptr<JobStore>> {
+                          SOFTID_ASSIGN_OR_RETURN(const std::string url,
+                                                  testing::TestDatabase(dir.string()));
+                          PostgresJobStoreOptions options;
+                          options.clock = std::move(clock);
+                          SOFTID_ASSIGN_OR_RETURN(std::unique_ptr<PostgresJobStore> store,
+                                                  PostgresJobStore::Open(url, options));
+                          return std::unique_ptr<JobStore>(std::move(store));
+                        },
+                        [](const fs::path& dir) { return testing::DropTestDatabase(dir.string()); },
+                        testing::PostgresUnavailable};
 
 std::vector<ManifestEntry> Manifest(const std::string& seed) {
   return {{"capture.json", Sha256::Hex(seed + "json"), 812},
@@ -80,8 +102,19 @@ ProgressEvent Iteration(int iteration, double cost) {
 class JobStoreConformance : public ::testing::TestWithParam<Backend> {
  protected:
   void SetUp() override {
+    if (GetParam().unavailable) {
+      if (const std::optional<std::string> why = GetParam().unavailable()) GTEST_SKIP() << *why;
+    }
     store_ = Open();
     ASSERT_NE(store_, nullptr);
+  }
+
+  void TearDown() override {
+    store_.reset();
+    if (GetParam().remove && !IsSkipped()) {
+      const Status removed = GetParam().remove(dir_.path());
+      EXPECT_TRUE(removed.ok()) << removed.ToString();
+    }
   }
 
   std::unique_ptr<JobStore> Open() {
@@ -289,6 +322,29 @@ TEST_P(JobStoreConformance, CreateJobBoundedHoldsUnderConcurrency) {
   EXPECT_EQ(created.load(), kMaxQueued);
   EXPECT_EQ(refused.load(), kNumThreads * 4 - kMaxQueued);
   EXPECT_EQ(*store_->CountJobs(JobState::kQueued), kMaxQueued);
+}
+
+// Concurrent creates with one request_id make one capture and one job, which every caller gets:
+// the lookup and the insert are one transaction.
+TEST_P(JobStoreConformance, ConcurrentCreatesWithOneRequestIdMakeOneResource) {
+  constexpr int kNumThreads = 6;
+  std::vector<std::string> captures(kNumThreads), jobs(kNumThreads);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kNumThreads; ++t) {
+    threads.emplace_back([&, t] {
+      const Result<Capture> capture = store_->CreateCapture(Manifest("same"), "take-1", "lab-1");
+      ASSERT_TRUE(capture.ok()) << capture.status().ToString();
+      captures[t] = capture->id;
+      const Result<Job> job = store_->CreateJob(capture->id, {{"cells", 8}}, "job-1", "lab-1");
+      ASSERT_TRUE(job.ok()) << job.status().ToString();
+      jobs[t] = job->id;
+    });
+  }
+  for (std::thread& thread : threads) thread.join();
+  EXPECT_EQ(std::set<std::string>(captures.begin(), captures.end()).size(), 1u);
+  EXPECT_EQ(std::set<std::string>(jobs.begin(), jobs.end()).size(), 1u);
+  EXPECT_EQ(*store_->CountJobs(std::nullopt), 1);
+  EXPECT_EQ(store_->ListCaptures({})->captures.size(), 1u);
 }
 
 // --- Running jobs ------------------------------------------------------------------------------
@@ -893,6 +949,40 @@ TEST_P(JobStoreConformance, MalformedAndUnknownIds) {
             StatusCode::kNotFound);
 }
 
+// --- API tokens (the TokenStore every backend also implements)
+// ------------------------------------
+
+// Tokens are found by their secret's hash, listed oldest first, and revoked once: a second revoke
+// keeps the first time. Bad station names and hashes are refused, unknown ids NotFound.
+TEST_P(JobStoreConformance, TokensAreFoundListedAndRevoked) {
+  auto* tokens = dynamic_cast<TokenStore*>(store_.get());
+  ASSERT_NE(tokens, nullptr) << GetParam().name << " does not implement TokenStore";
+  const std::string first_hash = Sha256::Hex("first secret");
+  const Timestamp expires = ToTimestamp(clock_.Now()) + std::chrono::hours(24);
+  const Result<ApiToken> first = tokens->CreateToken("lab-1", false, expires, first_hash);
+  ASSERT_TRUE(first.ok()) << first.status().ToString();
+  EXPECT_EQ(first->id.rfind("tok-", 0), 0u);
+  EXPECT_EQ(first->expires_at, expires);
+  const Result<ApiToken> admin = tokens->CreateToken("hq", true, std::nullopt, Sha256::Hex("x"));
+  ASSERT_TRUE(admin.ok()) << admin.status().ToString();
+
+  EXPECT_EQ(**tokens->FindToken(first_hash), *first);
+  EXPECT_FALSE(tokens->FindToken(Sha256::Hex("nobody's"))->has_value());
+  EXPECT_EQ(*tokens->ListTokens(), (std::vector<ApiToken>{*first, *admin}));
+
+  ASSERT_TRUE(tokens->RevokeToken(first->id).ok());
+  const std::optional<Timestamp> revoked_at = (*tokens->FindToken(first_hash))->revoked_at;
+  ASSERT_TRUE(revoked_at.has_value());
+  ASSERT_TRUE(tokens->RevokeToken(first->id).ok());
+  EXPECT_EQ((*tokens->FindToken(first_hash))->revoked_at, revoked_at);
+  EXPECT_EQ(tokens->RevokeToken("tok-0123456789abcdef").code(), StatusCode::kNotFound);
+  EXPECT_EQ(tokens->RevokeToken("job-0123456789abcdef").code(), StatusCode::kInvalidArgument);
+  EXPECT_EQ(tokens->CreateToken("a b", false, std::nullopt, first_hash).status().code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(tokens->CreateToken("lab-2", false, std::nullopt, "nope").status().code(),
+            StatusCode::kInvalidArgument);
+}
+
 // --- Durability and concurrency ----------------------------------------------------------------
 
 // Closing and reopening keeps captures, jobs, history and checkpoints; a closed store refuses
@@ -951,7 +1041,7 @@ TEST_P(JobStoreConformance, ThreadsSharingAStoreNeverClaimTheSameJob) {
   EXPECT_EQ(std::set<std::string>(all.begin(), all.end()), created);
 }
 
-INSTANTIATE_TEST_SUITE_P(Backends, JobStoreConformance, ::testing::Values(kSqlite),
+INSTANTIATE_TEST_SUITE_P(Backends, JobStoreConformance, ::testing::Values(kSqlite, kPostgres),
                          [](const ::testing::TestParamInfo<Backend>& info) {
                            return info.param.name;
                          });

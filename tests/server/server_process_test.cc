@@ -31,7 +31,9 @@
 
 #include "client/capture_files.h"
 #include "client/reconstruction_client.h"
+#include "server/store/postgres_connection.h"
 #include "tests/core/inverse/inverse_test_util.h"
+#include "tests/server/postgres_test_server.h"
 #include "tests/server/temp_dir.h"
 
 extern char** environ;
@@ -1092,6 +1094,93 @@ TEST_F(ServerProcessTest, KillNineDuringBlobStorageLeavesNothingOrphanedAfterRes
   EXPECT_EQ(job.capture_id(), capture.id());
   EXPECT_EQ(job.state(), v1::QUEUED);
   StopCleanly(*server);
+}
+
+// Standard output and error, together, and exit status of `softid-server <args>`.
+std::pair<std::string, int> RunServerCommandWithErrors(const std::string& args) {
+  const std::string command = std::string(SOFTID_SERVER_BINARY) + " " + args + " 2>&1";
+  FILE* pipe = ::popen(command.c_str(), "r");
+  if (pipe == nullptr) return {"", -1};
+  std::string out;
+  char buffer[512];
+  while (std::fgets(buffer, sizeof buffer, pipe) != nullptr) out += buffer;
+  const int status = ::pclose(pipe);
+  return {out, WIFEXITED(status) ? WEXITSTATUS(status) : -1};
+}
+
+// A --store the server cannot use stops it at start with the flag and the URL in the message,
+// never the password: exit 2 for a value that is not a PostgreSQL URL, 1 for a server that cannot
+// be reached.
+TEST_F(ServerProcessTest, UnusableStoreIsRefusedNamingTheFlag) {
+  const std::string data = "--listen localhost:0 --data " + data_dir().string();
+  const auto [unreachable, unreachable_status] =
+      RunServerCommandWithErrors(data + " --store postgresql://softid:s3cret@127.0.0.1:1/softid");
+  EXPECT_EQ(unreachable_status, 1) << unreachable;
+  EXPECT_NE(unreachable.find("--store postgresql://softid:****@127.0.0.1:1/softid: cannot "
+                             "connect: "),
+            std::string::npos)
+      << unreachable;
+  EXPECT_EQ(unreachable.find("s3cret"), std::string::npos) << unreachable;
+
+  const auto [other, other_status] = RunServerCommandWithErrors(data + " --store mysql://db/x");
+  EXPECT_EQ(other_status, 2) << other;
+  EXPECT_NE(other.find("--store mysql://db/x: must be a postgresql:// URL"), std::string::npos)
+      << other;
+}
+
+// The server on a PostgreSQL store (tests/server/with_postgres.sh starts one): a token made with
+// `tokens create --store` lets a station in, and a job runs to SUCCEEDED, recorded in PostgreSQL
+// rather than in a SQLite file under --data, which keeps only the uploaded files.
+class PostgresServerProcessTest : public ServerProcessTest {
+ protected:
+  void SetUp() override {
+    if (const std::optional<std::string> why = store::testing::PostgresUnavailable()) {
+      GTEST_SKIP() << *why;
+    }
+    ServerProcessTest::SetUp();
+    Result<std::string> url = store::testing::TestDatabase(root_.path().string());
+    ASSERT_TRUE(url.ok()) << url.status().ToString();
+    url_ = *url;
+  }
+  void TearDown() override {
+    if (url_.empty()) return;
+    const Status dropped = store::testing::DropTestDatabase(root_.path().string());
+    EXPECT_TRUE(dropped.ok()) << dropped.ToString();
+  }
+
+  std::string url_;
+};
+
+TEST_F(PostgresServerProcessTest, RunsAJobWithItsStoreInPostgres) {
+  const auto [secret_line, created] =
+      RunServerCommand("tokens create --store '" + url_ + "' --station lab-pg");
+  ASSERT_EQ(created, 0) << secret_line;
+  const std::string secret = secret_line.substr(0, secret_line.find('\n'));
+  ASSERT_EQ(secret.rfind("softid_", 0), 0u) << secret_line;
+
+  ServerProcess::Flags flags;
+  flags.extra = {"--store", url_, "--auth", "token"};
+  std::unique_ptr<ServerProcess> server = Start(flags);
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient client = server->Client(secret);
+  const std::string capture_id = Upload(client);
+  ASSERT_FALSE(capture_id.empty());
+  const v1::Job job = CreateOk(client, capture_id, FitConfig(2));
+  WatchToEnd(client, job.id());
+  const v1::Job done = GetJob(client, job.id());
+  EXPECT_EQ(done.state(), v1::SUCCEEDED) << done.error();
+  StopCleanly(*server);
+
+  EXPECT_FALSE(fs::exists(data_dir() / "softid.db"));
+  EXPECT_GT(CountBlobs(data_dir()), 0);
+  Result<store::PostgresConnection> db = store::PostgresConnection::Connect(url_);
+  ASSERT_TRUE(db.ok()) << db.status().ToString();
+  Result<store::PostgresResult> row =
+      db->Query("SELECT state, owner FROM jobs WHERE id = $1", job.id());
+  ASSERT_TRUE(row.ok()) << row.status().ToString();
+  ASSERT_EQ(row->rows(), 1);
+  EXPECT_EQ(row->Text(0, 0), "SUCCEEDED");
+  EXPECT_EQ(row->Text(0, 1), "lab-pg");
 }
 
 }  // namespace
