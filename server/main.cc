@@ -74,6 +74,12 @@ int main(int argc, char** argv) {
                  "tokens there instead of the SQLite database under --data (uploaded files stay "
                  "under --data)")
       ->envname("SOFTID_STORE");
+  std::string role = "all";
+  app.add_option("--role", role,
+                 "all: take RPCs and run jobs; api: take RPCs only; worker: run jobs only "
+                 "(answers health probes); api and worker processes share a --store")
+      ->envname("SOFTID_ROLE")
+      ->capture_default_str();
   app.add_option("--workers", options.num_workers, "jobs run in parallel (default: cores)")
       ->envname("SOFTID_WORKERS")
       ->check(CLI::NonNegativeNumber)
@@ -196,6 +202,12 @@ int main(int argc, char** argv) {
   }
   options.data_dir = data_dir;
   options.store_url = store_url;
+  softid::Result<softid::server::ServerRole> parsed_role = softid::server::ParseServerRole(role);
+  if (!parsed_role.ok()) {
+    std::fprintf(stderr, "softid-server: %s\n", parsed_role.status().message().c_str());
+    return kExitInvalidInput;
+  }
+  options.role = *parsed_role;
   if (auth != "auto") {
     options.auth =
         auth == "token" ? softid::server::AuthMode::kToken : softid::server::AuthMode::kNone;

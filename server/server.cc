@@ -98,8 +98,28 @@ Result<TlsOptions> ResolveTls(const ServerOptions& options, spdlog::logger& log)
 
 }  // namespace
 
+const char* ToString(ServerRole role) {
+  switch (role) {
+    case ServerRole::kApi: return "api";
+    case ServerRole::kWorker: return "worker";
+    case ServerRole::kAll: break;
+  }
+  return "all";
+}
+
+Result<ServerRole> ParseServerRole(std::string_view text) {
+  for (ServerRole role : {ServerRole::kAll, ServerRole::kApi, ServerRole::kWorker}) {
+    if (text == ToString(role)) return role;
+  }
+  return Status::InvalidArgument("--role " + std::string(text) + ": must be all, api or worker");
+}
+
 Status ServerOptions::Validate() const {
   if (listen_address.empty()) return Status::InvalidArgument("listen = \"\": must be host:port");
+  if (role == ServerRole::kWorker && num_workers < 1) {
+    return Status::InvalidArgument("role = worker with workers = " + std::to_string(num_workers) +
+                                   ": a worker needs at least one");
+  }
   if (data_dir.empty()) return Status::InvalidArgument("data = \"\": a data directory is required");
   if (num_workers < 0) {
     return Status::InvalidArgument("workers = " + std::to_string(num_workers) +
@@ -182,9 +202,11 @@ struct Server::Parts {
   bool shut_down = false;
 };
 
-Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
+Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& requested,
                                               std::shared_ptr<spdlog::logger> logger) {
-  SOFTID_RETURN_IF_ERROR(options.Validate());
+  SOFTID_RETURN_IF_ERROR(requested.Validate());
+  ServerOptions options = requested;
+  if (options.role == ServerRole::kApi) options.num_workers = 0;  // an API process never fits
   auto parts = std::make_unique<Parts>();
   parts->options = options;
   parts->logger = logger ? std::move(logger) : spdlog::default_logger();
@@ -203,8 +225,12 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
     log->warn("cannot restrict the data directory's permissions: {}", error.message());
     error.clear();
   }
-  const fs::path staging = options.data_dir / "uploads";
-  const fs::path work = options.data_dir / "work";
+  // With a shared store several processes may share the data directory: each stages uploads and
+  // runs jobs in folders of its own (a crashed process's are left for the operator).
+  const bool shared_store = !options.store_url.empty();
+  const std::string node = HostName() + "-" + std::to_string(::getpid());
+  const fs::path staging = options.data_dir / "uploads" / (shared_store ? node : "");
+  const fs::path work = options.data_dir / "work" / (shared_store ? node : "");
   SOFTID_RETURN_IF_ERROR(ResetFolder(staging));
   SOFTID_RETURN_IF_ERROR(ResetFolder(work));
   SOFTID_ASSIGN_OR_RETURN(const TlsOptions tls, ResolveTls(options, *log));
@@ -219,7 +245,6 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   // No worker of this process runs yet, so every RUNNING job in the embedded store was left by a
   // previous one. A PostgreSQL store may be shared: other servers' workers may be running its
   // RUNNING jobs, and only an expired lease marks a job as lost (the lease sweep below).
-  const bool shared_store = !options.store_url.empty();
   SOFTID_ASSIGN_OR_RETURN(
       const store::RecoverySummary recovered,
       parts->jobs->RecoverAfterCrash(options.max_attempts,
@@ -231,7 +256,8 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
               recovered.num_cancelled);
   }
 
-  RemoveOrphanBlobs(*parts->jobs, *parts->blobs, log);
+  // Another process sharing the data directory may be between its blob puts and its commit.
+  if (!shared_store) RemoveOrphanBlobs(*parts->jobs, *parts->blobs, log);
   parts->reports.emplace(options.data_dir / "reports");
 
   WorkerPoolOptions pool_options;
@@ -240,7 +266,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   pool_options.heartbeat_interval = options.heartbeat_interval;
   pool_options.idle_poll_interval = options.idle_poll_interval;
   pool_options.work_root = work;
-  pool_options.worker_id_prefix = HostName() + "-" + std::to_string(::getpid());
+  pool_options.worker_id_prefix = node;
   pool_options.metrics = &parts->metrics;
   pool_options.blob_puts = &parts->blob_puts;
   pool_options.reports = &*parts->reports;
@@ -261,7 +287,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
       static_cast<double>(options.max_job_wall_time.count());
   const int cores = static_cast<int>(std::thread::hardware_concurrency());
   service_options.job_limits.cores = std::max(1, cores / std::max(1, options.num_workers));
-  if (options.num_workers == 0) {
+  if (options.num_workers == 0 && options.role != ServerRole::kApi) {
     log->warn(
         "--workers 0: this process runs no jobs; they stay QUEUED until a server with "
         "workers serves this data directory");
@@ -298,15 +324,18 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   SOFTID_ASSIGN_OR_RETURN(std::shared_ptr<grpc::ServerCredentials> credentials,
                           MakeServerCredentials(tls));
   builder.AddListeningPort(options.listen_address, credentials, &parts->port);
-  builder.RegisterService(parts->grpc_service.get());
+  // A worker answers health probes only: stations talk to the API processes.
+  if (options.role != ServerRole::kWorker) builder.RegisterService(parts->grpc_service.get());
   parts->grpc_server = builder.BuildAndStart();
   if (parts->grpc_server == nullptr || parts->port == 0) {
     parts->pool.reset();
     (void)parts->jobs->Close();
     return Status::IoError("cannot listen on " + options.listen_address);
   }
-  parts->grpc_server->GetHealthCheckService()->SetServingStatus(
-      v1::Reconstruction::service_full_name(), true);
+  if (options.role != ServerRole::kWorker) {
+    parts->grpc_server->GetHealthCheckService()->SetServingStatus(
+        v1::Reconstruction::service_full_name(), true);
+  }
   if (!options.metrics_listen.empty()) {
     store::JobStore* jobs = parts->jobs.get();
     const Metrics* metrics = &parts->metrics;
@@ -353,9 +382,11 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& options,
   }
   parts->pool->Start();
   log->info(
-      "softid-server listening on {} (port {}, {}, auth {}), data {}, {} worker(s), max {} queued",
-      options.listen_address, parts->port, options.tls.enabled() ? "TLS" : "plain text",
-      ToString(auth), options.data_dir.string(), options.num_workers, options.max_queued_jobs);
+      "softid-server ({}) listening on {} (port {}, {}, auth {}), data {}, {} worker(s), max {} "
+      "queued",
+      ToString(options.role), options.listen_address, parts->port,
+      options.tls.enabled() ? "TLS" : "plain text", ToString(auth), options.data_dir.string(),
+      options.num_workers, options.max_queued_jobs);
   return std::unique_ptr<Server>(new Server(std::move(parts)));
 }
 

@@ -17,6 +17,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <string_view>
 
 #include "core/common/status.h"
 #include "server/api_tokens.h"
@@ -26,6 +27,17 @@
 
 namespace softid::server {
 
+// What one server process does (--role). Any number of each may share a PostgreSQL store and a
+// data directory (one volume every process mounts).
+enum class ServerRole {
+  kAll,     // takes RPCs and runs jobs: the single-node default
+  kApi,     // takes RPCs, never fits (no workers)
+  kWorker,  // claims and runs jobs; serves only gRPC health (probes) and metrics
+};
+const char* ToString(ServerRole role);
+// "all", "api" or "worker"; InvalidArgument naming --role and the value otherwise.
+Result<ServerRole> ParseServerRole(std::string_view text);
+
 struct ServerOptions {
   // "host:port"; port 0 picks a free port (see Server::port()).
   std::string listen_address = "localhost:50051";
@@ -34,8 +46,9 @@ struct ServerOptions {
   // data_dir/softid.db, or a postgresql:// URL for a PostgreSQL database that several servers may
   // share (--store). Blobs, staging and work folders stay under data_dir either way.
   std::string store_url;
-  int num_workers = 1;             // >= 0
-  int64_t max_queued_jobs = 1000;  // >= 1
+  ServerRole role = ServerRole::kAll;  // kApi runs no workers whatever num_workers says
+  int num_workers = 1;                 // >= 0; >= 1 for kWorker
+  int64_t max_queued_jobs = 1000;      // >= 1
   // A job whose worker was lost (crash, kill -9, or shutdown mid-fit) is re-run until it was
   // started this many times, then FAILED: a job that crashes the server every time must not
   // crash it forever.

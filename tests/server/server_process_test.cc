@@ -100,10 +100,11 @@ class ServerProcess {
     int max_queued = 100;
     int max_attempts = 3;
     std::vector<std::string> extra = {};  // further flags
+    std::string name = "";                // tells apart processes sharing one data directory
   };
 
   ServerProcess(const fs::path& data_dir, const fs::path& log_file, const Flags& flags)
-      : port_file_(data_dir.string() + ".port"), log_file_(log_file) {
+      : port_file_(data_dir.string() + flags.name + ".port"), log_file_(log_file) {
     std::error_code ignored;
     fs::remove(port_file_, ignored);
     std::vector<std::string> args = {SOFTID_SERVER_BINARY,
@@ -1128,6 +1129,17 @@ TEST_F(ServerProcessTest, UnusableStoreIsRefusedNamingTheFlag) {
       << other;
 }
 
+// A role the server does not have, or a worker without workers, stops it naming the flag.
+TEST_F(ServerProcessTest, BadRoleIsRefusedNamingTheFlag) {
+  const std::string data = "--listen localhost:0 --data " + data_dir().string();
+  const auto [unknown, unknown_status] = RunServerCommandWithErrors(data + " --role boss");
+  EXPECT_EQ(unknown_status, 2) << unknown;
+  EXPECT_NE(unknown.find("--role boss: must be all, api or worker"), std::string::npos) << unknown;
+  const auto [idle, idle_status] = RunServerCommandWithErrors(data + " --role worker --workers 0");
+  EXPECT_NE(idle_status, 0) << idle;
+  EXPECT_NE(idle.find("role = worker with workers = 0"), std::string::npos) << idle;
+}
+
 // The server on a PostgreSQL store (tests/server/with_postgres.sh starts one): a token made with
 // `tokens create --store` lets a station in, and a job runs to SUCCEEDED, recorded in PostgreSQL
 // rather than in a SQLite file under --data, which keeps only the uploaded files.
@@ -1150,6 +1162,39 @@ class PostgresServerProcessTest : public ServerProcessTest {
 
   std::string url_;
 };
+
+// Two processes on one store and one data directory: an API process (takes RPCs, never fits) and
+// a worker (runs jobs, answers only health probes). A job submitted to the API runs on the worker,
+// and the API serves its progress, result and report.
+TEST_F(PostgresServerProcessTest, ApiAndWorkerProcessesShareTheStoreAndTheData) {
+  ServerProcess::Flags api_flags;
+  api_flags.extra = {"--store", url_, "--role", "api"};
+  api_flags.name = "-api";
+  ServerProcess::Flags worker_flags;
+  worker_flags.extra = {"--store", url_, "--role", "worker"};
+  worker_flags.name = "-worker";
+  const fs::path api_log = root_.path() / "api.log", worker_log = root_.path() / "worker.log";
+  auto api = std::make_unique<ServerProcess>(data_dir(), api_log, api_flags);
+  ASSERT_TRUE(api->WaitUntilServing());
+  ReconstructionClient client = api->Client();
+  const v1::Job job = CreateOk(client, Upload(client), FitConfig(1));
+  std::this_thread::sleep_for(std::chrono::milliseconds(1500));
+  EXPECT_EQ(GetJob(client, job.id()).state(), v1::QUEUED) << "the API process ran a job";
+
+  auto worker = std::make_unique<ServerProcess>(data_dir(), worker_log, worker_flags);
+  ASSERT_TRUE(worker->WaitUntilServing());
+  WatchToEnd(client, job.id());
+  EXPECT_EQ(GetJob(client, job.id()).state(), v1::SUCCEEDED) << ReadFile(worker_log);
+  v1::Result result;
+  ASSERT_TRUE(client.GetResult(job.id(), &result).ok());
+  EXPECT_EQ(result.artifacts_size(), 3);
+  v1::Job listed;
+  EXPECT_EQ(worker->Client().GetJob(job.id(), &listed).error_code(),
+            grpc::StatusCode::UNIMPLEMENTED);
+  StopCleanly(*worker);
+  api->Signal(SIGTERM);
+  EXPECT_EQ(api->Wait(std::chrono::seconds(20)).value_or(-1), 0) << ReadFile(api_log);
+}
 
 TEST_F(PostgresServerProcessTest, RunsAJobWithItsStoreInPostgres) {
   const auto [secret_line, created] =
