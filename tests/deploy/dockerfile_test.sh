@@ -10,6 +10,7 @@ set -euo pipefail
 source_dir=$1
 dockerfile=$source_dir/deploy/Dockerfile
 compose=$source_dir/deploy/docker-compose.yml
+multi=$source_dir/deploy/docker-compose.multi.yml
 list=$source_dir/deploy/runtime-packages.txt
 failed=0
 
@@ -34,11 +35,11 @@ expect "health checked with the client" 'CMD \[.*"softid", "--retry-for", "0", "
 expect "TLS on by default (self-signed)" 'SOFTID_TLS_SELF_SIGNED=true' "$dockerfile"
 expect "the client in the image trusts that certificate" 'SOFTID_TLS_CA=/var/lib/softid/tls/server.crt' \
   "$dockerfile"
-if grep -Eq 'SOFTID_ALLOW_INSECURE|--allow-insecure' "$dockerfile" "$compose"; then
+if grep -Eq 'SOFTID_ALLOW_INSECURE|--allow-insecure' "$dockerfile" "$compose" "$multi"; then
   echo "FAIL: the image or compose file serves plain text on the network (allow-insecure)" >&2
   failed=1
 fi
-if grep -Eq 'SOFTID_AUTH=none|--auth none|SOFTID_AUTH: *"?none' "$dockerfile" "$compose"; then
+if grep -Eq 'SOFTID_AUTH=none|--auth none|SOFTID_AUTH: *"?none' "$dockerfile" "$compose" "$multi"; then
   echo "FAIL: the image or compose file turns API tokens off" >&2
   failed=1
 fi
@@ -57,6 +58,15 @@ while read -r source; do
 done < <(awk '$1 == "COPY" && $2 !~ /^--/ && $2 != "." {print $2}' "$dockerfile")
 
 expect "compose builds deploy/Dockerfile" 'dockerfile: deploy/Dockerfile' "$compose"
+# The multi-node file: PostgreSQL, an API role and a worker role on one store and one volume.
+expect "multi: a PostgreSQL 15 service" 'image: postgres:15' "$multi"
+expect "multi: an API process" 'SOFTID_ROLE: api' "$multi"
+expect "multi: worker processes" 'SOFTID_ROLE: worker' "$multi"
+expect "multi: the shared store" 'SOFTID_STORE: postgresql://' "$multi"
+[ "$(grep -Ec 'softid-data:/var/lib/softid' "$multi")" -eq 2 ] ||
+  { echo "FAIL: multi: the API and the workers must mount one data volume" >&2; failed=1; }
+[ "$(grep -Ec 'condition: service_healthy' "$multi")" -eq 2 ] ||
+  { echo "FAIL: multi: the API waits for the database and the workers for the API" >&2; failed=1; }
 expect "compose keeps the data on a volume" ':/var/lib/softid' "$compose"
 
 [ "$failed" -eq 0 ] || exit 1
