@@ -163,106 +163,132 @@ inverse::IdentifiabilityOptions IdentifiabilityOptionsFor(const inverse::JobConf
   return options;
 }
 
-}  // namespace
-
-Status DiagnoseOptions::Validate() const {
-  if (max_base_restarts < 0)
-    return json::Invalid("max_base_restarts", max_base_restarts, "must be >= 0");
-  SOFTID_RETURN_IF_ERROR(noise_floor.Validate());
-  SOFTID_RETURN_IF_ERROR(phases.Validate());
-  SOFTID_RETURN_IF_ERROR(screening.Validate());
-  SOFTID_RETURN_IF_ERROR(decision.Validate());
-  if (patches < 1) return json::Invalid("patches", patches, "must be >= 1");
-  if (default_heldout_every < 2)
-    return json::Invalid("default_heldout_every", default_heldout_every, "must be >= 2");
-  return Status::Ok();
-}
-
-Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
-                                 const inverse::JobConfig& config_in,
-                                 const DiagnoseOptions& options,
-                                 const inverse::FitResult* base_fit) {
-  const auto begin = Clock::now();
-  SOFTID_RETURN_IF_ERROR(options.Validate());
-  auto stage = [&](const std::string& message) {
-    if (options.on_stage) options.on_stage(message);
-  };
-  inverse::JobConfig config = config_in;
-  config.diagnose = false;
-  if (config.heldout_every == 0) config.heldout_every = options.default_heldout_every;
-  SOFTID_RETURN_IF_ERROR(config.Validate());
+// One diagnosis: the base fit and the evaluation context every later stage shares, the report it
+// fills, and the stages (numbered as in diagnose.h) as methods.
+struct DiagnosisRun {
+  const capture::Capture& capture;
+  const DiagnoseOptions& options;
+  const DecisionOptions& rule;
+  const Clock::time_point begin = Clock::now();
+  inverse::JobConfig config;  // the base config, "auto" resolved after the base fit
   DiagnosisReport report;
-
-  // 1. The base model.
   inverse::FitResult base;
-  if (base_fit != nullptr && config_in.heldout_every > 0) {
-    base = *base_fit;
-  } else {
-    stage("base fit: " + std::to_string(config.fit.size()) + " parameter(s)");
-    SOFTID_ASSIGN_OR_RETURN(base, inverse::Fit(capture, config, options.fit));
-  }
-  report.base_fit = inverse::ToJson(base);
-  const fem::PhysicalParameters p0 = base.Best().final;
-  // Every refit and the likelihood ratios compare models on the base fit's grid and time step: an
-  // "auto" choice redone at other parameters could change the discretisation between the models.
-  config = inverse::WithFitDiscretisation(config, base);
-
+  fem::PhysicalParameters p0;  // the base fit's parameters
   Context context;
-  SOFTID_ASSIGN_OR_RETURN(context.mesh, capture::LoadCaptureMesh(capture));
-  SOFTID_ASSIGN_OR_RETURN(
-      context.observations,
-      LoadObservations(capture, config.frames.first, config.frames.last, config.heldout_every));
-  auto frames =
-      std::make_shared<const std::vector<inverse::ObservedFrame>>(context.observations.frames);
-  try {
-    context.objective = std::make_unique<inverse::TrajectoryObjective>(
-        context.mesh, capture.fixed_region, p0, inverse::SimulationOptionsFor(config),
-        inverse::CostOptionsFor(config), frames, capture.fps, config.substeps);
-  } catch (const std::invalid_argument& e) {
-    return Status::InvalidArgument(e.what());
-  }
-  context.objective->SetCancelFlag(options.fit.cancel);
-  context.rest_bounds = context.mesh.Bounds();
-  const double h = context.objective->simulator().hex_mesh().CellSize();
-  context.truncation = config.cost.truncation_cells * h;
-  context.patches =
-      MakePatches(context.objective->simulator().rest_surface(), options.patches, -p0.gravity);
-  for (const auto& f : context.observations.frames) {
-    context.frame_times.push_back({f.frame, f.time});
-    report.frames.push_back(f.frame);
-    report.heldout.push_back(f.heldout);
-  }
-
-  // 2. Locate the mismatch.
-  stage("residual map, noise floor and motion phases");
-  SOFTID_ASSIGN_OR_RETURN(ModelResiduals r0, ResidualsAt(context, p0));
-  report.base_cost = r0.cost;
-  report.base_heldout = r0.heldout;
-  SOFTID_ASSIGN_OR_RETURN(report.noise_floor, EstimateNoiseFloor(r0.map, options.noise_floor));
-  const double sigma = report.noise_floor.sigma;
-  SOFTID_ASSIGN_OR_RETURN(report.motion, SplitMotionPhases(context.objective->simulator(), p0,
-                                                           context.frame_times, options.phases));
-  const DecisionOptions& rule = options.decision;
-  report.before = Locate(r0.map, report.motion, sigma, rule.misfit_threshold, rule.min_phase_frames,
-                         rule.min_patch_points);
-  report.after = report.before;
-  const EffectiveSampleSize ess0 = ComputeEffectiveSampleSize(FittedResiduals(r0.map));
-  report.n_eff = ess0.n_eff;
-  if (report.noise_floor.frame0_excess) {
-    report.nuisances.push_back(
-        {{"nuisance", "camera_pose_or_time_offset"},
-         {"evidence", "frame 0, whose pose is given, misfits " +
-                          std::to_string(report.noise_floor.frame0_misfit /
-                                         report.noise_floor.quantile_misfit) +
-                          " x the floor of the moving frames"},
-         {"modelled", false}});
-  }
-
-  ModelResiduals final_residuals = r0;
+  ModelResiduals r0;   // at p0
+  double sigma = 0.0;  // noise floor [m]
+  EffectiveSampleSize ess0;
+  ModelResiduals final_residuals;
   nlohmann::json base_identifiability;  // computed when the base misfits (screening needs H_bb)
 
-  if (report.before.flagged) {
-    // 3-4. Screen (around the base fit with its parameters profiled out), then refit the best.
+  DiagnosisRun(const capture::Capture& capture, inverse::JobConfig config,
+               const DiagnoseOptions& options)
+      : capture(capture), options(options), rule(options.decision), config(std::move(config)) {}
+
+  void Stage(const std::string& message) const {
+    if (options.on_stage) options.on_stage(message);
+  }
+  bool Cancelled() const { return options.fit.cancel != nullptr && options.fit.cancel->load(); }
+  double DefaultK(const fem::PhysicalParameters& p) const {
+    return fem::DefaultContactStiffness(p.youngs_modulus, context.rest_bounds.sizes().maxCoeff());
+  }
+
+  // The whole diagnosis, or the diagnosis restarted from a better base fit (4b).
+  Result<DiagnosisReport> Run(const inverse::FitResult* base_fit, bool base_fit_usable) {
+    SOFTID_RETURN_IF_ERROR(FitBase(base_fit_usable ? base_fit : nullptr));
+    SOFTID_RETURN_IF_ERROR(BuildContext());
+    SOFTID_RETURN_IF_ERROR(LocateMismatch());
+    final_residuals = r0;
+    if (report.before.flagged) {
+      SOFTID_RETURN_IF_ERROR(Screen());
+      TestCandidatesAlone();
+      TestPhysicsGivenNuisances();
+    }
+    DecideFromTheTests();
+    SOFTID_ASSIGN_OR_RETURN(std::optional<DiagnosisReport> restarted, RestartFromABetterBase());
+    if (restarted) return *std::move(restarted);
+    ListNuisances();
+    SOFTID_RETURN_IF_ERROR(SettleFinalModel());
+    SOFTID_RETURN_IF_ERROR(WritePlots());
+    report.seconds = std::chrono::duration<double>(Clock::now() - begin).count();
+    return report;
+  }
+
+  // 1. The base model: the given fit, or a new one.
+  Status FitBase(const inverse::FitResult* base_fit) {
+    if (base_fit != nullptr) {
+      base = *base_fit;
+    } else {
+      Stage("base fit: " + std::to_string(config.fit.size()) + " parameter(s)");
+      SOFTID_ASSIGN_OR_RETURN(base, inverse::Fit(capture, config, options.fit));
+    }
+    report.base_fit = inverse::ToJson(base);
+    p0 = base.Best().final;
+    // Every refit and the likelihood ratios compare models on the base fit's grid and time step: an
+    // "auto" choice redone at other parameters could change the discretisation between the models.
+    config = inverse::WithFitDiscretisation(config, base);
+    return Status::Ok();
+  }
+
+  // The objective on the fitted frames at the base fit's discretisation, the surface patches and
+  // the frame times.
+  Status BuildContext() {
+    SOFTID_ASSIGN_OR_RETURN(context.mesh, capture::LoadCaptureMesh(capture));
+    SOFTID_ASSIGN_OR_RETURN(
+        context.observations,
+        LoadObservations(capture, config.frames.first, config.frames.last, config.heldout_every));
+    auto frames =
+        std::make_shared<const std::vector<inverse::ObservedFrame>>(context.observations.frames);
+    try {
+      context.objective = std::make_unique<inverse::TrajectoryObjective>(
+          context.mesh, capture.fixed_region, p0, inverse::SimulationOptionsFor(config),
+          inverse::CostOptionsFor(config), frames, capture.fps, config.substeps);
+    } catch (const std::invalid_argument& e) {
+      return Status::InvalidArgument(e.what());
+    }
+    context.objective->SetCancelFlag(options.fit.cancel);
+    context.rest_bounds = context.mesh.Bounds();
+    const double h = context.objective->simulator().hex_mesh().CellSize();
+    context.truncation = config.cost.truncation_cells * h;
+    context.patches =
+        MakePatches(context.objective->simulator().rest_surface(), options.patches, -p0.gravity);
+    for (const auto& f : context.observations.frames) {
+      context.frame_times.push_back({f.frame, f.time});
+      report.frames.push_back(f.frame);
+      report.heldout.push_back(f.heldout);
+    }
+    return Status::Ok();
+  }
+
+  // 2. Locate the mismatch: residual map, noise floor, motion phases, flagged phases and patches.
+  Status LocateMismatch() {
+    Stage("residual map, noise floor and motion phases");
+    SOFTID_ASSIGN_OR_RETURN(r0, ResidualsAt(context, p0));
+    report.base_cost = r0.cost;
+    report.base_heldout = r0.heldout;
+    SOFTID_ASSIGN_OR_RETURN(report.noise_floor, EstimateNoiseFloor(r0.map, options.noise_floor));
+    sigma = report.noise_floor.sigma;
+    SOFTID_ASSIGN_OR_RETURN(report.motion, SplitMotionPhases(context.objective->simulator(), p0,
+                                                             context.frame_times, options.phases));
+    report.before = Locate(r0.map, report.motion, sigma, rule.misfit_threshold,
+                           rule.min_phase_frames, rule.min_patch_points);
+    report.after = report.before;
+    ess0 = ComputeEffectiveSampleSize(FittedResiduals(r0.map));
+    report.n_eff = ess0.n_eff;
+    if (report.noise_floor.frame0_excess) {
+      report.nuisances.push_back(
+          {{"nuisance", "camera_pose_or_time_offset"},
+           {"evidence", "frame 0, whose pose is given, misfits " +
+                            std::to_string(report.noise_floor.frame0_misfit /
+                                           report.noise_floor.quantile_misfit) +
+                            " x the floor of the moving frames"},
+           {"modelled", false}});
+    }
+    return Status::Ok();
+  }
+
+  // 3. Screen every candidate around the base fit (its parameters profiled out).
+  Status Screen() {
     std::vector<double> excess;
     for (const FrameResiduals& f : r0.map.frames)
       excess.push_back(std::max(0.0, f.misfit * f.misfit - sigma * sigma));
@@ -277,7 +303,7 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
     screening_base.n_eff = ess0.n_eff;
     screening_base.floor_cost = 0.5 * sigma * sigma;
     screening_base.rest_bounds = context.rest_bounds;
-    stage("curvature of the base fit (identifiability)");
+    Stage("curvature of the base fit (identifiability)");
     Result<inverse::IdentifiabilityReport> base_id = inverse::AnalyzeIdentifiability(
         capture, config, base, IdentifiabilityOptionsFor(config, ess0.n_eff));
     if (base_id.ok()) {
@@ -286,167 +312,184 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
     } else {
       base_identifiability = {{"error", base_id.status().message()}};
     }
-    stage("screening " + std::to_string(CandidateLibrary().size()) + " candidates");
+    Stage("screening " + std::to_string(CandidateLibrary().size()) + " candidates");
     SOFTID_ASSIGN_OR_RETURN(report.screening,
                             ScreenCandidates(*context.objective, screening_base, report.motion,
                                              excess, options.screening));
-    // The refit of `freed` from each of `starts` (every base parameter free as well); the lowest
-    // fitted cost wins. *tried lists each start's extension values and fitted cost.
-    auto refit = [&](const Candidate& candidate, const std::vector<std::string>& freed,
-                     const std::vector<fem::PhysicalParameters>& starts, nlohmann::json* tried,
-                     inverse::JobConfig* used,
-                     const std::vector<fem::PhysicalParameters>& fallbacks = {})
-        -> Result<inverse::FitResult> {
-      Result<inverse::FitResult> best = Status::Internal("no refit start");
-      const double k0 =
-          fem::DefaultContactStiffness(p0.youngs_modulus, context.rest_bounds.sizes().maxCoeff());
-      std::vector<fem::PhysicalParameters> all = starts;
-      all.insert(all.end(), fallbacks.begin(), fallbacks.end());
-      for (size_t i = 0; i < all.size(); ++i) {
-        // Fallback starts only while no start has succeeded.
-        if (i >= starts.size() && best.ok()) break;
-        const fem::PhysicalParameters& start = all[i];
-        const inverse::JobConfig c = RefitConfig(config, freed, start);
-        Result<inverse::FitResult> fit = inverse::Fit(capture, c, options.fit);
-        nlohmann::json entry = {{"start", ExtensionValues(candidate.extension, start, k0)}};
-        if (i >= starts.size()) entry["fallback"] = true;
-        if (fit.ok()) {
-          entry["cost"] = fit->Best().final_cost;
-          entry["found"] = ExtensionValues(candidate.extension, fit->Best().final, k0);
-        } else {
-          entry["error"] = fit.status().message();
-        }
-        tried->push_back(entry);
-        if (fit.ok() && (!best.ok() || fit->Best().final_cost < best->Best().final_cost)) {
-          best = std::move(fit);
-          *used = c;
-        } else if (!best.ok() && !fit.ok()) {
-          best = fit.status();
-        }
-      }
-      return best;
-    };
-    // Steps 1a-1e for a finished refit: `tested.test` holds the null's costs (cost_before,
-    // heldout_before); LR, gates, profile and (when accepted) identifiability follow.
-    auto judge = [&](const Candidate& candidate, const Result<inverse::FitResult>& fit,
-                     const inverse::JobConfig& fit_config, TestedCandidate* tested) {
-      Result<ModelResiduals> r1 = Status::Internal("not evaluated");
-      if (fit.ok()) {
-        tested->parameters = fit->Best().final;
-        r1 = ResidualsAt(context, tested->parameters);
-      }
-      if (!fit.ok() || !r1.ok()) {
-        tested->test.refit_error = !fit.ok() ? fit.status().message() : r1.status().message();
-        ApplyDecisionRule(rule, candidate, &tested->test);
-        return;
-      }
-      tested->fit = inverse::ToJson(*fit);
-      tested->test.cost_after = r1->cost;
-      tested->test.heldout_after = r1->heldout;
-      const EffectiveSampleSize ess = ComputeEffectiveSampleSize(FittedResiduals(r1->map));
-      tested->test.n_eff = ess.n_eff;
-      tested->test.tau_pixels = ess.tau_pixels;
-      tested->test.tau_frames = ess.tau_frames;
-      tested->test.lr = LikelihoodRatioStatistic(tested->test.cost_before, r1->cost, ess.n_eff);
-      tested->after = Locate(r1->map, report.motion, sigma, rule.misfit_threshold,
-                             rule.min_phase_frames, rule.min_patch_points);
-      // The phases and patches flagged at the base fit must be back at the noise level.
-      for (size_t i = 0; i < report.before.phases.size(); ++i) {
-        if (!report.before.phases[i].flagged) continue;
-        for (const PhaseMisfit& after : tested->after.phases)
-          if (after.phase == report.before.phases[i].phase &&
-              after.normalised > rule.misfit_threshold)
-            tested->test.still_flagged.push_back(ToString(after.phase));
-      }
-      for (size_t i = 0; i < report.before.patches.size(); ++i) {
-        if (report.before.patches[i].flagged &&
-            tested->after.patches[i].normalised > rule.misfit_threshold)
-          tested->test.still_flagged.push_back("patch " + std::to_string(i) + " (" +
-                                               tested->after.patches[i].label + ")");
-      }
-      const double k0 = fem::DefaultContactStiffness(tested->parameters.youngs_modulus,
-                                                     context.rest_bounds.sizes().maxCoeff());
-      tested->test.plausible =
-          IsPlausible(candidate.extension, tested->parameters, k0, &tested->test.plausibility_note);
-      tested->values = ExtensionValues(candidate.extension, tested->parameters, k0);
-      tested->uncertainty = nullptr;
-      ApplyDecisionRule(rule, candidate, &tested->test);
-      // 1a'. The null's cost is the lowest the null model reaches, also from the refit's values
-      // with the extension back at its null: a base fit that stopped in a local minimum (control
-      // s119: beta 0.0066 instead of 0.0025) let any extension "improve" it by escaping there.
-      if (tested->test.accepted) {
-        std::vector<std::string> null_freed;
-        for (const std::string& name : fit_config.fit) {
-          const bool extension_parameter =
-              std::find(candidate.parameters.begin(), candidate.parameters.end(), name) !=
-              candidate.parameters.end();
-          if (!extension_parameter && !config.IsFitted(name)) null_freed.push_back(name);
-        }
-        const fem::PhysicalParameters null_start =
-            NullModelStart(candidate.extension, p0, tested->parameters, context.rest_bounds);
-        stage(std::string("null model refitted from the ") + ToString(candidate.extension) +
-              " refit");
-        Result<inverse::FitResult> null_fit =
-            inverse::Fit(capture, RefitConfig(config, null_freed, null_start), options.fit);
-        Result<ModelResiduals> rn = Status::Internal("not evaluated");
-        if (null_fit.ok()) rn = ResidualsAt(context, null_fit->Best().final);
-        if (null_fit.ok() && null_freed.empty()) tested->null_fit = *null_fit;
-        if (rn.ok()) {
-          const bool lower = rn->cost < tested->test.cost_before;
-          tested->null_refit = {
-              {"cost", rn->cost}, {"heldout", rn->heldout}, {"replaced_null", lower}};
-          if (lower) {
-            tested->test.cost_before = rn->cost;
-            tested->test.heldout_before = rn->heldout;
-            tested->test.lr = LikelihoodRatioStatistic(rn->cost, r1->cost, ess.n_eff);
-            ApplyDecisionRule(rule, candidate, &tested->test);
-          }
-        } else {
-          tested->null_refit = {
-              {"error", !null_fit.ok() ? null_fit.status().message() : rn.status().message()}};
-        }
-      }
-      // 1e. Does the motion determine the found value? Its profile at +-25 %.
-      if (tested->test.accepted) {
-        const Profile profile =
-            ProfileExtension(*context.objective, candidate.extension, tested->parameters, r1->cost,
-                             ess.n_eff, tested->test.critical_value, 0.25, k0);
-        tested->profile = {{"change", 0.25},
-                           {"lr_minus", profile.lr_minus},
-                           {"lr_plus", profile.lr_plus},
-                           {"determined", profile.determined},
-                           {"relative_uncertainty", profile.relative_uncertainty}};
-        tested->test.identifiability_checked = true;
-        tested->test.identifiable = profile.determined;
-        if (!profile.determined) {
-          tested->test.identifiability_note = "a 25 % change of the value is not rejected (LR " +
-                                              std::to_string(profile.lr_minus) + ", " +
-                                              std::to_string(profile.lr_plus) + ")";
-        }
-        ApplyDecisionRule(rule, candidate, &tested->test);
-      }
-      // Identifiability, only where everything else passed (it costs 2 runs per variable).
-      if (tested->test.accepted && options.identifiability) {
-        stage(std::string("identifiability of ") + ToString(candidate.extension));
-        Result<inverse::IdentifiabilityReport> id = inverse::AnalyzeIdentifiability(
-            capture, fit_config, *fit, IdentifiabilityOptionsFor(config, ess.n_eff));
-        if (id.ok()) {
-          bool ok = true;
-          std::string note;
-          tested->uncertainty = ExtensionUncertainty(candidate, *id, &ok, &note);
-          // Reported, not a gate: a Hessian from differences of adjoint gradients can miss the
-          // curvature of a piecewise-smooth cost (contact switching), the profile above cannot.
-          if (!ok) tested->profile["hessian_note"] = note;
-          tested->fit["identifiability"] = inverse::ToJson(*id);
-        } else {
-          tested->profile["hessian_note"] = id.status().message();
-        }
-      }
-      tested->cost_history.push_back(fit->Best().initial_cost);
-      for (double c : fit->Best().CostHistoryOverEveryFrame()) tested->cost_history.push_back(c);
-    };
-    auto cancelled = [&] { return options.fit.cancel != nullptr && options.fit.cancel->load(); };
+    return Status::Ok();
+  }
 
+  // The refit of `freed` from each of `starts` (every base parameter free as well); the lowest
+  // fitted cost wins. *tried lists each start's extension values and fitted cost.
+  Result<inverse::FitResult> Refit(const Candidate& candidate,
+                                   const std::vector<std::string>& freed,
+                                   const std::vector<fem::PhysicalParameters>& starts,
+                                   nlohmann::json* tried, inverse::JobConfig* used,
+                                   const std::vector<fem::PhysicalParameters>& fallbacks = {}) {
+    Result<inverse::FitResult> best = Status::Internal("no refit start");
+    const double k0 =
+        fem::DefaultContactStiffness(p0.youngs_modulus, context.rest_bounds.sizes().maxCoeff());
+    std::vector<fem::PhysicalParameters> all = starts;
+    all.insert(all.end(), fallbacks.begin(), fallbacks.end());
+    for (size_t i = 0; i < all.size(); ++i) {
+      // Fallback starts only while no start has succeeded.
+      if (i >= starts.size() && best.ok()) break;
+      const fem::PhysicalParameters& start = all[i];
+      const inverse::JobConfig c = RefitConfig(config, freed, start);
+      Result<inverse::FitResult> fit = inverse::Fit(capture, c, options.fit);
+      nlohmann::json entry = {{"start", ExtensionValues(candidate.extension, start, k0)}};
+      if (i >= starts.size()) entry["fallback"] = true;
+      if (fit.ok()) {
+        entry["cost"] = fit->Best().final_cost;
+        entry["found"] = ExtensionValues(candidate.extension, fit->Best().final, k0);
+      } else {
+        entry["error"] = fit.status().message();
+      }
+      tried->push_back(entry);
+      if (fit.ok() && (!best.ok() || fit->Best().final_cost < best->Best().final_cost)) {
+        best = std::move(fit);
+        *used = c;
+      } else if (!best.ok() && !fit.ok()) {
+        best = fit.status();
+      }
+    }
+    return best;
+  }
+
+  // 4. Steps 1a-1e of the rule for a finished refit: `tested.test` holds the null's costs
+  // (cost_before, heldout_before); LR, gates, profile and (when accepted) identifiability follow.
+  void Judge(const Candidate& candidate, const Result<inverse::FitResult>& fit,
+             const inverse::JobConfig& fit_config, TestedCandidate* tested) {
+    Result<ModelResiduals> r1 = Status::Internal("not evaluated");
+    if (fit.ok()) {
+      tested->parameters = fit->Best().final;
+      r1 = ResidualsAt(context, tested->parameters);
+    }
+    if (!fit.ok() || !r1.ok()) {
+      tested->test.refit_error = !fit.ok() ? fit.status().message() : r1.status().message();
+      ApplyDecisionRule(rule, candidate, &tested->test);
+      return;
+    }
+    tested->fit = inverse::ToJson(*fit);
+    tested->test.cost_after = r1->cost;
+    tested->test.heldout_after = r1->heldout;
+    const EffectiveSampleSize ess = ComputeEffectiveSampleSize(FittedResiduals(r1->map));
+    tested->test.n_eff = ess.n_eff;
+    tested->test.tau_pixels = ess.tau_pixels;
+    tested->test.tau_frames = ess.tau_frames;
+    tested->test.lr = LikelihoodRatioStatistic(tested->test.cost_before, r1->cost, ess.n_eff);
+    tested->after = Locate(r1->map, report.motion, sigma, rule.misfit_threshold,
+                           rule.min_phase_frames, rule.min_patch_points);
+    // The phases and patches flagged at the base fit must be back at the noise level.
+    for (size_t i = 0; i < report.before.phases.size(); ++i) {
+      if (!report.before.phases[i].flagged) continue;
+      for (const PhaseMisfit& after : tested->after.phases)
+        if (after.phase == report.before.phases[i].phase &&
+            after.normalised > rule.misfit_threshold)
+          tested->test.still_flagged.push_back(ToString(after.phase));
+    }
+    for (size_t i = 0; i < report.before.patches.size(); ++i) {
+      if (report.before.patches[i].flagged &&
+          tested->after.patches[i].normalised > rule.misfit_threshold)
+        tested->test.still_flagged.push_back("patch " + std::to_string(i) + " (" +
+                                             tested->after.patches[i].label + ")");
+    }
+    const double k0 = fem::DefaultContactStiffness(tested->parameters.youngs_modulus,
+                                                   context.rest_bounds.sizes().maxCoeff());
+    tested->test.plausible =
+        IsPlausible(candidate.extension, tested->parameters, k0, &tested->test.plausibility_note);
+    tested->values = ExtensionValues(candidate.extension, tested->parameters, k0);
+    tested->uncertainty = nullptr;
+    ApplyDecisionRule(rule, candidate, &tested->test);
+    if (tested->test.accepted) RefitTheNullModel(candidate, fit_config, *r1, ess, tested);
+    if (tested->test.accepted) ProfileTheFoundValue(candidate, *r1, ess, tested);
+    if (tested->test.accepted && options.identifiability) {
+      CheckIdentifiability(candidate, *fit, fit_config, ess, tested);
+    }
+    tested->cost_history.push_back(fit->Best().initial_cost);
+    for (double c : fit->Best().CostHistoryOverEveryFrame()) tested->cost_history.push_back(c);
+  }
+
+  // 1a'. The null's cost is the lowest the null model reaches, also from the refit's values
+  // with the extension back at its null: a base fit that stopped in a local minimum (control
+  // s119: beta 0.0066 instead of 0.0025) let any extension "improve" it by escaping there.
+  void RefitTheNullModel(const Candidate& candidate, const inverse::JobConfig& fit_config,
+                         const ModelResiduals& r1, const EffectiveSampleSize& ess,
+                         TestedCandidate* tested) {
+    std::vector<std::string> null_freed;
+    for (const std::string& name : fit_config.fit) {
+      const bool extension_parameter =
+          std::find(candidate.parameters.begin(), candidate.parameters.end(), name) !=
+          candidate.parameters.end();
+      if (!extension_parameter && !config.IsFitted(name)) null_freed.push_back(name);
+    }
+    const fem::PhysicalParameters null_start =
+        NullModelStart(candidate.extension, p0, tested->parameters, context.rest_bounds);
+    Stage(std::string("null model refitted from the ") + ToString(candidate.extension) + " refit");
+    Result<inverse::FitResult> null_fit =
+        inverse::Fit(capture, RefitConfig(config, null_freed, null_start), options.fit);
+    Result<ModelResiduals> rn = Status::Internal("not evaluated");
+    if (null_fit.ok()) rn = ResidualsAt(context, null_fit->Best().final);
+    if (null_fit.ok() && null_freed.empty()) tested->null_fit = *null_fit;
+    if (rn.ok()) {
+      const bool lower = rn->cost < tested->test.cost_before;
+      tested->null_refit = {{"cost", rn->cost}, {"heldout", rn->heldout}, {"replaced_null", lower}};
+      if (lower) {
+        tested->test.cost_before = rn->cost;
+        tested->test.heldout_before = rn->heldout;
+        tested->test.lr = LikelihoodRatioStatistic(rn->cost, r1.cost, ess.n_eff);
+        ApplyDecisionRule(rule, candidate, &tested->test);
+      }
+    } else {
+      tested->null_refit = {
+          {"error", !null_fit.ok() ? null_fit.status().message() : rn.status().message()}};
+    }
+  }
+
+  // 1e. Does the motion determine the found value? Its profile at +-25 %.
+  void ProfileTheFoundValue(const Candidate& candidate, const ModelResiduals& r1,
+                            const EffectiveSampleSize& ess, TestedCandidate* tested) {
+    const double k0 = DefaultK(tested->parameters);
+    const Profile profile =
+        ProfileExtension(*context.objective, candidate.extension, tested->parameters, r1.cost,
+                         ess.n_eff, tested->test.critical_value, 0.25, k0);
+    tested->profile = {{"change", 0.25},
+                       {"lr_minus", profile.lr_minus},
+                       {"lr_plus", profile.lr_plus},
+                       {"determined", profile.determined},
+                       {"relative_uncertainty", profile.relative_uncertainty}};
+    tested->test.identifiability_checked = true;
+    tested->test.identifiable = profile.determined;
+    if (!profile.determined) {
+      tested->test.identifiability_note = "a 25 % change of the value is not rejected (LR " +
+                                          std::to_string(profile.lr_minus) + ", " +
+                                          std::to_string(profile.lr_plus) + ")";
+    }
+    ApplyDecisionRule(rule, candidate, &tested->test);
+  }
+
+  // Identifiability, only where everything else passed (it costs 2 runs per variable).
+  void CheckIdentifiability(const Candidate& candidate, const inverse::FitResult& fit,
+                            const inverse::JobConfig& fit_config, const EffectiveSampleSize& ess,
+                            TestedCandidate* tested) {
+    Stage(std::string("identifiability of ") + ToString(candidate.extension));
+    Result<inverse::IdentifiabilityReport> id = inverse::AnalyzeIdentifiability(
+        capture, fit_config, fit, IdentifiabilityOptionsFor(config, ess.n_eff));
+    if (id.ok()) {
+      bool ok = true;
+      std::string note;
+      tested->uncertainty = ExtensionUncertainty(candidate, *id, &ok, &note);
+      // Reported, not a gate: a Hessian from differences of adjoint gradients can miss the
+      // curvature of a piecewise-smooth cost (contact switching), the profile above cannot.
+      if (!ok) tested->profile["hessian_note"] = note;
+      tested->fit["identifiability"] = inverse::ToJson(*id);
+    } else {
+      tested->profile["hessian_note"] = id.status().message();
+    }
+  }
+
+  // 4. One refit per screened extension that predicts an improvement, judged alone.
+  void TestCandidatesAlone() {
     for (const ScreenedCandidate& s : report.screening) {
       if (static_cast<int>(report.tested.size()) >= rule.max_refits) break;
       if (!s.applicable || !(s.predicted_lr > 0.0)) continue;
@@ -454,9 +497,9 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
       if (std::any_of(report.tested.begin(), report.tested.end(),
                       [&](const TestedCandidate& t) { return t.test.extension == s.extension; }))
         continue;
-      if (cancelled()) break;
+      if (Cancelled()) break;
       const Candidate& candidate = GetCandidate(s.extension);
-      stage(std::string("refit with ") + ToString(s.extension));
+      Stage(std::string("refit with ") + ToString(s.extension));
       // A two-sided variable is refitted from its best start on each side of the null.
       std::vector<fem::PhysicalParameters> starts = s.refit_starts;
       if (starts.empty()) starts = {s.start};
@@ -476,15 +519,17 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
       tested.starts = nlohmann::json::array();
       inverse::JobConfig used = config;
       const Result<inverse::FitResult> fit =
-          refit(candidate, candidate.parameters, starts, &tested.starts, &used, fallbacks);
-      judge(candidate, fit, used, &tested);
+          Refit(candidate, candidate.parameters, starts, &tested.starts, &used, fallbacks);
+      Judge(candidate, fit, used, &tested);
       report.tested.push_back(std::move(tested));
     }
+  }
 
-    // Step 2 of the rule: a physics candidate that improves the fit, tested given each nuisance
-    // that improves it too with a plausible value (the two are not nested). The joint refit starts
-    // from the better (forward cost) of the nuisance's refit with the candidate's found values and
-    // the candidate's refit with the nuisance's found values.
+  // Step 2 of the rule: a physics candidate that improves the fit, tested given each nuisance
+  // that improves it too with a plausible value (the two are not nested). The joint refit starts
+  // from the better (forward cost) of the nuisance's refit with the candidate's found values and
+  // the candidate's refit with the nuisance's found values.
+  void TestPhysicsGivenNuisances() {
     const size_t num_single = report.tested.size();
     report.tested.reserve(num_single * (num_single + 1));  // references below stay valid
     for (size_t n = 0; n < num_single; ++n) {
@@ -495,12 +540,12 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
       for (size_t i = 0; i < num_single; ++i) {
         const CandidateTest& alone = report.tested[i].test;
         if (alone.nuisance || !alone.refit_error.empty() || !alone.lr_passed) continue;
-        if (cancelled()) break;
+        if (Cancelled()) break;
         const TestedCandidate& nuisance = report.tested[n];
         const TestedCandidate& physics = report.tested[i];
         const Candidate& candidate = GetCandidate(physics.test.extension);
         const Candidate& nuisance_candidate = GetCandidate(nuisance.test.extension);
-        stage(std::string("refit with ") + ToString(candidate.extension) + " given " +
+        Stage(std::string("refit with ") + ToString(candidate.extension) + " given " +
               ToString(nuisance_candidate.extension));
         fem::PhysicalParameters start =
             CopyExtension(candidate.extension, physics.parameters, nuisance.parameters);
@@ -522,8 +567,8 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
         tested.starts = nlohmann::json::array();
         inverse::JobConfig used = config;
         const Result<inverse::FitResult> fit =
-            refit(candidate, freed, {start}, &tested.starts, &used);
-        judge(candidate, fit, used, &tested);
+            Refit(candidate, freed, {start}, &tested.starts, &used);
+        Judge(candidate, fit, used, &tested);
         if (tested.test.refit_error.empty()) {
           tested.test.nuisance_lr = LikelihoodRatioStatistic(
               tested.test.physics_cost, tested.test.cost_after, tested.test.n_eff);
@@ -538,10 +583,12 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
     }
   }
 
-  // 5. Decide and report.
-  std::vector<CandidateTest> tests;
-  for (const TestedCandidate& t : report.tested) tests.push_back(t.test);
-  report.decision = Decide(report.before.flagged, tests, &report.winner);
+  // 5. The decision from the tests.
+  void DecideFromTheTests() {
+    std::vector<CandidateTest> tests;
+    for (const TestedCandidate& t : report.tested) tests.push_back(t.test);
+    report.decision = Decide(report.before.flagged, tests, &report.winner);
+  }
 
   // 4b. Nothing explains a misfit that refits did lower a lot: the base fit may have stopped in a
   // local minimum that the extra freedom let the refits leave (halves 2x at 4 sub-steps: base E
@@ -549,100 +596,115 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
   // null model refitted from each such refit (extension at its null); when one lands
   // significantly lower than the base (LR above the 1-parameter critical value), the whole
   // diagnosis restarts from it as the base fit.
-  if (report.decision == "unexplained" && options.max_base_restarts > 0) {
-    const double critical = ChiBarSquareCriticalValue(1, 0, rule.alpha);
-    std::optional<inverse::FitResult> better;
-    double better_cost = r0.cost;
-    std::string via;
-    for (const TestedCandidate& t : report.tested) {
-      // Against the first base (a null refitted in gate 1a' may have replaced cost_before).
-      if (t.test.conditional || !t.test.refit_error.empty() ||
-          !(LikelihoodRatioStatistic(r0.cost, t.test.cost_after, ess0.n_eff) > critical))
-        continue;
-      if (options.fit.cancel != nullptr && options.fit.cancel->load()) break;
-      // Gate 1a' may have fitted this very start already.
-      Result<inverse::FitResult> fit = Status::Internal("not fitted");
-      if (t.null_fit) {
-        fit = *t.null_fit;
-      } else {
-        stage(std::string("base model refitted from the ") + ToString(t.test.extension) + " refit");
-        const fem::PhysicalParameters start =
-            NullModelStart(t.test.extension, p0, t.parameters, context.rest_bounds);
-        fit = inverse::Fit(capture, RefitConfig(config, {}, start), options.fit);
-      }
-      if (!fit.ok() || !(fit->Best().final_cost < better_cost)) continue;
-      better_cost = fit->Best().final_cost;
-      better = std::move(*fit);
-      via = ToString(t.test.extension);
-    }
-    if (better && LikelihoodRatioStatistic(r0.cost, better_cost, ess0.n_eff) > critical) {
-      std::ostringstream why;
-      why << std::setprecision(3) << "restart: the base fit stopped in a local minimum (cost "
-          << r0.cost << " m^2; refitted from the " << via << " refit " << better_cost << " m^2)";
-      stage(why.str());
-      DiagnoseOptions next = options;
-      next.max_base_restarts = options.max_base_restarts - 1;
-      SOFTID_ASSIGN_OR_RETURN(DiagnosisReport restarted, Diagnose(capture, config, next, &*better));
-      report.seconds = std::chrono::duration<double>(Clock::now() - begin).count();
-      nlohmann::json restart = {{"reason", "base fit in a local minimum"},
-                                {"via", via},
-                                {"cost_before", r0.cost},
-                                {"cost_after", better_cost},
-                                {"first_decision", report.decision},
-                                {"first_report", ToJson(report)}};
-      restarted.base_restarts.insert(restarted.base_restarts.begin(), restart);
-      restarted.seconds = std::chrono::duration<double>(Clock::now() - begin).count();
-      return restarted;
-    }
-  }
-  // Nuisances: accepted on their own, or part of the final model (physics found given them).
-  const TestedCandidate* winning = report.winner >= 0 ? &report.tested[report.winner] : nullptr;
-  for (const TestedCandidate& t : report.tested) {
-    if (t.test.conditional || !t.test.nuisance) continue;
-    const bool in_final_model =
-        winning != nullptr && winning->test.conditional && winning->test.given == t.test.extension;
-    if (!t.test.accepted && !in_final_model) continue;
-    nlohmann::json entry = {
-        {"nuisance", ToString(t.test.extension)}, {"parameters", t.values},
-        {"uncertainty", t.uncertainty},           {"modelled", true},
-        {"accepted_alone", t.test.accepted},      {"explains_mismatch", winning == &t}};
-    // Physics found despite the nuisance: whether the nuisance is still needed given it (then it
-    // is part of the final model, with these values).
-    if (report.winner >= 0 && !report.tested[report.winner].test.nuisance) {
-      for (const TestedCandidate& c : report.tested) {
-        if (!c.test.conditional || c.test.given != t.test.extension ||
-            c.test.extension != report.tested[report.winner].test.extension)
+  Result<std::optional<DiagnosisReport>> RestartFromABetterBase() {
+    if (report.decision == "unexplained" && options.max_base_restarts > 0) {
+      const double critical = ChiBarSquareCriticalValue(1, 0, rule.alpha);
+      std::optional<inverse::FitResult> better;
+      double better_cost = r0.cost;
+      std::string via;
+      for (const TestedCandidate& t : report.tested) {
+        // Against the first base (a null refitted in gate 1a' may have replaced cost_before).
+        if (t.test.conditional || !t.test.refit_error.empty() ||
+            !(LikelihoodRatioStatistic(r0.cost, t.test.cost_after, ess0.n_eff) > critical))
           continue;
-        entry["needed_given_physics"] = c.test.nuisance_needed;
-        if (&c == &report.tested[report.winner])
-          entry["parameters_in_final_model"] = c.nuisance_values;
+        if (options.fit.cancel != nullptr && options.fit.cancel->load()) break;
+        // Gate 1a' may have fitted this very start already.
+        Result<inverse::FitResult> fit = Status::Internal("not fitted");
+        if (t.null_fit) {
+          fit = *t.null_fit;
+        } else {
+          Stage(std::string("base model refitted from the ") + ToString(t.test.extension) +
+                " refit");
+          const fem::PhysicalParameters start =
+              NullModelStart(t.test.extension, p0, t.parameters, context.rest_bounds);
+          fit = inverse::Fit(capture, RefitConfig(config, {}, start), options.fit);
+        }
+        if (!fit.ok() || !(fit->Best().final_cost < better_cost)) continue;
+        better_cost = fit->Best().final_cost;
+        better = std::move(*fit);
+        via = ToString(t.test.extension);
+      }
+      if (better && LikelihoodRatioStatistic(r0.cost, better_cost, ess0.n_eff) > critical) {
+        std::ostringstream why;
+        why << std::setprecision(3) << "restart: the base fit stopped in a local minimum (cost "
+            << r0.cost << " m^2; refitted from the " << via << " refit " << better_cost << " m^2)";
+        Stage(why.str());
+        DiagnoseOptions next = options;
+        next.max_base_restarts = options.max_base_restarts - 1;
+        SOFTID_ASSIGN_OR_RETURN(DiagnosisReport restarted,
+                                Diagnose(capture, config, next, &*better));
+        report.seconds = std::chrono::duration<double>(Clock::now() - begin).count();
+        nlohmann::json restart = {{"reason", "base fit in a local minimum"},
+                                  {"via", via},
+                                  {"cost_before", r0.cost},
+                                  {"cost_after", better_cost},
+                                  {"first_decision", report.decision},
+                                  {"first_report", ToJson(report)}};
+        restarted.base_restarts.insert(restarted.base_restarts.begin(), restart);
+        restarted.seconds = std::chrono::duration<double>(Clock::now() - begin).count();
+        return std::optional<DiagnosisReport>(std::move(restarted));
       }
     }
-    report.nuisances.push_back(entry);
+    return std::optional<DiagnosisReport>();
   }
-  if (report.winner >= 0) {
-    TestedCandidate& w = report.tested[report.winner];
-    report.after = w.after;
-    report.final_fit = w.fit;
-    report.identifiability =
-        w.fit.contains("identifiability") ? w.fit["identifiability"] : nlohmann::json(nullptr);
-    SOFTID_ASSIGN_OR_RETURN(final_residuals, ResidualsAt(context, w.parameters));
-  } else {
-    report.final_fit = report.base_fit;
-    final_residuals = r0;
-    if (!base_identifiability.is_null()) {
-      report.identifiability = base_identifiability;
-    } else if (options.identifiability) {
-      stage("identifiability of the base model");
-      Result<inverse::IdentifiabilityReport> id = inverse::AnalyzeIdentifiability(
-          capture, config, base, IdentifiabilityOptionsFor(config, ess0.n_eff));
-      report.identifiability =
-          id.ok() ? inverse::ToJson(*id) : nlohmann::json{{"error", id.status().message()}};
+
+  // Nuisances: accepted on their own, or part of the final model (physics found given them).
+  void ListNuisances() {
+    const TestedCandidate* winning = report.winner >= 0 ? &report.tested[report.winner] : nullptr;
+    for (const TestedCandidate& t : report.tested) {
+      if (t.test.conditional || !t.test.nuisance) continue;
+      const bool in_final_model = winning != nullptr && winning->test.conditional &&
+                                  winning->test.given == t.test.extension;
+      if (!t.test.accepted && !in_final_model) continue;
+      nlohmann::json entry = {
+          {"nuisance", ToString(t.test.extension)}, {"parameters", t.values},
+          {"uncertainty", t.uncertainty},           {"modelled", true},
+          {"accepted_alone", t.test.accepted},      {"explains_mismatch", winning == &t}};
+      // Physics found despite the nuisance: whether the nuisance is still needed given it (then it
+      // is part of the final model, with these values).
+      if (report.winner >= 0 && !report.tested[report.winner].test.nuisance) {
+        for (const TestedCandidate& c : report.tested) {
+          if (!c.test.conditional || c.test.given != t.test.extension ||
+              c.test.extension != report.tested[report.winner].test.extension)
+            continue;
+          entry["needed_given_physics"] = c.test.nuisance_needed;
+          if (&c == &report.tested[report.winner])
+            entry["parameters_in_final_model"] = c.nuisance_values;
+        }
+      }
+      report.nuisances.push_back(entry);
     }
   }
 
-  if (!options.plot_directory.empty()) {
-    stage("plots");
+  // The final model's fit, residuals and identifiability: the winner's, or the base's.
+  Status SettleFinalModel() {
+    if (report.winner >= 0) {
+      TestedCandidate& w = report.tested[report.winner];
+      report.after = w.after;
+      report.final_fit = w.fit;
+      report.identifiability =
+          w.fit.contains("identifiability") ? w.fit["identifiability"] : nlohmann::json(nullptr);
+      SOFTID_ASSIGN_OR_RETURN(final_residuals, ResidualsAt(context, w.parameters));
+    } else {
+      report.final_fit = report.base_fit;
+      final_residuals = r0;
+      if (!base_identifiability.is_null()) {
+        report.identifiability = base_identifiability;
+      } else if (options.identifiability) {
+        Stage("identifiability of the base model");
+        Result<inverse::IdentifiabilityReport> id = inverse::AnalyzeIdentifiability(
+            capture, config, base, IdentifiabilityOptionsFor(config, ess0.n_eff));
+        report.identifiability =
+            id.ok() ? inverse::ToJson(*id) : nlohmann::json{{"error", id.status().message()}};
+      }
+    }
+    return Status::Ok();
+  }
+
+  // The PNG plots, when a folder is given.
+  Status WritePlots() {
+    if (options.plot_directory.empty()) return Status::Ok();
+    Stage("plots");
     const std::filesystem::path dir = options.plot_directory;
     const bool changed = report.winner >= 0;
     const std::string misfit_png = (dir / "residual_per_frame.png").string();
@@ -681,9 +743,37 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
     const std::string cost_png = (dir / "cost_per_iteration.png").string();
     SOFTID_RETURN_IF_ERROR(WriteCostHistoryPlot(cost_png, series));
     report.plots.push_back(cost_png);
+    return Status::Ok();
   }
-  report.seconds = std::chrono::duration<double>(Clock::now() - begin).count();
-  return report;
+};
+
+}  // namespace
+
+Status DiagnoseOptions::Validate() const {
+  if (max_base_restarts < 0)
+    return json::Invalid("max_base_restarts", max_base_restarts, "must be >= 0");
+  SOFTID_RETURN_IF_ERROR(noise_floor.Validate());
+  SOFTID_RETURN_IF_ERROR(phases.Validate());
+  SOFTID_RETURN_IF_ERROR(screening.Validate());
+  SOFTID_RETURN_IF_ERROR(decision.Validate());
+  if (patches < 1) return json::Invalid("patches", patches, "must be >= 1");
+  if (default_heldout_every < 2)
+    return json::Invalid("default_heldout_every", default_heldout_every, "must be >= 2");
+  return Status::Ok();
+}
+
+Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
+                                 const inverse::JobConfig& config_in,
+                                 const DiagnoseOptions& options,
+                                 const inverse::FitResult* base_fit) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  inverse::JobConfig config = config_in;
+  config.diagnose = false;
+  if (config.heldout_every == 0) config.heldout_every = options.default_heldout_every;
+  SOFTID_RETURN_IF_ERROR(config.Validate());
+  DiagnosisRun run(capture, std::move(config), options);
+  // A given fit serves only when it held out the frames the diagnosis holds out.
+  return run.Run(base_fit, config_in.heldout_every > 0);
 }
 
 }  // namespace softid::diagnosis
