@@ -132,40 +132,71 @@ std::vector<bool> SignatureFrames(const Candidate& candidate,
   return out;
 }
 
-Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjective& objective,
-                                                        const ScreeningBase& base,
-                                                        const std::vector<FrameMotion>& motion,
-                                                        const std::vector<double>& excess,
-                                                        const ScreeningOptions& options) {
-  SOFTID_RETURN_IF_ERROR(options.Validate());
-  SOFTID_DEMAND(base.space != nullptr);
-  const inverse::ParameterSpace& space = *base.space;
-  const fem::PhysicalParameters& p0 = base.parameters;
-  const std::vector<double> x0 = space.ToVariables(p0);
-  const int nb = space.NumVariables();
-  const double body_size = base.rest_bounds.sizes().maxCoeff();
-  const double k0 = p0.contact_stiffness > 0.0
-                        ? p0.contact_stiffness
-                        : fem::DefaultContactStiffness(p0.youngs_modulus, body_size);
+namespace {
+
+// The screening of one base fit: what every variant shares (the base point, its gradient in the
+// base variables, the profiled inverse Hessian) and the steps each variant goes through.
+struct Screening {
+  inverse::TrajectoryObjective& objective;
+  const ScreeningBase& base;
+  const ScreeningOptions& options;
+  const inverse::ParameterSpace& space;
+  const fem::PhysicalParameters& p0;
+  std::vector<double> x0;
+  int nb = 0;
+  double k0 = 0.0;              // the contact stiffness the contact variant scales [Pa/m]
+  Eigen::MatrixXd hbb_inverse;  // H_bb^+ over the base variables
+  fem::ParameterGradient g0;    // at the null
+  Point null_point;
+  Eigen::Vector3d spin_direction = Eigen::Vector3d::Zero();
+
+  Screening(inverse::TrajectoryObjective& objective, const ScreeningBase& base,
+            const ScreeningOptions& options)
+      : objective(objective),
+        base(base),
+        options(options),
+        space(*base.space),
+        p0(base.parameters),
+        x0(space.ToVariables(p0)),
+        nb(space.NumVariables()) {
+    k0 = p0.contact_stiffness > 0.0
+             ? p0.contact_stiffness
+             : fem::DefaultContactStiffness(p0.youngs_modulus, base.rest_bounds.sizes().maxCoeff());
+    hbb_inverse = ProfiledInverse();
+  }
 
   // H_bb^+ (pseudo-inverse over its positive eigenvalues): base directions the data do not fix
   // cannot absorb anything to second order.
-  Eigen::MatrixXd hbb_inverse = Eigen::MatrixXd::Zero(nb, nb);
-  if (base.hessian.rows() == nb && base.hessian.cols() == nb && nb > 0) {
+  Eigen::MatrixXd ProfiledInverse() const {
+    Eigen::MatrixXd out = Eigen::MatrixXd::Zero(nb, nb);
+    if (base.hessian.rows() != nb || base.hessian.cols() != nb || nb == 0) return out;
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(0.5 *
                                                          (base.hessian + base.hessian.transpose()));
     const double top = eigen.eigenvalues().cwiseAbs().maxCoeff();
     for (int i = 0; i < nb; ++i) {
       const double lambda = eigen.eigenvalues()[i];
       if (lambda > 1e-8 * top) {
-        hbb_inverse +=
-            eigen.eigenvectors().col(i) * eigen.eigenvectors().col(i).transpose() / lambda;
+        out += eigen.eigenvectors().col(i) * eigen.eigenvectors().col(i).transpose() / lambda;
       }
     }
+    return out;
   }
 
-  auto evaluate = [&](const fem::PhysicalParameters& p, const Variant& v,
-                      Point* out) -> Result<bool> {
+  // The null, shared by the variants whose null is the base model itself.
+  Status EvaluateNull() {
+    SOFTID_ASSIGN_OR_RETURN(inverse::ObjectiveEvaluation null_eval, objective.Evaluate(p0, true));
+    if (null_eval.diverged)
+      return Status::FailedPrecondition("the base fit's simulation diverges: cannot screen");
+    g0 = null_eval.gradient;
+    null_point.cost = null_eval.cost;
+    null_point.gx.resize(nb);
+    if (nb > 0) space.ChainGradient(g0, x0.data(), null_point.gx.data());
+    if (g0.initial_angular_velocity.norm() > 0.0)
+      spin_direction = -g0.initial_angular_velocity.normalized();
+    return Status::Ok();
+  }
+
+  Result<bool> Evaluate(const fem::PhysicalParameters& p, const Variant& v, Point* out) {
     if (!p.Validate().ok()) return false;
     SOFTID_ASSIGN_OR_RETURN(inverse::ObjectiveEvaluation e, objective.Evaluate(p, true));
     if (e.diverged) return false;
@@ -174,46 +205,74 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
     out->gx.resize(nb);
     if (nb > 0) space.ChainGradient(e.gradient, x0.data(), out->gx.data());
     return true;
-  };
-
-  // The null, shared by the variants whose null is the base model itself.
-  SOFTID_ASSIGN_OR_RETURN(inverse::ObjectiveEvaluation null_eval, objective.Evaluate(p0, true));
-  if (null_eval.diverged)
-    return Status::FailedPrecondition("the base fit's simulation diverges: cannot screen");
-  const fem::ParameterGradient& g0 = null_eval.gradient;
-  Point null_point;
-  null_point.cost = null_eval.cost;
-  null_point.gx.resize(nb);
-  if (nb > 0) space.ChainGradient(g0, x0.data(), null_point.gx.data());
-
-  std::vector<Variant> variants;
-  {
-    Variant v;
-    v.extension = Extension::kFriction;
-    v.boundary = true;
-    v.step = options.friction_step;
-    v.max_start = options.max_friction_start;
-    v.make = [](fem::PhysicalParameters p, double t) {
-      p.friction_coefficient = t;
-      return p;
-    };
-    v.dtheta = [](const fem::ParameterGradient& g, const fem::PhysicalParameters&) {
-      return g.friction_coefficient;
-    };
-    variants.push_back(v);
-    v.extension = Extension::kAirDrag;
-    v.step = options.drag_step;
-    v.max_start = options.max_drag_start;
-    v.make = [](fem::PhysicalParameters p, double t) {
-      p.drag_quadratic = t;
-      return p;
-    };
-    v.dtheta = [](const fem::ParameterGradient& g, const fem::PhysicalParameters&) {
-      return g.drag_quadratic;
-    };
-    variants.push_back(v);
   }
-  for (int axis = 0; axis < 3; ++axis) {
+
+  // Every way of leaving the null: friction, drag, the stiffness halves along each axis, contact
+  // stiffness, spin.
+  std::vector<Variant> Variants() const {
+    std::vector<Variant> variants;
+    {
+      Variant v;
+      v.extension = Extension::kFriction;
+      v.boundary = true;
+      v.step = options.friction_step;
+      v.max_start = options.max_friction_start;
+      v.make = [](fem::PhysicalParameters p, double t) {
+        p.friction_coefficient = t;
+        return p;
+      };
+      v.dtheta = [](const fem::ParameterGradient& g, const fem::PhysicalParameters&) {
+        return g.friction_coefficient;
+      };
+      variants.push_back(v);
+      v.extension = Extension::kAirDrag;
+      v.step = options.drag_step;
+      v.max_start = options.max_drag_start;
+      v.make = [](fem::PhysicalParameters p, double t) {
+        p.drag_quadratic = t;
+        return p;
+      };
+      v.dtheta = [](const fem::ParameterGradient& g, const fem::PhysicalParameters&) {
+        return g.drag_quadratic;
+      };
+      variants.push_back(v);
+    }
+    for (int axis = 0; axis < 3; ++axis) variants.push_back(HalvesVariant(axis));
+    {
+      Variant v;
+      v.extension = Extension::kContact;
+      v.central = true;
+      v.step = options.log_contact_step;
+      v.max_start = options.max_log_contact_start;
+      v.make = [k0 = k0](fem::PhysicalParameters p, double t) {
+        p.contact_stiffness = k0 * std::exp(t);
+        return p;
+      };
+      v.dtheta = [](const fem::ParameterGradient& g, const fem::PhysicalParameters& p) {
+        return g.contact_stiffness * p.contact_stiffness;
+      };
+      variants.push_back(v);
+    }
+    {
+      Variant v;
+      v.extension = Extension::kInitialSpin;
+      v.boundary = true;  // a rate along the descent direction
+      v.step = options.spin_step;
+      v.max_start = options.max_spin_start;
+      v.make = [spin_direction = spin_direction](fem::PhysicalParameters p, double t) {
+        p.initial_angular_velocity = t * spin_direction;
+        return p;
+      };
+      v.dtheta = [spin_direction = spin_direction](const fem::ParameterGradient& g,
+                                                   const fem::PhysicalParameters&) {
+        return g.initial_angular_velocity.dot(spin_direction);
+      };
+      variants.push_back(v);
+    }
+    return variants;
+  }
+
+  Variant HalvesVariant(int axis) const {
     Variant v;
     v.extension = Extension::kHeterogeneousStiffness;
     v.axis = axis;
@@ -247,64 +306,21 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
                                     return p;
                                   }};
     }
-    variants.push_back(v);
-  }
-  {
-    Variant v;
-    v.extension = Extension::kContact;
-    v.central = true;
-    v.step = options.log_contact_step;
-    v.max_start = options.max_log_contact_start;
-    v.make = [k0](fem::PhysicalParameters p, double t) {
-      p.contact_stiffness = k0 * std::exp(t);
-      return p;
-    };
-    v.dtheta = [](const fem::ParameterGradient& g, const fem::PhysicalParameters& p) {
-      return g.contact_stiffness * p.contact_stiffness;
-    };
-    variants.push_back(v);
-  }
-  Eigen::Vector3d spin_direction = Eigen::Vector3d::Zero();
-  if (g0.initial_angular_velocity.norm() > 0.0)
-    spin_direction = -g0.initial_angular_velocity.normalized();
-  {
-    Variant v;
-    v.extension = Extension::kInitialSpin;
-    v.boundary = true;  // a rate along the descent direction
-    v.step = options.spin_step;
-    v.max_start = options.max_spin_start;
-    v.make = [spin_direction](fem::PhysicalParameters p, double t) {
-      p.initial_angular_velocity = t * spin_direction;
-      return p;
-    };
-    v.dtheta = [spin_direction](const fem::ParameterGradient& g, const fem::PhysicalParameters&) {
-      return g.initial_angular_velocity.dot(spin_direction);
-    };
-    variants.push_back(v);
+    return v;
   }
 
-  double total_excess = 0.0;
-  for (double e : excess) total_excess += e;
-  const bool uniform_field = p0.stiffness_field.kind == fem::StiffnessField::Kind::kUniform;
-
-  std::vector<ScreenedCandidate> out;
-  for (const Variant& v : variants) {
-    const Candidate& candidate = GetCandidate(v.extension);
-    ScreenedCandidate s;
-    s.extension = v.extension;
-    s.axis = v.axis;
-    s.start = p0;
-    s.start_cost = base.cost;
-    if (v.extension == Extension::kInitialSpin) s.direction = spin_direction;
+  // Whether the variant can be screened here; *s's note says why not.
+  bool CheckApplicable(const Variant& v, const Candidate& candidate, ScreenedCandidate* s) const {
+    const bool uniform_field = p0.stiffness_field.kind == fem::StiffnessField::Kind::kUniform;
     for (const std::string& name : candidate.parameters) {
       if (Contains(base.fitted, name)) {
-        s.applicable = false;
-        s.note = name + " is already fitted by the base model";
+        s->applicable = false;
+        s->note = name + " is already fitted by the base model";
       }
     }
     if (candidate.needs_ground && !p0.ground) {
-      s.applicable = false;
-      s.note = "no ground plane: no contact";
+      s->applicable = false;
+      s->note = "no ground plane: no contact";
     }
     // A value the job fixed away from the null is the job's claim; leave it alone.
     const bool off_null =
@@ -313,68 +329,50 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
         (v.extension == Extension::kHeterogeneousStiffness && !uniform_field) ||
         (v.extension == Extension::kContact && p0.contact_damping != 0.0) ||
         (v.extension == Extension::kInitialSpin && p0.initial_angular_velocity.norm() != 0.0);
-    if (s.applicable && off_null) {
-      s.applicable = false;
-      s.note = "fixed by the job away from its null value";
+    if (s->applicable && off_null) {
+      s->applicable = false;
+      s->note = "fixed by the job away from its null value";
     }
     if (v.extension == Extension::kInitialSpin && spin_direction.norm() == 0.0) {
-      s.applicable = false;
-      s.note = "score: zero gradient";
+      s->applicable = false;
+      s->note = "score: zero gradient";
     }
-    if (!s.applicable) {
-      out.push_back(s);
-      continue;
-    }
-    // Score and curvatures.
+    return s->applicable;
+  }
+
+  // Score (slope at the null) and curvatures, raw and with the base variables profiled out;
+  // *absorb is how the base variables move per unit of theta. False when the simulation diverges
+  // next to the null.
+  Result<bool> MeasureSlope(const Variant& v, ScreenedCandidate* s, Eigen::VectorXd* absorb) {
     Point a, b;
     double separation = v.step;
     if (v.central) {
-      SOFTID_ASSIGN_OR_RETURN(bool ok_a, evaluate(v.make(p0, -v.step), v, &a));
-      SOFTID_ASSIGN_OR_RETURN(bool ok_b, evaluate(v.make(p0, v.step), v, &b));
-      if (!ok_a || !ok_b) {
-        s.applicable = false;
-        s.note = "the simulation diverges next to the null";
-        out.push_back(s);
-        continue;
-      }
+      SOFTID_ASSIGN_OR_RETURN(bool ok_a, Evaluate(v.make(p0, -v.step), v, &a));
+      SOFTID_ASSIGN_OR_RETURN(bool ok_b, Evaluate(v.make(p0, v.step), v, &b));
+      if (!ok_a || !ok_b) return false;
       separation = 2.0 * v.step;
-      s.gradient = 0.5 * (a.dtheta + b.dtheta);
+      s->gradient = 0.5 * (a.dtheta + b.dtheta);
     } else {
       a = null_point;
       a.dtheta = v.dtheta(g0, p0);
-      SOFTID_ASSIGN_OR_RETURN(bool ok_b, evaluate(v.make(p0, v.step), v, &b));
-      if (!ok_b) {
-        s.applicable = false;
-        s.note = "the simulation diverges next to the null";
-        out.push_back(s);
-        continue;
-      }
-      s.gradient = a.dtheta;
+      SOFTID_ASSIGN_OR_RETURN(bool ok_b, Evaluate(v.make(p0, v.step), v, &b));
+      if (!ok_b) return false;
+      s->gradient = a.dtheta;
     }
-    s.curvature = (b.dtheta - a.dtheta) / separation;
+    s->curvature = (b.dtheta - a.dtheta) / separation;
     const Eigen::VectorXd h =
         nb > 0 ? Eigen::VectorXd((b.gx - a.gx) / separation) : Eigen::VectorXd();
-    const Eigen::VectorXd absorb = nb > 0 ? Eigen::VectorXd(hbb_inverse * h) : Eigen::VectorXd();
-    s.efficient_curvature = nb > 0 ? s.curvature - h.dot(absorb) : s.curvature;
-    if (v.boundary && !(s.gradient < 0.0)) {
-      s.note = "score: the cost rises as the parameter leaves 0";
-      out.push_back(s);
-      continue;
-    }
-    // Newton's step on the profiled quadratic model, or a few steps downhill without curvature.
-    double curvature = s.efficient_curvature;
-    if (!(curvature > 0.01 * std::abs(s.curvature))) {
-      s.note = "the base parameters absorb most of it (profiled curvature ~0)";
-      curvature = 0.01 * std::abs(s.curvature);
-    }
-    double theta =
-        curvature > 0.0 ? -s.gradient / curvature : -4.0 * v.step * (s.gradient > 0 ? 1 : -1);
-    theta = std::clamp(theta, v.boundary ? 0.5 * v.step : -v.max_start, v.max_start);
-    const double predicted_drop =
-        curvature > 0.0 ? 0.5 * s.gradient * s.gradient / curvature : std::abs(s.gradient * theta);
-    // Refit start: the best of the joint step (base variables re-adjusted), the extension alone,
-    // and half the joint step.
-    // Each try with its theta (the side of the null it lies on).
+    *absorb = nb > 0 ? Eigen::VectorXd(hbb_inverse * h) : Eigen::VectorXd();
+    s->efficient_curvature = nb > 0 ? s->curvature - h.dot(*absorb) : s->curvature;
+    return true;
+  }
+
+  // Refit starts to try, each with its theta (the side of the null it lies on): the best of the
+  // joint Newton step (base variables re-adjusted), the extension alone, and half the joint step,
+  // then ladders over the start range.
+  std::vector<std::pair<double, fem::PhysicalParameters>> RefitTries(
+      const Variant& v, const ScreenedCandidate& s, double theta,
+      const Eigen::VectorXd& absorb) const {
     std::vector<std::pair<double, fem::PhysicalParameters>> tries;
     Eigen::VectorXd dx = nb > 0 ? Eigen::VectorXd(-absorb * theta) : Eigen::VectorXd();
     for (int i = 0; i < nb; ++i) dx[i] = std::clamp(dx[i], -1.0, 1.0);
@@ -437,6 +435,14 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
         }
       }
     }
+    return tries;
+  }
+
+  // The refit's start(s) from the tries by their forward cost, and the fallbacks.
+  void ChooseStarts(const Variant& v,
+                    const std::vector<std::pair<double, fem::PhysicalParameters>>& tries,
+                    ScreenedCandidate* s_ptr) {
+    ScreenedCandidate& s = *s_ptr;
     s.start_cost = std::numeric_limits<double>::infinity();
     std::vector<double> try_costs(tries.size(), std::numeric_limits<double>::infinity());
     double start_theta = 0.0;
@@ -497,11 +503,46 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
         s.fallback_starts.push_back(tries[i].second);
       }
     }
+  }
+
+  // Screens one variant: applicability, slope and curvature, refit starts, predicted LR, score.
+  Result<ScreenedCandidate> ScreenVariant(const Variant& v, const std::vector<FrameMotion>& motion,
+                                          const std::vector<double>& excess, double total_excess) {
+    const Candidate& candidate = GetCandidate(v.extension);
+    ScreenedCandidate s;
+    s.extension = v.extension;
+    s.axis = v.axis;
+    s.start = p0;
+    s.start_cost = base.cost;
+    if (v.extension == Extension::kInitialSpin) s.direction = spin_direction;
+    if (!CheckApplicable(v, candidate, &s)) return s;
+    Eigen::VectorXd absorb;
+    SOFTID_ASSIGN_OR_RETURN(const bool measured, MeasureSlope(v, &s, &absorb));
+    if (!measured) {
+      s.applicable = false;
+      s.note = "the simulation diverges next to the null";
+      return s;
+    }
+    if (v.boundary && !(s.gradient < 0.0)) {
+      s.note = "score: the cost rises as the parameter leaves 0";
+      return s;
+    }
+    // Newton's step on the profiled quadratic model, or a few steps downhill without curvature.
+    double curvature = s.efficient_curvature;
+    if (!(curvature > 0.01 * std::abs(s.curvature))) {
+      s.note = "the base parameters absorb most of it (profiled curvature ~0)";
+      curvature = 0.01 * std::abs(s.curvature);
+    }
+    double theta =
+        curvature > 0.0 ? -s.gradient / curvature : -4.0 * v.step * (s.gradient > 0 ? 1 : -1);
+    theta = std::clamp(theta, v.boundary ? 0.5 * v.step : -v.max_start, v.max_start);
+    const double predicted_drop =
+        curvature > 0.0 ? 0.5 * s.gradient * s.gradient / curvature : std::abs(s.gradient * theta);
+    ChooseStarts(v, RefitTries(v, s, theta, absorb), &s);
     if (!std::isfinite(s.start_cost)) {
       s.applicable = false;
       s.note = "the simulation diverges at every refit start";
-      out.push_back(s);
-      continue;
+      return s;
     }
     switch (v.extension) {
       case Extension::kFriction: s.theta = s.start.friction_coefficient; break;
@@ -534,7 +575,28 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
     }
     s.score = s.predicted_lr *
               ((1.0 - options.signature_weight) + options.signature_weight * s.signature_share);
-    out.push_back(s);
+    return s;
+  }
+};
+
+}  // namespace
+
+Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjective& objective,
+                                                        const ScreeningBase& base,
+                                                        const std::vector<FrameMotion>& motion,
+                                                        const std::vector<double>& excess,
+                                                        const ScreeningOptions& options) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  SOFTID_DEMAND(base.space != nullptr);
+  Screening screening(objective, base, options);
+  SOFTID_RETURN_IF_ERROR(screening.EvaluateNull());
+  double total_excess = 0.0;
+  for (double e : excess) total_excess += e;
+  std::vector<ScreenedCandidate> out;
+  for (const Variant& v : screening.Variants()) {
+    SOFTID_ASSIGN_OR_RETURN(ScreenedCandidate s,
+                            screening.ScreenVariant(v, motion, excess, total_excess));
+    out.push_back(std::move(s));
   }
   std::stable_sort(
       out.begin(), out.end(),
