@@ -13,6 +13,7 @@
 #include <thread>
 
 #include "core/common/cpu_support.h"
+#include "core/fem/numeric_runtime.h"
 #include "server/log_context.h"
 #include "server/server.h"
 #include "server/tokens_command.h"
@@ -56,6 +57,7 @@ int DefaultWorkers() {
 int main(int argc, char** argv) {
   // Links the start-up check that this CPU runs the build's instruction set.
   if (!softid::CpuSupportsBuild()) return 2;
+  softid::fem::ConfigureNumericRuntime();  // CHOLMOD's OpenMP serialised, BLAS single-threaded
   softid::server::ServerOptions options;
   options.num_workers = DefaultWorkers();
   std::string data_dir;

@@ -5,11 +5,13 @@
 #include <CLI/CLI.hpp>
 
 #include "core/common/cpu_support.h"
+#include "core/fem/numeric_runtime.h"
 #include "core/lab/commands.h"
 
 int main(int argc, char** argv) {
   // Links the start-up check that this CPU runs the build's instruction set.
   if (!softid::CpuSupportsBuild()) return 2;
+  softid::fem::ConfigureNumericRuntime();  // CHOLMOD's OpenMP serialised, BLAS single-threaded
   auto logger = spdlog::stderr_color_mt("softid-lab");
   spdlog::set_default_logger(logger);
   spdlog::set_pattern("[%H:%M:%S.%e] [%^%l%$] %v");
