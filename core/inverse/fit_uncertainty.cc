@@ -82,6 +82,9 @@ void AddDiscretisationErrors(const DiscretisationError& error, nlohmann::json* j
 Result<FitUncertainty> EstimateFitUncertainty(const capture::Capture& capture,
                                               const JobConfig& config, const FitResult& fit) {
   IdentifiabilityOptions options;
+  // Forward runs only: the analysis comes with every result, so its cost counts (a third of
+  // it by central differences of the adjoint gradient; docs/benchmarks.md).
+  options.curvature = CurvatureMethod::kGaussNewton;
   options.threads = config.threads;
   options.min_residual_sigma = DepthQuantisationSigma(capture);
   FitUncertainty out;

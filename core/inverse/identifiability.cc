@@ -6,6 +6,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <thread>
@@ -225,26 +226,32 @@ HessianCovariance CovarianceFromHessian(const Eigen::MatrixXd& h, double varianc
   return out;
 }
 
-Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& make_objective,
-                                                     const ParameterSpace& space,
-                                                     const fem::PhysicalParameters& parameters,
-                                                     const IdentifiabilityOptions& options) {
-  const auto begin = std::chrono::steady_clock::now();
-  SOFTID_RETURN_IF_ERROR(options.Validate());
-  const int p = space.NumVariables();
-  const std::vector<double> x0 = space.ToVariables(parameters);
-  const double s = options.step;
+namespace {
 
-  // Task 0: the centre; task 1 + 2 j (+ 1): x0 -+ s e_j.
-  const int num_tasks = 1 + 2 * p;
-  std::vector<Evaluation> results(num_tasks);
-  int num_points = 0;
+// The cost's curvature at the optimum in the optimiser's variables, and what came with it.
+struct Curvature {
+  double cost = 0.0;         // C(x*) [m^2]
+  Eigen::VectorXd gradient;  // dC/dx at x* [m^2]
+  Eigen::MatrixXd hessian;   // symmetric [m^2]
+  double asymmetry = 0.0;    // |H - H^T| / |H| before symmetrising [-]
+  int num_points = 0;        // observed points in the fitted frames
+  int evaluations = 0;
+};
+
+// Runs tasks 0..num_tasks-1 on `threads` workers, each with an objective of its own (objectives
+// are not thread-safe); the first error stops the others and is returned.
+Status RunOnObjectives(const ObjectiveFactory& make_objective, int num_tasks, int threads,
+                       const std::function<Status(TrajectoryObjective&, int)>& task_fn) {
   std::atomic<int> next{0};
   std::mutex error_mutex;
   Status error;
   const auto fail = [&](Status status) {
     std::lock_guard lock(error_mutex);
     if (error.ok()) error = std::move(status);
+  };
+  const auto failed = [&] {
+    std::lock_guard lock(error_mutex);
+    return !error.ok();
   };
   auto worker = [&]() {
     std::unique_ptr<TrajectoryObjective> objective;
@@ -258,66 +265,159 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
       fail(Status::Internal("identifiability: the objective factory returned null"));
       return;
     }
-    for (int task = next++; task < num_tasks; task = next++) {
-      {
-        std::lock_guard lock(error_mutex);
-        if (!error.ok()) return;
-      }
-      std::vector<double> x = x0;
-      if (task > 0) x[(task - 1) / 2] += (task % 2 == 1 ? -s : s);
-      const fem::PhysicalParameters at = space.ToParameters(x.data(), parameters);
-      if (Status valid = at.Validate(); !valid.ok()) {
-        fail(
-            Status::FailedPrecondition("identifiability: invalid parameters at a difference "
-                                       "step (lower IdentifiabilityOptions.step): " +
-                                       valid.message()));
+    for (int task = next++; task < num_tasks && !failed(); task = next++) {
+      if (Status done = task_fn(*objective, task); !done.ok()) {
+        fail(std::move(done));
         return;
-      }
-      Result<ObjectiveEvaluation> evaluation = objective->Evaluate(at, /*with_gradient=*/true);
-      if (!evaluation.ok()) {
-        fail(evaluation.status());
-        return;
-      }
-      if (evaluation->diverged) {
-        fail(Status::FailedPrecondition(
-            task == 0
-                ? std::string("identifiability: the simulation diverges at the optimum")
-                : "identifiability: the simulation diverges at " +
-                      space.variable_names()[(task - 1) / 2] + (task % 2 == 1 ? " - " : " + ") +
-                      std::to_string(s) + " (lower IdentifiabilityOptions.step)"));
-        return;
-      }
-      Evaluation& out = results[task];
-      out.cost = evaluation->cost;
-      out.gradient.resize(p);
-      space.ChainGradient(evaluation->gradient, x.data(), out.gradient.data());
-      if (task == 0) {
-        for (const ObservedFrame& frame : objective->frames()) {
-          if (!frame.heldout) num_points += static_cast<int>(frame.points.size());
-        }
       }
     }
   };
-  int threads =
-      options.threads > 0 ? options.threads : static_cast<int>(std::thread::hardware_concurrency());
   threads = std::clamp(threads, 1, num_tasks);
   {
     std::vector<std::jthread> pool;
     for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
     worker();
   }
-  SOFTID_RETURN_IF_ERROR(error);
+  return error;
+}
 
-  IdentifiabilityReport report;
-  report.evaluations = num_tasks;
-  report.cost = results[0].cost;
-  report.gradient = results[0].gradient;
+// The parameters at x, or why the difference stencil cannot use them.
+Result<fem::PhysicalParameters> StencilPoint(const ParameterSpace& space,
+                                             const fem::PhysicalParameters& parameters,
+                                             const std::vector<double>& x) {
+  fem::PhysicalParameters at = space.ToParameters(x.data(), parameters);
+  if (Status valid = at.Validate(); !valid.ok()) {
+    return Status::FailedPrecondition(
+        "identifiability: invalid parameters at a difference step (lower "
+        "IdentifiabilityOptions.step): " +
+        valid.message());
+  }
+  return at;
+}
+
+Status Diverged(const ParameterSpace& space, int variable, const char* sign, double s) {
+  return Status::FailedPrecondition(
+      variable < 0
+          ? std::string("identifiability: the simulation diverges at the optimum")
+          : "identifiability: the simulation diverges at " + space.variable_names()[variable] +
+                sign + std::to_string(s) + " (lower IdentifiabilityOptions.step)");
+}
+
+int PointsInFittedFrames(const TrajectoryObjective& objective) {
+  int n = 0;
+  for (const ObservedFrame& frame : objective.frames()) {
+    if (!frame.heldout) n += static_cast<int>(frame.points.size());
+  }
+  return n;
+}
+
+int Threads(const IdentifiabilityOptions& options) {
+  return options.threads > 0 ? options.threads
+                             : static_cast<int>(std::thread::hardware_concurrency());
+}
+
+// H e_j ~ (g(x* + s e_j) - g(x* - s e_j)) / (2 s): 1 + 2p forward+adjoint runs.
+Result<Curvature> CurvatureByGradientDifferences(const ObjectiveFactory& make_objective,
+                                                 const ParameterSpace& space,
+                                                 const fem::PhysicalParameters& parameters,
+                                                 const IdentifiabilityOptions& options) {
+  const int p = space.NumVariables();
+  const std::vector<double> x0 = space.ToVariables(parameters);
+  const double s = options.step;
+  // Task 0: the centre; task 1 + 2 j (+ 1): x0 -+ s e_j.
+  const int num_tasks = 1 + 2 * p;
+  std::vector<Evaluation> results(num_tasks);
+  Curvature out;
+  SOFTID_RETURN_IF_ERROR(RunOnObjectives(
+      make_objective, num_tasks, Threads(options), [&](TrajectoryObjective& objective, int task) {
+        std::vector<double> x = x0;
+        if (task > 0) x[(task - 1) / 2] += (task % 2 == 1 ? -s : s);
+        SOFTID_ASSIGN_OR_RETURN(const fem::PhysicalParameters at,
+                                StencilPoint(space, parameters, x));
+        SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation,
+                                objective.Evaluate(at, /*with_gradient=*/true));
+        if (evaluation.diverged) {
+          return Diverged(space, task == 0 ? -1 : (task - 1) / 2, task % 2 == 1 ? " - " : " + ", s);
+        }
+        Evaluation& result = results[task];
+        result.cost = evaluation.cost;
+        result.gradient.resize(p);
+        space.ChainGradient(evaluation.gradient, x.data(), result.gradient.data());
+        if (task == 0) out.num_points = PointsInFittedFrames(objective);
+        return Status::Ok();
+      }));
+  out.evaluations = num_tasks;
+  out.cost = results[0].cost;
+  out.gradient = results[0].gradient;
   Eigen::MatrixXd h(p, p);
   for (int j = 0; j < p; ++j)
     h.col(j) = (results[2 + 2 * j].gradient - results[1 + 2 * j].gradient) / (2.0 * s);
   const double norm = h.norm();
-  report.hessian_asymmetry = norm > 0.0 ? (h - h.transpose()).norm() / norm : 0.0;
-  h = 0.5 * (h + h.transpose()).eval();
+  out.asymmetry = norm > 0.0 ? (h - h.transpose()).norm() / norm : 0.0;
+  out.hessian = 0.5 * (h + h.transpose());
+  return out;
+}
+
+// H ~ J^T J with J e_j ~ (r(x* + s e_j) - r(x*)) / s for the residuals r of
+// TrajectoryObjective::EvaluateResiduals (C = |r|^2 / 2): 1 + p forward runs, no adjoint. Exact
+// to first order at a fit whose residuals are at the noise (the second-order term averages out).
+Result<Curvature> CurvatureByGaussNewton(const ObjectiveFactory& make_objective,
+                                         const ParameterSpace& space,
+                                         const fem::PhysicalParameters& parameters,
+                                         const IdentifiabilityOptions& options) {
+  const int p = space.NumVariables();
+  const std::vector<double> x0 = space.ToVariables(parameters);
+  const double s = options.step;
+  const int num_tasks = 1 + p;  // the centre, then x0 + s e_j
+  std::vector<Eigen::VectorXd> residuals(num_tasks);
+  Curvature out;
+  SOFTID_RETURN_IF_ERROR(RunOnObjectives(
+      make_objective, num_tasks, Threads(options), [&](TrajectoryObjective& objective, int task) {
+        std::vector<double> x = x0;
+        if (task > 0) x[task - 1] += s;
+        SOFTID_ASSIGN_OR_RETURN(const fem::PhysicalParameters at,
+                                StencilPoint(space, parameters, x));
+        SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation,
+                                objective.EvaluateResiduals(at, &residuals[task]));
+        if (evaluation.diverged) return Diverged(space, task - 1, " + ", s);
+        if (task == 0) {
+          out.cost = evaluation.cost;
+          out.num_points = PointsInFittedFrames(objective);
+        }
+        return Status::Ok();
+      }));
+  Eigen::MatrixXd jacobian(residuals[0].size(), p);
+  for (int j = 0; j < p; ++j) jacobian.col(j) = (residuals[1 + j] - residuals[0]) / s;
+  out.evaluations = num_tasks;
+  out.hessian = jacobian.transpose() * jacobian;
+  out.gradient = jacobian.transpose() * residuals[0];
+  return out;
+}
+
+}  // namespace
+
+Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& make_objective,
+                                                     const ParameterSpace& space,
+                                                     const fem::PhysicalParameters& parameters,
+                                                     const IdentifiabilityOptions& options) {
+  const auto begin = std::chrono::steady_clock::now();
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  const int p = space.NumVariables();
+  const std::vector<double> x0 = space.ToVariables(parameters);
+  SOFTID_ASSIGN_OR_RETURN(
+      const Curvature curvature,
+      options.curvature == CurvatureMethod::kGaussNewton
+          ? CurvatureByGaussNewton(make_objective, space, parameters, options)
+          : CurvatureByGradientDifferences(make_objective, space, parameters, options));
+  const int num_points = curvature.num_points;
+
+  IdentifiabilityReport report;
+  report.evaluations = curvature.evaluations;
+  report.curvature = options.curvature;
+  report.cost = curvature.cost;
+  report.gradient = curvature.gradient;
+  report.hessian_asymmetry = curvature.asymmetry;
+  const Eigen::MatrixXd& h = curvature.hessian;
   report.hessian = h;
   report.hessian_positive_definite =
       p > 0 && h.llt().info() == Eigen::Success && (h.diagonal().array() > 0.0).all();
@@ -498,9 +598,11 @@ nlohmann::json ToJson(const IdentifiabilityReport& report) {
                             {"direction", vector(c.direction)}});
   }
   return {
-      {"method",
-       "Laplace approximation: Cov(x) = 2 C_min / (N_eff - p) * H^-1, H by central differences "
-       "of adjoint gradients in the optimiser's variables (log for positive quantities)"},
+      {"method", std::string("Laplace approximation: Cov(x) = 2 C_min / (N_eff - p) * H^-1, H ") +
+                     (report.curvature == CurvatureMethod::kGaussNewton
+                          ? "= J^T J (Gauss-Newton, forward differences of the residuals)"
+                          : "by central differences of adjoint gradients") +
+                     " in the optimiser's variables (log for positive quantities)"},
       {"cost", number(report.cost)},
       {"residual_sigma", number(report.residual_sigma)},
       {"num_effective_samples", number(report.num_effective_samples)},

@@ -53,12 +53,25 @@
 
 namespace softid::inverse {
 
+// How step 1 measures the curvature H.
+enum class CurvatureMethod {
+  // Central differences of the adjoint gradient (above): 1 + 2p forward+adjoint runs. Sees the
+  // cost's own curvature, negative directions included (a saddle, a maximum).
+  kGradientDifferences,
+  // Gauss-Newton, H ~ J^T J from forward differences of the per-point residuals (cost =
+  // |r|^2 / 2): 1 + p forward runs, no adjoint, several times cheaper. Always positive
+  // semi-definite; at a fit whose residuals are at the noise it agrees with the above to first
+  // order (the second-order term averages out). The per-result uncertainty uses it.
+  kGaussNewton,
+};
+
 struct IdentifiabilityOptions {
+  CurvatureMethod curvature = CurvatureMethod::kGradientDifferences;
   // s, the central-difference step in the optimiser's variables [-] (log variables: a 1 % change;
   // gravity: 0.01 m/s^2), > 0. Large enough that the piecewise-smooth cost (points switch cells)
   // averages out, small next to the curvature scale of the valleys we look for.
   double step = 1e-2;
-  // Worker threads for the 2p evaluations; 0 = std::thread::hardware_concurrency(), >= 0.
+  // Worker threads for the evaluations; 0 = std::thread::hardware_concurrency(), >= 0.
   int threads = 0;
   // N_eff, the number of independent residuals [-]; 0 = the number of observed points in the
   // fitted frames. >= 0.
@@ -146,8 +159,9 @@ struct IdentifiabilityReport {
   Eigen::VectorXd gradient;            // dC/dx at x* [m^2] (should be ~0 at an optimum)
   double num_effective_samples = 0.0;  // N_eff used [-]
   double residual_sigma = 0.0;         // sigma [m]
-  Eigen::MatrixXd hessian;             // H [m^2], symmetrised
-  double hessian_asymmetry = 0.0;      // |H - H^T| / |H| before symmetrising (FD noise) [-]
+  CurvatureMethod curvature = CurvatureMethod::kGradientDifferences;  // how H was measured
+  Eigen::MatrixXd hessian;                                            // H [m^2], symmetrised
+  double hessian_asymmetry = 0.0;  // |H - H^T| / |H| before symmetrising (FD noise) [-]
   bool hessian_positive_definite = false;
   Eigen::MatrixXd covariance;           // Cov(x) [-]; +inf rows and columns of unbounded variables
   Eigen::MatrixXd correlation;          // [-]; NaN (JSON null) between unbounded and bounded

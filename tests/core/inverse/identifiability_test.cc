@@ -180,6 +180,34 @@ TEST(Identifiability, FreeFallDeterminesGravityNotStiffness) {
   EXPECT_TRUE(json.contains("method"));
 }
 
+// At parameters that fit to the noise, the Gauss-Newton curvature (forward runs only, 1 + p of
+// them) gives the uncertainties the adjoint-gradient differences give (1 + 2p forward+adjoint).
+TEST(Identifiability, GaussNewtonAgreesWithGradientDifferencesAtAGoodFit) {
+  const SmallCapture capture = MakeSmallCapture("torus-drop", /*duration=*/0.3);
+  ASSERT_TRUE(capture.ok) << capture.error;
+  IdentifiabilityOptions options;
+  options.threads = 2;
+  options.min_residual_sigma = 1e-3;
+  const std::vector<std::string> fitted = {"youngs_modulus", "initial_velocity"};
+  Result<IdentifiabilityReport> differences = AnalyzeAtTruth(capture, fitted, options);
+  options.curvature = CurvatureMethod::kGaussNewton;
+  Result<IdentifiabilityReport> gauss_newton = AnalyzeAtTruth(capture, fitted, options);
+  ASSERT_TRUE(differences.ok()) << differences.status().ToString();
+  ASSERT_TRUE(gauss_newton.ok()) << gauss_newton.status().ToString();
+  Print(*gauss_newton);
+  EXPECT_EQ(differences->evaluations, 9);
+  EXPECT_EQ(gauss_newton->evaluations, 5);
+  EXPECT_TRUE(gauss_newton->hessian_positive_definite);
+  for (const VariableIdentifiability& v : differences->variables) {
+    const VariableIdentifiability* g = gauss_newton->Find(v.name);
+    ASSERT_NE(g, nullptr);
+    ASSERT_TRUE(std::isfinite(v.standard_uncertainty)) << v.name;
+    EXPECT_NEAR(g->standard_uncertainty / v.standard_uncertainty, 1.0, 0.25) << v.name;
+  }
+  EXPECT_NE(ToJson(*gauss_newton)["method"].get<std::string>().find("Gauss-Newton"),
+            std::string::npos);
+}
+
 // In free fall, mass damping (a = g - alpha v) bends the trajectory by alpha g t^3 / 6 against
 // gravity's g t^2 / 2: over a short window t^2 and t^3 are nearly collinear (correlation 0.99
 // for a uniform weighting of [0, T]), so gravity[2] and mass_damping form a valley, whatever the
