@@ -21,6 +21,7 @@
 #include "server/job_events.h"
 #include "server/job_service.h"
 #include "server/metrics_http.h"
+#include "server/orphan_blobs.h"
 #include "server/periodic_task.h"
 #include "server/self_signed_certificate.h"
 #include "server/store/blob_store.h"
@@ -38,28 +39,6 @@ Status ResetFolder(const fs::path& dir) {
   if (!error) fs::create_directories(dir, error);
   if (error) return Status::IoError("cannot prepare " + dir.string() + ": " + error.message());
   return Status::Ok();
-}
-
-// Blobs no capture lists: left by an upload killed between its blob puts and its commit. At
-// start no upload of this process runs; the data directory has one owner (single node).
-void RemoveOrphanBlobs(store::JobStore& jobs, const store::BlobStore& blobs,
-                       const std::shared_ptr<spdlog::logger>& log) {
-  Result<std::vector<std::string>> hashes = blobs.List();
-  if (!hashes.ok()) {
-    log->warn("orphan blob sweep skipped: {}", hashes.status().message());
-    return;
-  }
-  Result<std::vector<std::string>> listed = jobs.ListReferencedBlobs();
-  if (!listed.ok()) {
-    log->warn("orphan blob sweep skipped: {}", listed.status().message());
-    return;
-  }
-  const std::set<std::string> referenced(listed->begin(), listed->end());
-  int removed = 0;
-  for (const std::string& sha256 : *hashes) {
-    if (!referenced.contains(sha256) && blobs.Remove(sha256).ok()) ++removed;
-  }
-  if (removed > 0) log->info("removed {} blob(s) that no capture refers to", removed);
 }
 
 std::string HostName() {
@@ -195,7 +174,8 @@ struct Server::Parts {
   std::unique_ptr<GrpcReconstructionService> grpc_service;
   std::unique_ptr<MetricsHttpServer> metrics_http;
   std::unique_ptr<PeriodicTask> retention;
-  std::unique_ptr<PeriodicTask> lease_sweep;  // PostgreSQL store only
+  std::unique_ptr<PeriodicTask> lease_sweep;   // PostgreSQL store only
+  std::unique_ptr<PeriodicTask> orphan_sweep;  // PostgreSQL store only
   std::unique_ptr<grpc::Server> grpc_server;
   int port = 0;
   std::mutex shutdown_mutex;
@@ -257,7 +237,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& requested,
   }
 
   // Another process sharing the data directory may be between its blob puts and its commit.
-  if (!shared_store) RemoveOrphanBlobs(*parts->jobs, *parts->blobs, log);
+  if (!shared_store) RemoveOrphanBlobs(*parts->jobs, *parts->blobs, std::chrono::seconds(0), log);
   parts->reports.emplace(options.data_dir / "reports");
 
   WorkerPoolOptions pool_options;
@@ -365,6 +345,15 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& requested,
     store::JobStore* jobs = parts->jobs.get();
     WorkerPool* workers = parts->pool.get();
     const int max_attempts = options.max_attempts;
+    // Blobs an upload or ingest left behind on any process sharing the data directory.
+    const store::BlobStore* blobs = &*parts->blobs;
+    std::shared_mutex* puts = &parts->blob_puts;
+    const std::chrono::seconds age = options.orphan_blob_age;
+    parts->orphan_sweep = std::make_unique<PeriodicTask>(
+        std::chrono::duration_cast<std::chrono::milliseconds>(age), [jobs, blobs, puts, age, log] {
+          std::unique_lock lock(*puts);
+          RemoveOrphanBlobs(*jobs, *blobs, age, log);
+        });
     parts->lease_sweep =
         std::make_unique<PeriodicTask>(options.lease, [jobs, workers, max_attempts, log] {
           Result<store::RecoverySummary> swept =

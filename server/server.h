@@ -75,6 +75,10 @@ struct ServerOptions {
   // at start and every retention_interval; nullopt: kept until deleted.
   std::optional<std::chrono::seconds> retention;
   std::chrono::milliseconds retention_interval{std::chrono::hours(1)};
+  // With a shared store: blobs no capture lists are removed every this long once they are this
+  // old (another process may be between storing an upload's files and committing it, which takes
+  // seconds). A single node sweeps them at start instead.
+  std::chrono::seconds orphan_blob_age{std::chrono::hours(1)};
   // What each station may use (job_service.h).
   StationQuotas quotas;
   // CreateJob refuses a job whose estimated memory exceeds this (inverse::JobResourceLimits).
