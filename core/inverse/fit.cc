@@ -11,6 +11,7 @@
 
 #include "core/capture/capture.h"
 #include "core/common/json_fields.h"
+#include "core/inverse/fit_checkpoint.h"
 #include "core/inverse/horizon_continuation.h"
 #include "core/inverse/least_squares_refinement.h"
 #include "core/inverse/objective_settings.h"
@@ -464,6 +465,89 @@ Status ChooseGrid(const capture::Capture& capture, const geometry::TriangleMesh&
   return Status::Ok();
 }
 
+// The grid and time step of a fresh fit: as configured, or chosen (grid first) when "auto".
+Status ChooseDiscretisation(const capture::Capture& capture, const geometry::TriangleMesh& mesh,
+                            const JobConfig& config, const std::vector<ObservedFrame>& frames,
+                            const std::atomic<bool>* cancel, fem::SimulationOptions* simulation,
+                            FitResult* result) {
+  const fem::PhysicalParameters central = CentralStart(config, result->base);
+  const int last_frame = LastNominalFrame(frames, capture.fps);
+  SOFTID_RETURN_IF_ERROR(
+      ChooseGrid(capture, mesh, config, central, last_frame, cancel, simulation, result));
+  result->substeps = config.substeps;
+  if (config.substeps != kAutoSubsteps) return Status::Ok();
+  SubstepSelectionOptions selection_options;
+  selection_options.cancel = cancel;
+  SOFTID_ASSIGN_OR_RETURN(SubstepSelection selection,
+                          SelectSubsteps(mesh, capture.fixed_region, central, *simulation,
+                                         capture.fps, last_frame, selection_options));
+  result->substeps = selection.substeps;
+  result->substep_selection = std::move(selection);
+  return Status::Ok();
+}
+
+// The grid and time step a checkpoint of this fit chose. InvalidArgument when it cannot be this
+// config's (another number of starts, grid or time step).
+Status TakeDiscretisation(const FitCheckpoint& checkpoint, const JobConfig& config, int num_starts,
+                          fem::SimulationOptions* simulation, FitResult* result) {
+  const bool same_grid = config.cell_size > 0.0
+                             ? checkpoint.cell_size_m == config.cell_size
+                             : config.cells == kAutoCells || checkpoint.cells == config.cells;
+  const bool same_time_step =
+      config.substeps == kAutoSubsteps || checkpoint.substeps == config.substeps;
+  if (checkpoint.num_starts != num_starts || !same_grid || !same_time_step) {
+    return Status::InvalidArgument(
+        "resume_from: the checkpoint (" + std::to_string(checkpoint.num_starts) + " starts, " +
+        std::to_string(checkpoint.cells) + " cells, " + std::to_string(checkpoint.substeps) +
+        " substeps) is not of this config (" + std::to_string(num_starts) + " starts)");
+  }
+  for (const StartResult& finished : checkpoint.finished) {
+    if (finished.index < 0 || finished.index >= num_starts) {
+      return Status::InvalidArgument("resume_from: finished start " +
+                                     std::to_string(finished.index) + " does not exist");
+    }
+  }
+  result->cells = checkpoint.cells;
+  result->cell_size_m = checkpoint.cell_size_m;
+  result->grid_selection = checkpoint.grid_selection;
+  result->substeps = checkpoint.substeps;
+  result->substep_selection = checkpoint.substep_selection;
+  if (config.cell_size <= 0.0) simulation->cells_along_longest_side = checkpoint.cells;
+  return Status::Ok();
+}
+
+// The starts this call runs: options.only_starts (or every one), less those a checkpoint
+// finished, in index order.
+Result<std::vector<int>> StartsToRun(const FitOptions& options, int num_starts) {
+  std::vector<int> wanted = options.only_starts;
+  if (wanted.empty()) {
+    for (int s = 0; s < num_starts; ++s) wanted.push_back(s);
+  }
+  std::sort(wanted.begin(), wanted.end());
+  wanted.erase(std::unique(wanted.begin(), wanted.end()), wanted.end());
+  std::vector<int> out;
+  for (int s : wanted) {
+    if (s < 0 || s >= num_starts) {
+      return Status::InvalidArgument("only_starts: start " + std::to_string(s) +
+                                     " does not exist (the config has " +
+                                     std::to_string(num_starts) + " starts)");
+    }
+    if (options.resume_from == nullptr || !options.resume_from->IsFinished(s)) out.push_back(s);
+  }
+  return out;
+}
+
+FitCheckpoint CheckpointOf(const FitResult& result, int num_starts) {
+  FitCheckpoint checkpoint;
+  checkpoint.num_starts = num_starts;
+  checkpoint.cells = result.cells;
+  checkpoint.cell_size_m = result.cell_size_m;
+  checkpoint.grid_selection = result.grid_selection;
+  checkpoint.substeps = result.substeps;
+  checkpoint.substep_selection = result.substep_selection;
+  return checkpoint;
+}
+
 }  // namespace
 
 JobConfig WithFitDiscretisation(JobConfig config, const FitResult& fit) {
@@ -541,22 +625,32 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   // steps ~1.6x faster on both (softid-lab bench --threads).
   simulation.threads = std::max(1, cores / threads);
   const cost::SurfaceCostOptions cost_options = CostOptionsFor(config);
-  SOFTID_RETURN_IF_ERROR(ChooseGrid(capture, mesh, config, CentralStart(config, result.base),
-                                    LastNominalFrame(*frames, capture.fps), options.cancel,
-                                    &simulation, &result));
-  result.substeps = config.substeps;
-  if (config.substeps == kAutoSubsteps) {
-    SubstepSelectionOptions selection_options;
-    selection_options.cancel = options.cancel;
-    SOFTID_ASSIGN_OR_RETURN(
-        SubstepSelection selection,
-        SelectSubsteps(mesh, capture.fixed_region, CentralStart(config, result.base), simulation,
-                       capture.fps, LastNominalFrame(*frames, capture.fps), selection_options));
-    result.substeps = selection.substeps;
-    result.substep_selection = std::move(selection);
+  if (options.resume_from != nullptr) {
+    SOFTID_RETURN_IF_ERROR(TakeDiscretisation(
+        *options.resume_from, config, static_cast<int>(starts.size()), &simulation, &result));
+  } else {
+    SOFTID_RETURN_IF_ERROR(
+        ChooseDiscretisation(capture, mesh, config, *frames, options.cancel, &simulation, &result));
   }
+  SOFTID_ASSIGN_OR_RETURN(std::vector<int> to_run,
+                          StartsToRun(options, static_cast<int>(starts.size())));
+  FitCheckpoint checkpoint = CheckpointOf(result, static_cast<int>(starts.size()));
+  if (options.resume_from != nullptr) {
+    for (const StartResult& finished : options.resume_from->finished) {
+      result.starts[finished.index] = finished;
+      checkpoint.finished.push_back(finished);
+    }
+  }
+  std::mutex checkpoint_mutex;
+  if (options.on_checkpoint) options.on_checkpoint(checkpoint);
+  auto finished = [&](const StartResult& start) {
+    std::lock_guard lock(checkpoint_mutex);
+    checkpoint.finished.push_back(start);
+    if (options.on_checkpoint) options.on_checkpoint(checkpoint);
+  };
 
   ProgressBoard board(options, config, static_cast<int>(starts.size()), threads);
+  for (size_t i = 0; i < starts.size() - to_run.size(); ++i) board.StartBegins();
   std::atomic<int> next_start{0};
   std::mutex error_mutex;
   Status error;
@@ -572,16 +666,22 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
       return;
     }
     objective->SetCancelFlag(options.cancel);
-    for (int s = next_start++; s < static_cast<int>(starts.size()); s = next_start++) {
+    for (int next = next_start++; next < static_cast<int>(to_run.size()); next = next_start++) {
       if (options.cancel != nullptr && options.cancel->load()) break;
+      const int s = to_run[next];
       board.StartBegins();
       RunStart(s, starts[s], *objective, space, result.base, config, options, board,
                &result.starts[s]);
+      // A start stopped by a cancel did not finish: a resumed fit runs it again.
+      if (options.cancel == nullptr || !options.cancel->load()) finished(result.starts[s]);
     }
   };
-  {
+  if (!to_run.empty()) {
+    // The simulations keep the thread count of the whole fit (above), so that a resumed fit
+    // computes exactly what the uninterrupted one would have.
+    const int pool_threads = std::min(threads, static_cast<int>(to_run.size()));
     std::vector<std::jthread> pool;
-    for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
+    for (int t = 1; t < pool_threads; ++t) pool.emplace_back(worker);
     worker();
   }
   SOFTID_RETURN_IF_ERROR(error);

@@ -66,10 +66,24 @@ struct FitProgress {
   long long unconverged_steps = 0;
 };
 
+struct FitCheckpoint;  // fit_checkpoint.h
+
 struct FitOptions {
   std::function<void(const FitProgress&)> on_progress;  // optional
   // Checked every iteration; a set flag stops every start (the result then says "cancelled").
   const std::atomic<bool>* cancel = nullptr;
+  // Called (serialised) with everything finished so far: once the grid and time step are chosen,
+  // then after every start that ran to its end. What a caller saves to resume the fit later
+  // (fit_checkpoint.h). Optional.
+  std::function<void(const FitCheckpoint&)> on_checkpoint;
+  // A checkpoint of this fit (same capture and config) to resume from: its grid and time step
+  // are used as chosen and its finished starts are kept, not run again. InvalidArgument when its
+  // number of starts differs from the config's. Not owned; null: a fresh fit.
+  const FitCheckpoint* resume_from = nullptr;
+  // Only these starts run (indices < the config's starts; empty: every start), e.g. one task of
+  // a fit whose starts run on several workers; the others stay empty (evaluations 0) unless the
+  // checkpoint finished them. InvalidArgument naming an index out of range.
+  std::vector<int> only_starts;
 };
 
 // One stage of a start's continuation over the horizon.
