@@ -2,8 +2,10 @@
 
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <condition_variable>
 #include <mutex>
+#include <optional>
 #include <system_error>
 #include <thread>
 
@@ -12,6 +14,7 @@
 #include "core/diagnosis/fit_report.h"
 #include "core/diagnosis/report.h"
 #include "core/inverse/fit.h"
+#include "core/inverse/fit_checkpoint.h"
 #include "core/inverse/fit_uncertainty.h"
 #include "core/inverse/job_config.h"
 #include "server/materialize_capture.h"
@@ -105,6 +108,41 @@ struct WorkFolder {
   fs::path path;
 };
 
+// A note in the job's history (a kState event that changes nothing), pushed to watchers.
+void AppendNote(const store::Job& job, const JobRunnerContext& context, const std::string& note) {
+  store::ProgressEvent event;
+  event.kind = store::ProgressKind::kState;
+  event.message = note;
+  if (Result<int64_t> seq = context.jobs->AppendProgress(job.id, event); !seq.ok()) {
+    context.logger->warn("job {}: note not recorded: {}", job.id, seq.status().message());
+  }
+  context.events->Notify(job.id);
+}
+
+// The checkpoint an earlier attempt of the job saved (a worker lost or a server stopped midway),
+// when there is one this attempt can resume from; one that cannot be read is logged and ignored
+// (the fit then starts afresh, which is always correct).
+std::optional<inverse::FitCheckpoint> EarlierCheckpoint(const store::Job& job,
+                                                        const JobRunnerContext& context) {
+  if (job.attempts <= 1) return std::nullopt;
+  Result<std::optional<nlohmann::json>> stored = context.jobs->LoadCheckpoint(job.id);
+  if (!stored.ok() || !stored->has_value()) return std::nullopt;
+  Result<inverse::FitCheckpoint> checkpoint = inverse::FitCheckpointFromJson(**stored);
+  if (!checkpoint.ok()) {
+    context.logger->warn("job {}: checkpoint ignored: {}", job.id, checkpoint.status().message());
+    return std::nullopt;
+  }
+  return std::move(checkpoint).value();
+}
+
+// Which starts an earlier attempt finished: the history note and result.json's "resumed".
+nlohmann::json ResumedJson(const store::Job& job, const inverse::FitCheckpoint& checkpoint) {
+  std::vector<int> starts;
+  for (const inverse::StartResult& start : checkpoint.finished) starts.push_back(start.index);
+  std::sort(starts.begin(), starts.end());
+  return {{"attempt", job.attempts}, {"finished_starts", starts}};
+}
+
 // The diagnosis of a finished fit ("diagnose": true): its stages are recorded as notes in the
 // job's progress history, and its report goes into the result as "diagnosis". A diagnosis that
 // fails leaves the fit's result standing, with {"error": ...} as its report. Its plots go into
@@ -117,14 +155,7 @@ nlohmann::json RunDiagnosis(const store::Job& job, const capture::Capture& captu
   if (context.reports != nullptr) options.plot_directory = report_dir / "diagnosis";
   options.fit.cancel = &cancel;
   options.on_stage = [&](const std::string& stage) {
-    store::ProgressEvent note;
-    note.kind = store::ProgressKind::kState;
-    note.message = "diagnosis: " + stage;
-    if (Result<int64_t> seq = context.jobs->AppendProgress(job.id, note); !seq.ok()) {
-      context.logger->warn("job {}: diagnosis note not recorded: {}", job.id,
-                           seq.status().message());
-    }
-    context.events->Notify(job.id);
+    AppendNote(job, context, "diagnosis: " + stage);
   };
   Result<diagnosis::DiagnosisReport> report = diagnosis::Diagnose(capture, config, options, &fit);
   if (!report.ok()) {
@@ -240,6 +271,8 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   const fs::path report_dir = folder.path / "report";
   std::optional<inverse::FitUncertainty> uncertainty;  // "uncertainty": true (the default)
   std::string uncertainty_error;
+  const std::optional<inverse::FitCheckpoint> resume_from = EarlierCheckpoint(job, context);
+  nlohmann::json resumed_json;  // when an earlier attempt's starts were kept
   Status prepared;
   {
     Heartbeat heartbeat(job, worker_id, context, cancel);
@@ -284,6 +317,21 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
       if (requested.ok() && *requested) {
         heartbeat.set_cancel_requested();
         cancel.store(true);
+      }
+    };
+    // Starts an earlier attempt finished are kept; every start that finishes now is saved.
+    if (resume_from) {
+      options.resume_from = &*resume_from;
+      resumed_json = ResumedJson(job, *resume_from);
+      AppendNote(job, context,
+                 "resumed from a checkpoint: " + std::to_string(resume_from->finished.size()) +
+                     " of " + std::to_string(resume_from->num_starts) +
+                     " starts finished on an earlier attempt");
+    }
+    options.on_checkpoint = [&](const inverse::FitCheckpoint& checkpoint) {
+      if (Status saved = context.jobs->SaveCheckpoint(job.id, inverse::ToJson(checkpoint));
+          !saved.ok()) {
+        log->warn("job {}: checkpoint not saved: {}", job.id, saved.message());
       }
     };
     if (capture.ok() && !cancel.load()) result = inverse::Fit(*capture, *config, options);
@@ -342,6 +390,7 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   if (!diagnosis_json.is_null()) result_json["diagnosis"] = std::move(diagnosis_json);
   if (!ingest_json.is_null()) result_json["ingest"] = std::move(ingest_json);
   if (!report_json.is_null()) result_json["report"] = std::move(report_json);
+  if (!resumed_json.is_null()) result_json["resumed"] = std::move(resumed_json);
   KeepReport(job, report_dir, context, &result_json);
   if (Status completed = context.jobs->CompleteJob(job.id, result_json); !completed.ok()) {
     log->error("job {}: cannot record the result: {}", job.id, completed.message());

@@ -18,6 +18,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <latch>
 #include <memory>
 #include <nlohmann/json.hpp>
@@ -287,10 +288,11 @@ class ServerProcessTest : public ::testing::Test {
     return job;
   }
 
-  // Reads the job's event stream until its first ITERATION event (the fit is running), which it
-  // returns with every event before it.
-  static std::vector<v1::JobEvent> WatchUntilFirstIteration(ServerProcess& server,
-                                                            const std::string& job_id) {
+  // Reads the job's event stream until an event satisfies `until`, which it returns with every
+  // event before it.
+  static std::vector<v1::JobEvent> WatchUntil(
+      ServerProcess& server, const std::string& job_id,
+      const std::function<bool(const v1::JobEvent&)>& until) {
     grpc::ClientContext context;
     context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
     v1::WatchJobRequest request;
@@ -301,11 +303,18 @@ class ServerProcessTest : public ::testing::Test {
     v1::JobEvent event;
     while (reader->Read(&event)) {
       events.push_back(event);
-      if (event.kind() == v1::JobEvent::ITERATION) break;
+      if (until(event)) break;
     }
     context.TryCancel();
     (void)reader->Finish();
     return events;
+  }
+
+  // Until the first ITERATION event: the fit is running.
+  static std::vector<v1::JobEvent> WatchUntilFirstIteration(ServerProcess& server,
+                                                            const std::string& job_id) {
+    return WatchUntil(server, job_id,
+                      [](const v1::JobEvent& e) { return e.kind() == v1::JobEvent::ITERATION; });
   }
 
   static std::vector<v1::JobEvent> WatchToEnd(ReconstructionClient& client,
@@ -385,6 +394,64 @@ TEST_F(ServerProcessTest, KillNineWhileRunningThenRestartCompletesTheJob) {
   v1::Result result;
   ASSERT_TRUE(client.GetResult(job_id, &result).ok());
   EXPECT_TRUE(nlohmann::json::parse(result.result_json())["parameters"].contains("youngs_modulus"));
+  StopCleanly(*server);
+}
+
+// kill -9 after the first of three starts finished (one thread: they run in turn): the restarted
+// server resumes from the job's checkpoint, runs only the other two, and the result is the one an
+// uninterrupted run of the same job computes.
+TEST_F(ServerProcessTest, KillNineAfterAFinishedStartResumesFromTheCheckpoint) {
+  const double truth = capture_->truth.youngs_modulus;
+  nlohmann::json config = nlohmann::json::parse(FitConfig(/*max_iterations=*/4, /*starts=*/3));
+  config["initial"] = {{"youngs_modulus", {{"min", 0.5 * truth}, {"max", 2.0 * truth}}}};
+  std::string job_id, capture_id;
+  {
+    std::unique_ptr<ServerProcess> server = Start({.workers = 1});
+    ASSERT_NE(server, nullptr);
+    ReconstructionClient client = server->Client();
+    capture_id = Upload(client);
+    job_id = CreateOk(client, capture_id, config.dump()).id();
+    // The second start's first iteration: the first start has finished and been saved.
+    const std::vector<v1::JobEvent> before = WatchUntil(*server, job_id, [](const v1::JobEvent& e) {
+      return e.kind() == v1::JobEvent::ITERATION && e.start() == 1;
+    });
+    ASSERT_EQ(before.back().start(), 1);
+    server->Signal(SIGKILL);
+    EXPECT_EQ(server->Wait(std::chrono::seconds(10)), 128 + SIGKILL);
+  }
+
+  std::unique_ptr<ServerProcess> server = Start({.workers = 1});
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient client = server->Client();
+  const std::vector<v1::JobEvent> history = WatchToEnd(client, job_id);
+  ASSERT_EQ(history.back().state(), v1::SUCCEEDED);
+  bool noted = false;
+  for (const v1::JobEvent& e : history) {
+    if (e.attempt() != 2) continue;
+    EXPECT_FALSE(e.kind() == v1::JobEvent::ITERATION && e.start() == 0) << "start 0 ran again";
+    noted |= e.message().find("resumed from a checkpoint: 1 of 3 starts") != std::string::npos;
+  }
+  EXPECT_TRUE(noted);
+  v1::Result resumed;
+  ASSERT_TRUE(client.GetResult(job_id, &resumed).ok());
+  const nlohmann::json resumed_json = nlohmann::json::parse(resumed.result_json());
+  EXPECT_EQ(resumed_json["resumed"]["finished_starts"], nlohmann::json::array({0}));
+
+  const std::string again = CreateOk(client, capture_id, config.dump()).id();
+  ASSERT_EQ(WatchToEnd(client, again).back().state(), v1::SUCCEEDED);
+  v1::Result uninterrupted;
+  ASSERT_TRUE(client.GetResult(again, &uninterrupted).ok());
+  const nlohmann::json uninterrupted_json = nlohmann::json::parse(uninterrupted.result_json());
+  EXPECT_FALSE(uninterrupted_json.contains("resumed"));
+  EXPECT_EQ(resumed_json["parameters"], uninterrupted_json["parameters"]);
+  ASSERT_EQ(resumed_json["starts"].size(), 3u);
+  for (int s = 0; s < 3; ++s) {
+    EXPECT_EQ(resumed_json["starts"][s]["parameters"],
+              uninterrupted_json["starts"][s]["parameters"])
+        << "start " << s;
+    EXPECT_EQ(resumed_json["starts"][s]["iterations"],
+              uninterrupted_json["starts"][s]["iterations"]);
+  }
   StopCleanly(*server);
 }
 
