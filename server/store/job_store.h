@@ -30,6 +30,7 @@
 #include "server/store/capture.h"
 #include "server/store/job.h"
 #include "server/store/progress_event.h"
+#include "server/store/start_task.h"
 
 namespace softid::server::store {
 
@@ -192,6 +193,35 @@ class JobStore {
   // the job becomes CANCELLED instead. FailedPrecondition when the worker no longer holds it.
   virtual Status ReleaseJob(const std::string& job_id, const std::string& worker_id,
                             const std::string& reason) = 0;
+
+  // --- Start tasks (fan-out of a job's starts; start_task.h) -----------------------------------
+
+  // Splits the RUNNING job leased to `worker_id` into QUEUED tasks 0 .. num_tasks - 1 (>= 1).
+  // Idempotent: tasks an earlier attempt made are kept as they are (FailedPrecondition when
+  // their number differs). FailedPrecondition when the job is not RUNNING or leased to another.
+  virtual Status CreateStartTasks(const std::string& job_id, const std::string& worker_id,
+                                  int num_tasks) = 0;
+  // Atomically takes the first claimable task for `worker_id`: a QUEUED one, or a RUNNING one
+  // whose lease expired (its worker was lost); attempts + 1, lease until now + `lease`. Only
+  // tasks of RUNNING jobs without a cancel request; of `job_id` only when it is not empty, else
+  // the oldest job's first. Two workers never hold the same task. nullopt when none is claimable.
+  virtual Result<std::optional<StartTask>> ClaimStartTask(const std::string& worker_id,
+                                                          std::chrono::milliseconds lease,
+                                                          const std::string& job_id = "") = 0;
+  // Extends the task's lease. FailedPrecondition when `worker_id` no longer holds it, or its job
+  // ended or has a cancel request: the worker stops. (A job requeued meanwhile keeps its tasks
+  // running: the next attempt uses their results.)
+  virtual Status RenewStartTask(const std::string& job_id, int index, const std::string& worker_id,
+                                std::chrono::milliseconds lease) = 0;
+  // RUNNING (held by `worker_id`) -> DONE with `result`; FailedPrecondition otherwise, or when
+  // the job ended.
+  virtual Status CompleteStartTask(const std::string& job_id, int index,
+                                   const std::string& worker_id, const nlohmann::json& result) = 0;
+  // RUNNING (held by `worker_id`) -> QUEUED: the worker gives it back unfinished (a shutdown).
+  virtual Status ReleaseStartTask(const std::string& job_id, int index,
+                                  const std::string& worker_id) = 0;
+  // The job's tasks by index (none when it was not split). NotFound for an unknown job.
+  virtual Result<std::vector<StartTask>> ListStartTasks(const std::string& job_id) = 0;
 
   // --- Maintenance --------------------------------------------------------------------------
 

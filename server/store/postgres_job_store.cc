@@ -11,6 +11,7 @@
 #include "server/store/postgres_schema.h"
 #include "server/store/resource_id.h"
 #include "server/store/sha256.h"
+#include "server/store/start_task.h"
 
 namespace softid::server::store {
 namespace {
@@ -193,6 +194,39 @@ int EffectivePageSize(int requested) {
 Status WrongState(const Job& job, const std::string& requirement) {
   return Status::FailedPrecondition("job " + job.id + " is " + ToString(job.state) + ": " +
                                     requirement);
+}
+
+constexpr std::string_view kStartTaskColumns =
+    "job_id, idx, state, attempts, lease_owner, lease_expires_at, result";
+
+// Reads row `r` of a result selected with kStartTaskColumns.
+Result<StartTask> ReadStartTask(const PostgresResult& rows, int r) {
+  StartTask task;
+  task.job_id = rows.Text(r, 0);
+  task.index = static_cast<int>(rows.Int64(r, 1));
+  SOFTID_ASSIGN_OR_RETURN(task.state, StartTaskStateFromString(rows.Text(r, 2)));
+  task.attempts = static_cast<int>(rows.Int64(r, 3));
+  task.lease_owner = rows.Text(r, 4);
+  task.lease_expires_at = OptionalTimestamp(rows.OptionalInt64(r, 5));
+  if (!rows.IsNull(r, 6)) {
+    SOFTID_ASSIGN_OR_RETURN(task.result, ParseStoredJson(rows.Text(r, 6), "start_tasks.result"));
+  }
+  return task;
+}
+
+// The task, locked until the transaction ends.
+Result<StartTask> LoadStartTaskForUpdate(PostgresConnection& db, const std::string& job_id,
+                                         int index) {
+  SOFTID_ASSIGN_OR_RETURN(
+      PostgresResult rows,
+      db.Query("SELECT " + std::string(kStartTaskColumns) +
+                   " FROM start_tasks WHERE job_id = $1 AND idx = $2 FOR UPDATE",
+               job_id, index));
+  if (rows.rows() == 0) {
+    return Status::NotFound("start task " + std::to_string(index) + " of job " + job_id +
+                            " not found");
+  }
+  return ReadStartTask(rows, 0);
 }
 
 Status NotLeasedTo(const Job& job, const std::string& worker_id) {
@@ -1047,6 +1081,131 @@ Result<std::vector<std::string>> PostgresJobStore::ListReferencedBlobs() {
         SELECT DISTINCT file ->> 'sha256'
         FROM captures, json_array_elements(captures.manifest) AS file)sql"));
     return Column0(rows);
+  });
+}
+
+// --- Start tasks -----------------------------------------------------------------------------
+
+Status PostgresJobStore::CreateStartTasks(const std::string& job_id, const std::string& worker_id,
+                                          int num_tasks) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  SOFTID_RETURN_IF_ERROR(CheckTaskCount(num_tasks));
+  return Write([&](PostgresConnection& db) -> Status {
+    // The job's row lock orders this against another create and the job's transitions.
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(db, job_id, RowLock::kForUpdate));
+    SOFTID_RETURN_IF_ERROR(CheckTaskOwner(job, worker_id));
+    SOFTID_ASSIGN_OR_RETURN(PostgresResult count,
+                            db.Query("SELECT count(*) FROM start_tasks WHERE job_id = $1", job_id));
+    const int64_t existing = count.Int64(0, 0);
+    SOFTID_RETURN_IF_ERROR(CheckExistingTasks(job_id, existing, num_tasks));
+    if (existing == num_tasks) return Status::Ok();
+    return db
+        .Query(R"sql(
+        INSERT INTO start_tasks (job_id, idx, state, created_at)
+        SELECT $1, i, 'QUEUED', $3::bigint FROM generate_series(0, $2::integer - 1) AS i)sql",
+               job_id, num_tasks, ToUnixMicros(Now()))
+        .status();
+  });
+}
+
+Result<std::optional<StartTask>> PostgresJobStore::ClaimStartTask(const std::string& worker_id,
+                                                                  std::chrono::milliseconds lease,
+                                                                  const std::string& job_id) {
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  SOFTID_RETURN_IF_ERROR(CheckLease(lease));
+  if (!job_id.empty()) SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Write([&](PostgresConnection& db) -> Result<std::optional<StartTask>> {
+    const Timestamp now = Now();
+    const Timestamp expires = now + std::chrono::duration_cast<std::chrono::microseconds>(lease);
+    // As ClaimNextJob: the subquery locks the first claimable task no other transaction holds,
+    // the UPDATE takes it.
+    SOFTID_ASSIGN_OR_RETURN(PostgresResult rows,
+                            db.Query(R"sql(
+        UPDATE start_tasks
+        SET state = 'RUNNING', attempts = attempts + 1, lease_owner = $1, lease_expires_at = $2
+        WHERE (job_id, idx) = (
+          SELECT t.job_id, t.idx FROM start_tasks t JOIN jobs j ON j.id = t.job_id
+          WHERE j.state = 'RUNNING' AND NOT j.cancel_requested AND ($3 = '' OR t.job_id = $3)
+            AND (t.state = 'QUEUED' OR (t.state = 'RUNNING' AND t.lease_expires_at <= $4))
+          ORDER BY j.created_at, t.job_id, t.idx LIMIT 1
+          FOR UPDATE OF t SKIP LOCKED)
+        RETURNING )sql" + std::string(kStartTaskColumns),
+                                     worker_id, ToUnixMicros(expires), job_id, ToUnixMicros(now)));
+    if (rows.rows() == 0) return std::optional<StartTask>();
+    if (rows.rows() > 1) return Status::Internal("claim updated more than one start task");
+    SOFTID_ASSIGN_OR_RETURN(StartTask task, ReadStartTask(rows, 0));
+    return std::optional<StartTask>(std::move(task));
+  });
+}
+
+Status PostgresJobStore::RenewStartTask(const std::string& job_id, int index,
+                                        const std::string& worker_id,
+                                        std::chrono::milliseconds lease) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  SOFTID_RETURN_IF_ERROR(CheckLease(lease));
+  return Write([&](PostgresConnection& db) -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(db, job_id, RowLock::kNone));
+    SOFTID_ASSIGN_OR_RETURN(const StartTask task, LoadStartTaskForUpdate(db, job_id, index));
+    SOFTID_RETURN_IF_ERROR(CheckTaskHeld(job, task, worker_id));
+    const Timestamp expires = Now() + std::chrono::duration_cast<std::chrono::microseconds>(lease);
+    return db
+        .Query("UPDATE start_tasks SET lease_expires_at = $3 WHERE job_id = $1 AND idx = $2",
+               job_id, index, ToUnixMicros(expires))
+        .status();
+  });
+}
+
+Status PostgresJobStore::CompleteStartTask(const std::string& job_id, int index,
+                                           const std::string& worker_id,
+                                           const nlohmann::json& result) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  return Write([&](PostgresConnection& db) -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(db, job_id, RowLock::kNone));
+    SOFTID_ASSIGN_OR_RETURN(const StartTask task, LoadStartTaskForUpdate(db, job_id, index));
+    SOFTID_RETURN_IF_ERROR(CheckTaskHeld(job, task, worker_id));
+    return db
+        .Query(R"sql(
+        UPDATE start_tasks SET state = 'DONE', result = $3, lease_owner = NULL,
+                               lease_expires_at = NULL
+        WHERE job_id = $1 AND idx = $2)sql",
+               job_id, index, DumpJson(result))
+        .status();
+  });
+}
+
+Status PostgresJobStore::ReleaseStartTask(const std::string& job_id, int index,
+                                          const std::string& worker_id) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  return Write([&](PostgresConnection& db) -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const StartTask task, LoadStartTaskForUpdate(db, job_id, index));
+    SOFTID_RETURN_IF_ERROR(CheckTaskLease(task, worker_id));
+    return db
+        .Query(R"sql(
+        UPDATE start_tasks SET state = 'QUEUED', lease_owner = NULL, lease_expires_at = NULL
+        WHERE job_id = $1 AND idx = $2)sql",
+               job_id, index)
+        .status();
+  });
+}
+
+Result<std::vector<StartTask>> PostgresJobStore::ListStartTasks(const std::string& job_id) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Read([&](PostgresConnection& db) -> Result<std::vector<StartTask>> {
+    SOFTID_RETURN_IF_ERROR(LoadJob(db, job_id, RowLock::kNone).status());
+    SOFTID_ASSIGN_OR_RETURN(PostgresResult rows,
+                            db.Query("SELECT " + std::string(kStartTaskColumns) +
+                                         " FROM start_tasks WHERE job_id = $1 ORDER BY idx",
+                                     job_id));
+    std::vector<StartTask> tasks;
+    for (int r = 0; r < rows.rows(); ++r) {
+      SOFTID_ASSIGN_OR_RETURN(StartTask task, ReadStartTask(rows, r));
+      tasks.push_back(std::move(task));
+    }
+    return tasks;
   });
 }
 

@@ -112,6 +112,18 @@ class PostgresJobStore final : public JobStore, public TokenStore {
   Status ReleaseJob(const std::string& job_id, const std::string& worker_id,
                     const std::string& reason) override;
 
+  Status CreateStartTasks(const std::string& job_id, const std::string& worker_id,
+                          int num_tasks) override;
+  Result<std::optional<StartTask>> ClaimStartTask(const std::string& worker_id,
+                                                  std::chrono::milliseconds lease,
+                                                  const std::string& job_id = "") override;
+  Status RenewStartTask(const std::string& job_id, int index, const std::string& worker_id,
+                        std::chrono::milliseconds lease) override;
+  Status CompleteStartTask(const std::string& job_id, int index, const std::string& worker_id,
+                           const nlohmann::json& result) override;
+  Status ReleaseStartTask(const std::string& job_id, int index,
+                          const std::string& worker_id) override;
+  Result<std::vector<StartTask>> ListStartTasks(const std::string& job_id) override;
   Result<RecoverySummary> RecoverAfterCrash(int max_attempts, RecoveryScope scope) override;
   Result<bool> IsBlobReferenced(const std::string& sha256) override;
   Result<std::vector<std::string>> ListReferencedBlobs() override;

@@ -110,6 +110,25 @@ CREATE TABLE tokens (
   revoked_at     BIGINT
 );
 )sql",
+    // 1 -> 2: a job's starts as tasks any worker can claim (fan-out; start_task.h).
+    R"sql(
+CREATE TABLE start_tasks (
+  job_id            TEXT NOT NULL REFERENCES jobs (id) ON DELETE CASCADE,
+  idx               INTEGER NOT NULL CHECK (idx >= 0),
+  state             TEXT NOT NULL CHECK (state IN ('QUEUED', 'RUNNING', 'DONE')),
+  attempts          INTEGER NOT NULL DEFAULT 0 CHECK (attempts >= 0),
+  lease_owner       TEXT,
+  lease_expires_at  BIGINT,
+  result            JSON,
+  created_at        BIGINT NOT NULL,
+  PRIMARY KEY (job_id, idx),
+  -- A RUNNING task always has a lease, and only a DONE one a result.
+  CHECK ((state = 'RUNNING') = (lease_owner IS NOT NULL AND lease_expires_at IS NOT NULL)),
+  CHECK ((state = 'DONE') = (result IS NOT NULL))
+);
+-- Claiming walks the tasks not DONE in creation order.
+CREATE INDEX start_tasks_by_state ON start_tasks (state, created_at, job_id, idx);
+)sql",
 };
 
 // The number of tables in the connection's current schema.

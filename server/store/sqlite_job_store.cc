@@ -8,6 +8,7 @@
 #include "server/store/resource_id.h"
 #include "server/store/sha256.h"
 #include "server/store/sqlite_schema.h"
+#include "server/store/start_task.h"
 
 namespace softid::server::store {
 namespace {
@@ -96,6 +97,37 @@ Result<ProgressEvent> ReadProgress(const SqliteStatement& row) {
   event.num_starts = static_cast<int>(row.ColumnInt64(12));
   event.remaining_s = row.ColumnDouble(13);
   return event;
+}
+
+constexpr std::string_view kStartTaskColumns =
+    "job_id, idx, state, attempts, lease_owner, lease_expires_at, result";
+
+// Reads a row selected with kStartTaskColumns.
+Result<StartTask> ReadStartTask(const SqliteStatement& row) {
+  StartTask task;
+  task.job_id = row.ColumnText(0);
+  task.index = static_cast<int>(row.ColumnInt64(1));
+  SOFTID_ASSIGN_OR_RETURN(task.state, StartTaskStateFromString(row.ColumnText(2)));
+  task.attempts = static_cast<int>(row.ColumnInt64(3));
+  task.lease_owner = row.ColumnOptionalText(4).value_or("");
+  task.lease_expires_at = OptionalTimestamp(row.ColumnOptionalInt64(5));
+  if (!row.IsNull(6)) {
+    SOFTID_ASSIGN_OR_RETURN(task.result, ParseStoredJson(row.ColumnText(6), "start_tasks.result"));
+  }
+  return task;
+}
+
+Result<StartTask> LoadStartTask(SqliteDatabase& db, const std::string& job_id, int index) {
+  SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                          db.Prepare("SELECT " + std::string(kStartTaskColumns) +
+                                     " FROM start_tasks WHERE job_id = ?1 AND idx = ?2"));
+  SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, index));
+  SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
+  if (!found) {
+    return Status::NotFound("start task " + std::to_string(index) + " of job " + job_id +
+                            " not found");
+  }
+  return ReadStartTask(stmt);
 }
 
 Status CheckJobId(const std::string& job_id) {
@@ -199,8 +231,8 @@ Result<Job> SqliteJobStore::LoadJob(const std::string& job_id) {
   return ReadJob(stmt);
 }
 
-Result<std::optional<Capture>> SqliteJobStore::FindCaptureByRequestId(
-    const std::string& request_id, const std::string& owner) {
+Result<std::optional<Capture>> SqliteJobStore::FindCaptureByRequestId(const std::string& request_id,
+                                                                      const std::string& owner) {
   SOFTID_ASSIGN_OR_RETURN(
       SqliteStatement stmt,
       db_.Prepare("SELECT id, manifest, created_at, owner, format "
@@ -222,10 +254,9 @@ Result<std::optional<Capture>> SqliteJobStore::FindCaptureByRequestId(
 
 Result<std::optional<Job>> SqliteJobStore::FindJobByRequestId(const std::string& request_id,
                                                               const std::string& owner) {
-  SOFTID_ASSIGN_OR_RETURN(
-      SqliteStatement stmt,
-      db_.Prepare("SELECT " + std::string(kJobColumns) +
-                  " FROM jobs WHERE owner = ?1 AND station_request_id = ?2"));
+  SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                          db_.Prepare("SELECT " + std::string(kJobColumns) +
+                                      " FROM jobs WHERE owner = ?1 AND station_request_id = ?2"));
   SOFTID_RETURN_IF_ERROR(stmt.Bind(owner, request_id));
   SOFTID_ASSIGN_OR_RETURN(const bool found, stmt.Step());
   if (!found) return std::optional<Job>();
@@ -370,9 +401,9 @@ Result<CapturePage> SqliteJobStore::ListCaptures(const ListCapturesRequest& requ
     return Status::InvalidArgument("page_size = " + std::to_string(request.page_size) +
                                    ": must not be negative");
   }
-  const int page_size = std::min(
-      request.page_size == 0 ? ListJobsRequest::kDefaultPageSize : request.page_size,
-      ListJobsRequest::kMaxPageSize);
+  const int page_size =
+      std::min(request.page_size == 0 ? ListJobsRequest::kDefaultPageSize : request.page_size,
+               ListJobsRequest::kMaxPageSize);
   // "captures" keeps a token of a job list from being used here.
   std::string filter = "captures";
   if (request.owner.has_value()) filter += "&owner=" + *request.owner;
@@ -487,8 +518,7 @@ Result<std::optional<Job>> SqliteJobStore::CreateJobIfRoom(const std::string& ca
   SOFTID_RETURN_IF_ERROR(CheckRequestId(request_id));
   return Write([&]() -> Result<std::optional<Job>> {
     if (!request_id.empty()) {
-      SOFTID_ASSIGN_OR_RETURN(std::optional<Job> existing,
-                              FindJobByRequestId(request_id, owner));
+      SOFTID_ASSIGN_OR_RETURN(std::optional<Job> existing, FindJobByRequestId(request_id, owner));
       if (existing.has_value()) {
         if (existing->capture_id != capture_id || existing->config != config) {
           return Status::FailedPrecondition(
@@ -973,6 +1003,133 @@ Result<std::vector<std::string>> SqliteJobStore::ListReferencedBlobs() {
       hashes.push_back(stmt.ColumnText(0));
     }
     return hashes;
+  });
+}
+
+// --- Start tasks -----------------------------------------------------------------------------
+
+Status SqliteJobStore::CreateStartTasks(const std::string& job_id, const std::string& worker_id,
+                                        int num_tasks) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  SOFTID_RETURN_IF_ERROR(CheckTaskCount(num_tasks));
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(job_id));
+    SOFTID_RETURN_IF_ERROR(CheckTaskOwner(job, worker_id));
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement count,
+                            db_.Prepare("SELECT count(*) FROM start_tasks WHERE job_id = ?1"));
+    SOFTID_RETURN_IF_ERROR(count.Bind(job_id));
+    SOFTID_RETURN_IF_ERROR(count.Step().status());
+    SOFTID_RETURN_IF_ERROR(CheckExistingTasks(job_id, count.ColumnInt64(0), num_tasks));
+    if (count.ColumnInt64(0) == num_tasks) return Status::Ok();
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement insert, db_.Prepare(R"sql(
+        INSERT INTO start_tasks (job_id, idx, state, created_at) VALUES (?1, ?2, 'QUEUED', ?3))sql"));
+    const int64_t now = ToUnixMicros(Now());
+    for (int index = 0; index < num_tasks; ++index) {
+      insert.Reset();
+      SOFTID_RETURN_IF_ERROR(insert.Bind(job_id, index, now));
+      SOFTID_RETURN_IF_ERROR(insert.Run());
+    }
+    return Status::Ok();
+  });
+}
+
+Result<std::optional<StartTask>> SqliteJobStore::ClaimStartTask(const std::string& worker_id,
+                                                                std::chrono::milliseconds lease,
+                                                                const std::string& job_id) {
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  SOFTID_RETURN_IF_ERROR(CheckLease(lease));
+  if (!job_id.empty()) SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Write([&]() -> Result<std::optional<StartTask>> {
+    const Timestamp now = Now();
+    const Timestamp expires = now + std::chrono::duration_cast<std::chrono::microseconds>(lease);
+    // Under BEGIN IMMEDIATE no other connection can take the same task in between.
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        UPDATE start_tasks
+        SET state = 'RUNNING', attempts = attempts + 1, lease_owner = ?1, lease_expires_at = ?2
+        WHERE (job_id, idx) = (
+          SELECT t.job_id, t.idx FROM start_tasks t JOIN jobs j ON j.id = t.job_id
+          WHERE j.state = 'RUNNING' AND j.cancel_requested = 0 AND (?3 = '' OR t.job_id = ?3)
+            AND (t.state = 'QUEUED' OR (t.state = 'RUNNING' AND t.lease_expires_at <= ?4))
+          ORDER BY j.created_at, t.job_id, t.idx LIMIT 1)
+        RETURNING )sql" + std::string(kStartTaskColumns)));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(worker_id, ToUnixMicros(expires), job_id, ToUnixMicros(now)));
+    SOFTID_ASSIGN_OR_RETURN(const bool claimed, stmt.Step());
+    if (!claimed) return std::optional<StartTask>();
+    SOFTID_ASSIGN_OR_RETURN(StartTask task, ReadStartTask(stmt));
+    SOFTID_ASSIGN_OR_RETURN(const bool more, stmt.Step());  // runs the statement to completion
+    if (more) return Status::Internal("claim updated more than one start task");
+    return std::optional<StartTask>(std::move(task));
+  });
+}
+
+Status SqliteJobStore::RenewStartTask(const std::string& job_id, int index,
+                                      const std::string& worker_id,
+                                      std::chrono::milliseconds lease) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  SOFTID_RETURN_IF_ERROR(CheckLease(lease));
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(job_id));
+    SOFTID_ASSIGN_OR_RETURN(const StartTask task, LoadStartTask(db_, job_id, index));
+    SOFTID_RETURN_IF_ERROR(CheckTaskHeld(job, task, worker_id));
+    const Timestamp expires = Now() + std::chrono::duration_cast<std::chrono::microseconds>(lease);
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        UPDATE start_tasks SET lease_expires_at = ?3 WHERE job_id = ?1 AND idx = ?2)sql"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, index, ToUnixMicros(expires)));
+    return stmt.Run();
+  });
+}
+
+Status SqliteJobStore::CompleteStartTask(const std::string& job_id, int index,
+                                         const std::string& worker_id,
+                                         const nlohmann::json& result) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(job_id));
+    SOFTID_ASSIGN_OR_RETURN(const StartTask task, LoadStartTask(db_, job_id, index));
+    SOFTID_RETURN_IF_ERROR(CheckTaskHeld(job, task, worker_id));
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        UPDATE start_tasks SET state = 'DONE', result = ?3, lease_owner = NULL,
+                               lease_expires_at = NULL
+        WHERE job_id = ?1 AND idx = ?2)sql"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, index, DumpJson(result)));
+    return stmt.Run();
+  });
+}
+
+Status SqliteJobStore::ReleaseStartTask(const std::string& job_id, int index,
+                                        const std::string& worker_id) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  return Write([&]() -> Status {
+    SOFTID_ASSIGN_OR_RETURN(const StartTask task, LoadStartTask(db_, job_id, index));
+    SOFTID_RETURN_IF_ERROR(CheckTaskLease(task, worker_id));
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(R"sql(
+        UPDATE start_tasks SET state = 'QUEUED', lease_owner = NULL, lease_expires_at = NULL
+        WHERE job_id = ?1 AND idx = ?2)sql"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id, index));
+    return stmt.Run();
+  });
+}
+
+Result<std::vector<StartTask>> SqliteJobStore::ListStartTasks(const std::string& job_id) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  return Read([&]() -> Result<std::vector<StartTask>> {
+    SOFTID_RETURN_IF_ERROR(LoadJob(job_id).status());
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
+                            db_.Prepare("SELECT " + std::string(kStartTaskColumns) +
+                                        " FROM start_tasks WHERE job_id = ?1 ORDER BY idx"));
+    SOFTID_RETURN_IF_ERROR(stmt.Bind(job_id));
+    std::vector<StartTask> tasks;
+    while (true) {
+      SOFTID_ASSIGN_OR_RETURN(const bool has_row, stmt.Step());
+      if (!has_row) break;
+      SOFTID_ASSIGN_OR_RETURN(StartTask task, ReadStartTask(stmt));
+      tasks.push_back(std::move(task));
+    }
+    return tasks;
   });
 }
 

@@ -124,6 +124,25 @@ ALTER TABLE captures ADD COLUMN format TEXT NOT NULL DEFAULT 'softid-capture/1'
 ALTER TABLE jobs ADD COLUMN derived_capture_id TEXT;
 CREATE INDEX jobs_by_derived_capture ON jobs (derived_capture_id);
 )sql",
+    // 6 -> 7: a job's starts as tasks any worker can claim (fan-out; start_task.h).
+    R"sql(
+CREATE TABLE start_tasks (
+  job_id            TEXT NOT NULL REFERENCES jobs (id) ON DELETE CASCADE,
+  idx               INTEGER NOT NULL CHECK (idx >= 0),
+  state             TEXT NOT NULL CHECK (state IN ('QUEUED', 'RUNNING', 'DONE')),
+  attempts          INTEGER NOT NULL DEFAULT 0 CHECK (attempts >= 0),
+  lease_owner       TEXT,
+  lease_expires_at  INTEGER,
+  result            TEXT CHECK (result IS NULL OR json_valid(result)),
+  created_at        INTEGER NOT NULL,
+  PRIMARY KEY (job_id, idx),
+  -- A RUNNING task always has a lease, and only a DONE one a result.
+  CHECK ((state = 'RUNNING') = (lease_owner IS NOT NULL AND lease_expires_at IS NOT NULL)),
+  CHECK ((state = 'DONE') = (result IS NOT NULL))
+) STRICT, WITHOUT ROWID;
+-- Claiming walks the tasks not DONE in creation order.
+CREATE INDEX start_tasks_by_state ON start_tasks (state, created_at, job_id, idx);
+)sql",
 };
 
 Result<int64_t> ReadPragma(SqliteDatabase& db, std::string_view pragma) {

@@ -1041,6 +1041,154 @@ TEST_P(JobStoreConformance, ThreadsSharingAStoreNeverClaimTheSameJob) {
   EXPECT_EQ(std::set<std::string>(all.begin(), all.end()), created);
 }
 
+// --- Start tasks (fan-out) ------------------------------------------------------------------
+
+// The job's worker splits it; workers claim tasks in index order, complete them with results, and
+// the list shows each task's state; splitting again is harmless, with another count refused.
+TEST_P(JobStoreConformance, StartTasksAreSplitClaimedAndCompleted) {
+  const Capture capture = NewCapture();
+  const Job job = NewJob(capture.id);
+  EXPECT_EQ(store_->CreateStartTasks(job.id, "worker-1", 3).code(),
+            StatusCode::kFailedPrecondition);  // QUEUED: nobody holds it
+  Claim("worker-1");
+  EXPECT_EQ(store_->CreateStartTasks(job.id, "worker-2", 3).message(),
+            "job " + job.id + " is leased to worker-1, not worker-2");
+  EXPECT_EQ(store_->CreateStartTasks(job.id, "worker-1", 0).code(), StatusCode::kInvalidArgument);
+  ASSERT_TRUE(store_->CreateStartTasks(job.id, "worker-1", 3).ok());
+  ASSERT_TRUE(store_->CreateStartTasks(job.id, "worker-1", 3).ok());  // idempotent
+  EXPECT_EQ(store_->CreateStartTasks(job.id, "worker-1", 4).message(),
+            "job " + job.id + " has 3 start tasks already, not 4");
+
+  Result<std::optional<StartTask>> first = store_->ClaimStartTask("worker-2", seconds(30));
+  ASSERT_TRUE(first.ok() && first->has_value()) << first.status().ToString();
+  EXPECT_EQ((*first)->job_id, job.id);
+  EXPECT_EQ((*first)->index, 0);
+  EXPECT_EQ((*first)->state, StartTaskState::kRunning);
+  EXPECT_EQ((*first)->attempts, 1);
+  EXPECT_EQ((*first)->lease_owner, "worker-2");
+  Result<std::optional<StartTask>> second = store_->ClaimStartTask("worker-1", seconds(30), job.id);
+  ASSERT_TRUE(second.ok() && second->has_value());
+  EXPECT_EQ((*second)->index, 1);
+
+  const nlohmann::json result = {{"index", 0}, {"final_cost", 1.25e-7}};
+  EXPECT_EQ(store_->CompleteStartTask(job.id, 0, "worker-1", result).message(),
+            "start task 0 of job " + job.id + " is leased to worker-2, not held by worker-1");
+  ASSERT_TRUE(store_->CompleteStartTask(job.id, 0, "worker-2", result).ok());
+  EXPECT_EQ(store_->CompleteStartTask(job.id, 0, "worker-2", result).message(),
+            "start task 0 of job " + job.id + " is DONE, not held by worker-2");
+  EXPECT_EQ(store_->RenewStartTask(job.id, 7, "worker-2", seconds(30)).code(),
+            StatusCode::kNotFound);
+
+  Result<std::vector<StartTask>> tasks = store_->ListStartTasks(job.id);
+  ASSERT_TRUE(tasks.ok()) << tasks.status().ToString();
+  ASSERT_EQ(tasks->size(), 3u);
+  EXPECT_EQ((*tasks)[0].state, StartTaskState::kDone);
+  EXPECT_EQ((*tasks)[0].result, result);
+  EXPECT_TRUE((*tasks)[0].lease_owner.empty());
+  EXPECT_EQ((*tasks)[1].state, StartTaskState::kRunning);
+  EXPECT_EQ((*tasks)[2].state, StartTaskState::kQueued);
+  EXPECT_FALSE((*tasks)[2].result.has_value());
+  // Another job without tasks lists none; an unknown job is NotFound.
+  EXPECT_TRUE(store_->ListStartTasks(NewJob(capture.id).id)->empty());
+  EXPECT_EQ(store_->ListStartTasks("job-0123456789abcdef").status().code(), StatusCode::kNotFound);
+}
+
+// A task whose worker stops renewing is claimed again once its lease expired, by anyone; its old
+// worker can no longer renew or complete it. A released task is claimable at once.
+TEST_P(JobStoreConformance, StartTasksOfALostWorkerAreClaimedAgain) {
+  const Capture capture = NewCapture();
+  const Job job = NewJob(capture.id);
+  Claim("worker-1");
+  ASSERT_TRUE(store_->CreateStartTasks(job.id, "worker-1", 2).ok());
+  ASSERT_TRUE(store_->ClaimStartTask("worker-a", seconds(10))->has_value());
+  ASSERT_TRUE(store_->ClaimStartTask("worker-b", seconds(10))->has_value());
+  EXPECT_FALSE(store_->ClaimStartTask("worker-c", seconds(10))->has_value());
+  clock_.Advance(seconds(8));
+  ASSERT_TRUE(store_->RenewStartTask(job.id, 1, "worker-b", seconds(10)).ok());
+  clock_.Advance(seconds(4));  // task 0's lease expired, task 1's was renewed
+  Result<std::optional<StartTask>> again = store_->ClaimStartTask("worker-c", seconds(10));
+  ASSERT_TRUE(again.ok() && again->has_value());
+  EXPECT_EQ((*again)->index, 0);
+  EXPECT_EQ((*again)->attempts, 2);
+  EXPECT_EQ(store_->RenewStartTask(job.id, 0, "worker-a", seconds(10)).code(),
+            StatusCode::kFailedPrecondition);
+  ASSERT_TRUE(store_->ReleaseStartTask(job.id, 1, "worker-b").ok());
+  EXPECT_EQ(store_->ReleaseStartTask(job.id, 1, "worker-b").code(),
+            StatusCode::kFailedPrecondition);
+  Result<std::optional<StartTask>> released = store_->ClaimStartTask("worker-c", seconds(10));
+  ASSERT_TRUE(released.ok() && released->has_value());
+  EXPECT_EQ((*released)->index, 1);
+}
+
+// Only tasks of RUNNING jobs without a cancel request are handed out; a cancel stops the renewal
+// of running ones; tasks survive a requeue of their job (the next attempt keeps those DONE) and go
+// with a deleted job.
+TEST_P(JobStoreConformance, StartTasksFollowTheirJob) {
+  const Capture capture = NewCapture();
+  const Job job = NewJob(capture.id);
+  Claim("worker-1", seconds(10));
+  ASSERT_TRUE(store_->CreateStartTasks(job.id, "worker-1", 2).ok());
+  ASSERT_TRUE(store_->ClaimStartTask("worker-a", seconds(60))->has_value());
+  ASSERT_TRUE(store_->CompleteStartTask(job.id, 0, "worker-a", {{"done", true}}).ok());
+
+  // The job's worker is lost: the job is QUEUED, its queued task not claimable meanwhile.
+  clock_.Advance(seconds(11));
+  ASSERT_EQ(store_->RecoverAfterCrash(3, RecoveryScope::kExpiredLeasesOnly)->num_requeued, 1);
+  EXPECT_FALSE(store_->ClaimStartTask("worker-b", seconds(60))->has_value());
+  Claim("worker-2");
+  EXPECT_TRUE(store_->CreateStartTasks(job.id, "worker-2", 2).ok());
+  Result<std::vector<StartTask>> kept = store_->ListStartTasks(job.id);
+  ASSERT_TRUE(kept.ok());
+  EXPECT_EQ((*kept)[0].state, StartTaskState::kDone);
+  Result<std::optional<StartTask>> rest = store_->ClaimStartTask("worker-b", seconds(60));
+  ASSERT_TRUE(rest.ok() && rest->has_value());
+  EXPECT_EQ((*rest)->index, 1);
+
+  ASSERT_TRUE(store_->RequestCancel(job.id).ok());
+  EXPECT_EQ(store_->RenewStartTask(job.id, 1, "worker-b", seconds(60)).message(),
+            "job " + job.id + " has a cancel request: its start tasks stop");
+  ASSERT_TRUE(store_->ReleaseStartTask(job.id, 1, "worker-b").ok());
+  EXPECT_FALSE(store_->ClaimStartTask("worker-c", seconds(60))->has_value());
+  ASSERT_TRUE(store_->MarkCancelled(job.id).ok());
+  ASSERT_TRUE(store_->DeleteJob(job.id).ok());
+  EXPECT_EQ(store_->ListStartTasks(job.id).status().code(), StatusCode::kNotFound);
+}
+
+// Four threads claiming and completing the tasks of three jobs: each task is completed exactly
+// once.
+TEST_P(JobStoreConformance, ThreadsSharingAStoreNeverClaimTheSameStartTask) {
+  const Capture capture = NewCapture();
+  std::vector<std::string> jobs;
+  for (int j = 0; j < 3; ++j) {
+    jobs.push_back(NewJob(capture.id).id);
+    Claim("owner-" + std::to_string(j));
+    ASSERT_TRUE(store_->CreateStartTasks(jobs.back(), "owner-" + std::to_string(j), 8).ok());
+  }
+  std::atomic<int> completed{0};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t) {
+    threads.emplace_back([&, t] {
+      const std::string worker = "worker-" + std::to_string(t);
+      while (true) {
+        Result<std::optional<StartTask>> task = store_->ClaimStartTask(worker, seconds(30));
+        if (!task.ok() || !task->has_value()) break;
+        const Status done =
+            store_->CompleteStartTask((*task)->job_id, (*task)->index, worker, {{"by", worker}});
+        EXPECT_TRUE(done.ok()) << done.ToString();
+        if (done.ok()) ++completed;
+      }
+    });
+  }
+  for (std::thread& thread : threads) thread.join();
+  EXPECT_EQ(completed.load(), 24);
+  for (const std::string& job : jobs) {
+    for (const StartTask& task : *store_->ListStartTasks(job)) {
+      EXPECT_EQ(task.state, StartTaskState::kDone) << job << " " << task.index;
+      EXPECT_EQ(task.attempts, 1);
+    }
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Backends, JobStoreConformance, ::testing::Values(kSqlite, kPostgres),
                          [](const ::testing::TestParamInfo<Backend>& info) {
                            return info.param.name;

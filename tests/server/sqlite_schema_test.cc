@@ -37,8 +37,8 @@ TEST(SqliteSchema, CreatesVersionedStrictSchema) {
     names.insert(tables->ColumnText(0));
     EXPECT_EQ(tables->ColumnInt64(1), 1) << tables->ColumnText(0) << " is not STRICT";
   }
-  EXPECT_EQ(names,
-            (std::set<std::string>{"captures", "checkpoints", "jobs", "progress", "tokens"}));
+  EXPECT_EQ(names, (std::set<std::string>{"captures", "checkpoints", "jobs", "progress",
+                                          "start_tasks", "tokens"}));
 
   // STRICT and CHECK constraints hold: a bad state and a non-integer are refused.
   EXPECT_TRUE(db->Exec("INSERT INTO captures (id, request_id, manifest, created_at) VALUES "
@@ -106,7 +106,8 @@ TEST(SqliteSchema, MigratesVersion1Jobs) {
     Result<SqliteDatabase> db = SqliteDatabase::Open(path);
     ASSERT_TRUE(db.ok());
     ASSERT_TRUE(MigrateSqliteSchema(*db).ok());
-    // Back to the version 1 layout: versions 2 to 6 only added these columns, tables and indexes.
+    // Back to the version 1 layout: versions 2 to 7 only added these columns, tables and indexes.
+    ASSERT_TRUE(db->Exec("DROP TABLE start_tasks").ok());
     ASSERT_TRUE(db->Exec("DROP INDEX jobs_by_derived_capture").ok());
     ASSERT_TRUE(db->Exec("ALTER TABLE jobs DROP COLUMN derived_capture_id").ok());
     ASSERT_TRUE(db->Exec("ALTER TABLE captures DROP COLUMN format").ok());
