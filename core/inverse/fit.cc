@@ -599,31 +599,69 @@ Result<fem::PhysicalParameters> BaseParameters(const capture::Capture& capture,
   return ApplyToParameters(config, base);
 }
 
+namespace {
+
+// What a fit of a capture under a config has before it chooses its discretisation and runs its
+// starts.
+struct FitSetup {
+  geometry::TriangleMesh mesh;
+  std::shared_ptr<const std::vector<ObservedFrame>> frames;
+  fem::PhysicalParameters base;
+  std::optional<ParameterSpace> space;
+  std::vector<fem::PhysicalParameters> starts;
+  int cores = 1;    // the fit's share of the machine
+  int threads = 1;  // starts run at once
+  fem::SimulationOptions simulation;
+};
+
+Result<FitSetup> SetUpFit(const capture::Capture& capture, const JobConfig& config) {
+  SOFTID_RETURN_IF_ERROR(config.Validate());
+  FitSetup setup;
+  // config.diagnose is for the callers (core/diagnosis runs after the fit); the fit ignores it.
+  SOFTID_ASSIGN_OR_RETURN(setup.mesh, capture::LoadCaptureMesh(capture));
+  SOFTID_ASSIGN_OR_RETURN(setup.frames, LoadFittedFrames(capture, config));
+  SOFTID_ASSIGN_OR_RETURN(setup.base, BaseParameters(capture, setup.mesh, *setup.frames, config));
+  const double length = setup.mesh.Bounds().sizes().maxCoeff();
+  SOFTID_ASSIGN_OR_RETURN(setup.space, ParameterSpace::Create(config.fit, setup.base, length));
+  setup.starts = DrawStarts(config, setup.base);
+  setup.cores =
+      std::max(1, config.threads > 0 ? config.threads
+                                     : static_cast<int>(std::thread::hardware_concurrency()));
+  setup.threads = std::clamp(setup.cores, 1, static_cast<int>(setup.starts.size()));
+  setup.simulation = SimulationOptionsFor(config);
+  // Cores the concurrent starts leave idle go to their simulations: a single start on 2 cores
+  // steps ~1.6x faster on both (softid-lab bench --threads). The count depends on the whole fit
+  // only, never on which starts a call runs, so that every part of a fit computes the same.
+  setup.simulation.threads = std::max(1, setup.cores / setup.threads);
+  return setup;
+}
+
+}  // namespace
+
+Result<FitCheckpoint> PrepareFit(const capture::Capture& capture, const JobConfig& config,
+                                 const std::atomic<bool>* cancel) {
+  SOFTID_ASSIGN_OR_RETURN(FitSetup setup, SetUpFit(capture, config));
+  FitResult chosen;
+  chosen.base = setup.base;
+  SOFTID_RETURN_IF_ERROR(ChooseDiscretisation(capture, setup.mesh, config, *setup.frames, cancel,
+                                              &setup.simulation, &chosen));
+  return CheckpointOf(chosen, static_cast<int>(setup.starts.size()));
+}
+
 Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
                       const FitOptions& options) {
   const auto begin = Clock::now();
-  SOFTID_RETURN_IF_ERROR(config.Validate());
-  // config.diagnose is for the callers (core/diagnosis runs after the fit); the fit ignores it.
-  SOFTID_ASSIGN_OR_RETURN(geometry::TriangleMesh mesh, capture::LoadCaptureMesh(capture));
-  SOFTID_ASSIGN_OR_RETURN(auto frames, LoadFittedFrames(capture, config));
-
+  SOFTID_ASSIGN_OR_RETURN(FitSetup setup, SetUpFit(capture, config));
+  const geometry::TriangleMesh& mesh = setup.mesh;
+  const std::shared_ptr<const std::vector<ObservedFrame>>& frames = setup.frames;
+  const ParameterSpace& space = *setup.space;
+  const std::vector<fem::PhysicalParameters>& starts = setup.starts;
+  const int threads = setup.threads;
+  fem::SimulationOptions& simulation = setup.simulation;
   FitResult result;
   result.fitted = config.fit;
-  SOFTID_ASSIGN_OR_RETURN(result.base, BaseParameters(capture, mesh, *frames, config));
-  const double length = mesh.Bounds().sizes().maxCoeff();
-  SOFTID_ASSIGN_OR_RETURN(ParameterSpace space,
-                          ParameterSpace::Create(config.fit, result.base, length));
-  const std::vector<fem::PhysicalParameters> starts = DrawStarts(config, result.base);
+  result.base = setup.base;
   result.starts.resize(starts.size());
-
-  const int cores =
-      std::max(1, config.threads > 0 ? config.threads
-                                     : static_cast<int>(std::thread::hardware_concurrency()));
-  const int threads = std::clamp(cores, 1, static_cast<int>(starts.size()));
-  fem::SimulationOptions simulation = SimulationOptionsFor(config);
-  // Cores the concurrent starts leave idle go to their simulations: a single start on 2 cores
-  // steps ~1.6x faster on both (softid-lab bench --threads).
-  simulation.threads = std::max(1, cores / threads);
   const cost::SurfaceCostOptions cost_options = CostOptionsFor(config);
   if (options.resume_from != nullptr) {
     SOFTID_RETURN_IF_ERROR(TakeDiscretisation(

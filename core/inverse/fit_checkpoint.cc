@@ -179,6 +179,18 @@ Result<FitCheckpoint> ReadCheckpoint(const Json& j) {
 
 }  // namespace
 
+nlohmann::json StartCheckpointJson(const StartResult& start) {
+  return StartJson(start);
+}
+
+Result<StartResult> StartFromCheckpointJson(const nlohmann::json& json) {
+  try {
+    return ReadStart(json);
+  } catch (const nlohmann::json::exception& e) {
+    return Status::InvalidArgument(std::string("start: ") + e.what());
+  }
+}
+
 bool FitCheckpoint::IsFinished(int start_index) const {
   return std::any_of(finished.begin(), finished.end(),
                      [&](const StartResult& s) { return s.index == start_index; });

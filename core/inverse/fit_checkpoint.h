@@ -46,4 +46,16 @@ nlohmann::json ToJson(const FitCheckpoint& checkpoint);
 // InvalidArgument naming the field for a malformed checkpoint or another format.
 Result<FitCheckpoint> FitCheckpointFromJson(const nlohmann::json& json);
 
+// One finished start as a checkpoint lists it (every field, parameters whole), for a start run
+// apart from the rest of its fit (FitOptions::only_starts) and combined later.
+nlohmann::json StartCheckpointJson(const StartResult& start);
+// InvalidArgument naming the field for a malformed start.
+Result<StartResult> StartFromCheckpointJson(const nlohmann::json& json);
+
+// The first part of a fit, apart: loads what the config fits and chooses the grid and time step
+// when "auto", as Fit does. Its checkpoint (no start finished) lets starts run anywhere with the
+// same discretisation (FitOptions::resume_from with only_starts). Errors as Fit's.
+Result<FitCheckpoint> PrepareFit(const capture::Capture& capture, const JobConfig& config,
+                                 const std::atomic<bool>* cancel = nullptr);
+
 }  // namespace softid::inverse

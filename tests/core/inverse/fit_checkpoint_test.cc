@@ -88,32 +88,29 @@ TEST_F(FitCheckpointTest, ResumedFitComputesWhatTheUninterruptedOneDid) {
 
 TEST_F(FitCheckpointTest, StartsRunOneByOneMatchTheWholeFit) {
   JobConfig config = ThreeStartConfig(small_->truth);
-  config.substeps = kAutoSubsteps;  // chosen once, by the first call, then from its checkpoint
-  std::optional<FitCheckpoint> prepared;
-  FitOptions first;
-  first.only_starts = {0};
-  first.on_checkpoint = [&](const FitCheckpoint& c) {
-    if (!prepared) prepared = c;
-  };
-  Result<FitResult> start0 = Fit(small_->capture, config, first);
-  ASSERT_TRUE(start0.ok()) << start0.status().ToString();
-  ASSERT_TRUE(prepared.has_value());
+  config.substeps = kAutoSubsteps;  // chosen once, by PrepareFit, then from its checkpoint
+  Result<FitCheckpoint> prepared = PrepareFit(small_->capture, config);
+  ASSERT_TRUE(prepared.ok()) << prepared.status().ToString();
   ASSERT_TRUE(prepared->substep_selection.has_value());
-  EXPECT_EQ(start0->starts[1].evaluations, 0);  // not run
+  EXPECT_EQ(prepared->num_starts, 3);
+  EXPECT_TRUE(prepared->finished.empty());
 
-  // The other starts, each alone, from the discretisation the first call chose.
+  // Each start alone (as a worker elsewhere would run it), its result carried as JSON text.
   FitCheckpoint all = *prepared;
-  all.finished.push_back(start0->starts[0]);
-  for (int s : {2, 1}) {
+  for (int s : {2, 0, 1}) {
     FitOptions one;
     one.only_starts = {s};
     one.resume_from = &*prepared;
     Result<FitResult> task = Fit(small_->capture, config, one);
     ASSERT_TRUE(task.ok()) << task.status().ToString();
-    // The selection's record, kept from the checkpoint.
+    // The selection's record, kept from the checkpoint; the other starts did not run.
     ASSERT_TRUE(task->substep_selection.has_value());
     EXPECT_FALSE(task->substep_selection->trials.empty());
-    all.finished.push_back(task->starts[s]);
+    EXPECT_EQ(task->starts[(s + 1) % 3].evaluations, 0);
+    Result<StartResult> carried =
+        StartFromCheckpointJson(nlohmann::json::parse(StartCheckpointJson(task->starts[s]).dump()));
+    ASSERT_TRUE(carried.ok()) << carried.status().ToString();
+    all.finished.push_back(*carried);
   }
   // The last step runs nothing and picks the best.
   FitOptions combine;
@@ -127,6 +124,8 @@ TEST_F(FitCheckpointTest, StartsRunOneByOneMatchTheWholeFit) {
   for (size_t s = 0; s < whole->starts.size(); ++s)
     ExpectSameStart(combined->starts[s], whole->starts[s]);
   EXPECT_EQ(combined->best, whole->best);
+  EXPECT_EQ(StartFromCheckpointJson(nlohmann::json::object()).status().code(),
+            StatusCode::kInvalidArgument);
 }
 
 TEST_F(FitCheckpointTest, SurvivesJsonExactly) {
