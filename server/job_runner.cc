@@ -17,71 +17,18 @@
 #include "core/inverse/fit_checkpoint.h"
 #include "core/inverse/fit_uncertainty.h"
 #include "core/inverse/job_config.h"
-#include "server/materialize_capture.h"
-#include "server/recording_ingest.h"
+#include "server/fit_progress.h"
+#include "server/job_capture.h"
+#include "server/lease_heartbeat.h"
 #include "server/redact_paths.h"
+#include "server/start_tasks.h"
+#include "server/work_folder.h"
 
 namespace softid::server {
 namespace {
 
 namespace fs = std::filesystem;
 using Stopwatch = std::chrono::steady_clock;
-
-// Renews the lease and polls for a cancel request while the fit runs, so that a long first
-// evaluation (before any iteration reports) neither loses the lease nor ignores a cancel.
-class Heartbeat {
- public:
-  Heartbeat(const store::Job& job, const std::string& worker_id, const JobRunnerContext& context,
-            std::atomic<bool>& cancel)
-      : job_id_(job.id), thread_([&, this] { Loop(worker_id, context, cancel); }) {}
-  ~Heartbeat() {
-    {
-      std::lock_guard lock(mutex_);
-      done_ = true;
-    }
-    wake_.notify_all();
-    thread_.join();
-  }
-  bool lost() const { return lost_.load(); }
-  bool cancel_requested() const { return cancel_requested_.load(); }
-  void set_cancel_requested() { cancel_requested_.store(true); }
-
- private:
-  void Loop(const std::string& worker_id, const JobRunnerContext& context,
-            std::atomic<bool>& cancel) {
-    std::unique_lock lock(mutex_);
-    while (!wake_.wait_for(lock, context.heartbeat_interval, [this] { return done_; })) {
-      if (Status renewed = context.jobs->RenewLease(job_id_, worker_id, context.lease);
-          !renewed.ok()) {
-        context.logger->warn("job {}: lease lost, stopping: {}", job_id_, renewed.message());
-        lost_.store(true);
-        cancel.store(true);
-        return;
-      }
-      Result<bool> requested = context.jobs->IsCancelRequested(job_id_);
-      if (requested.ok() && *requested) {
-        cancel_requested_.store(true);
-        cancel.store(true);
-      }
-    }
-  }
-
-  std::string job_id_;
-  std::mutex mutex_;
-  std::condition_variable wake_;
-  bool done_ = false;
-  std::atomic<bool> lost_{false};
-  std::atomic<bool> cancel_requested_{false};
-  std::thread thread_;  // last: started after the members it uses
-};
-
-nlohmann::json FittedParametersJson(const inverse::JobConfig& config,
-                                    const fem::PhysicalParameters& parameters) {
-  nlohmann::json out = nlohmann::json::object();
-  for (const std::string& name : config.fit)
-    out[name] = inverse::ParameterValueJson(parameters, name);
-  return out;
-}
 
 // Records a failure; the job's error is what a user sees, so it says what went wrong, naming
 // files relative to the capture (the server's folders stay in the log).
@@ -95,18 +42,6 @@ JobOutcome Fail(const store::Job& job, const JobRunnerContext& context, const st
   context.events->Notify(job.id);
   return JobOutcome::kFailed;
 }
-
-struct WorkFolder {
-  explicit WorkFolder(fs::path p) : path(std::move(p)) {
-    std::error_code ignored;
-    fs::remove_all(path, ignored);
-  }
-  ~WorkFolder() {
-    std::error_code ignored;
-    fs::remove_all(path, ignored);
-  }
-  fs::path path;
-};
 
 // A note in the job's history (a kState event that changes nothing), pushed to watchers.
 void AppendNote(const store::Job& job, const JobRunnerContext& context, const std::string& note) {
@@ -141,6 +76,52 @@ nlohmann::json ResumedJson(const store::Job& job, const inverse::FitCheckpoint& 
   for (const inverse::StartResult& start : checkpoint.finished) starts.push_back(start.index);
   std::sort(starts.begin(), starts.end());
   return {{"attempt", job.attempts}, {"finished_starts", starts}};
+}
+
+// The job's lease, renewed while it runs; a cancel request stops it.
+LeaseCalls JobLease(const store::Job& job, const std::string& worker_id,
+                    const JobRunnerContext& context) {
+  LeaseCalls calls;
+  calls.renew = [&] { return context.jobs->RenewLease(job.id, worker_id, context.lease); };
+  calls.stop_requested = [&] {
+    Result<bool> requested = context.jobs->IsCancelRequested(job.id);
+    return requested.ok() && *requested;
+  };
+  calls.on_lost = [&](const Status& why) {
+    context.logger->warn("job {}: lease lost, stopping: {}", job.id, why.message());
+  };
+  return calls;
+}
+
+// The fit, every start in this worker: progress into the job's history (a cancel request seen
+// between iterations stops it at once), a checkpoint saved after every start, and the starts an
+// earlier attempt finished kept.
+Result<inverse::FitResult> FitHere(const store::Job& job, const capture::Capture& capture,
+                                   const inverse::JobConfig& config,
+                                   const std::optional<inverse::FitCheckpoint>& resume_from,
+                                   const JobRunnerContext& context,
+                                   std::chrono::steady_clock::time_point started,
+                                   std::atomic<bool>& cancel, LeaseHeartbeat& heartbeat) {
+  inverse::FitOptions options;
+  options.cancel = &cancel;
+  options.on_progress = [&](const inverse::FitProgress& p) {
+    const double elapsed =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+    RecordIteration(job, IterationEvent(p, config, elapsed), context);
+    Result<bool> requested = context.jobs->IsCancelRequested(job.id);
+    if (requested.ok() && *requested) {
+      heartbeat.set_stop_requested();
+      cancel.store(true);
+    }
+  };
+  if (resume_from) options.resume_from = &*resume_from;
+  options.on_checkpoint = [&](const inverse::FitCheckpoint& checkpoint) {
+    if (Status saved = context.jobs->SaveCheckpoint(job.id, inverse::ToJson(checkpoint));
+        !saved.ok()) {
+      context.logger->warn("job {}: checkpoint not saved: {}", job.id, saved.message());
+    }
+  };
+  return inverse::Fit(capture, config, options);
 }
 
 // The diagnosis of a finished fit ("diagnose": true): its stages are recorded as notes in the
@@ -196,40 +177,6 @@ void KeepReport(const store::Job& job, const fs::path& dir, const JobRunnerConte
   }
 }
 
-// The capture the job fits, laid out in `dir` and read: the job's capture, or for a recording the
-// capture its ingest derives (ingested now, or on an earlier attempt), whose report goes to
-// `ingest_report`. Errors say which capture or stage failed.
-Result<capture::Capture> PrepareCapture(const store::Job& job, const store::Capture& stored,
-                                        const std::string& worker_id,
-                                        const JobRunnerContext& context, const fs::path& dir,
-                                        const std::atomic<bool>& cancel,
-                                        nlohmann::json* ingest_report) {
-  store::Capture fitted = stored;
-  fs::path capture_dir = dir;
-  if (stored.format == store::kRecordingFormat) {
-    Result<IngestedCapture> ingested =
-        job.derived_capture_id.empty()
-            ? IngestRecording(job, stored, worker_id, context, dir, &cancel)
-            : LoadIngestedCapture(job, context);
-    if (!ingested.ok()) return ingested.status();
-    if (!job.derived_capture_id.empty()) {
-      context.logger->info("job {}: ingest skipped: capture {} was derived on an earlier attempt",
-                           job.id, job.derived_capture_id);
-    }
-    *ingest_report = std::move(ingested->report);
-    fitted = std::move(ingested->capture);
-    capture_dir = dir / "capture";
-  }
-  if (Status laid_out = MaterializeCapture(fitted, *context.blobs, capture_dir); !laid_out.ok()) {
-    return laid_out.WithContext("capture " + fitted.id);
-  }
-  // Frames were decoded at upload (or written by the ingest); headers suffice here.
-  Result<capture::Capture> capture =
-      capture::ReadCapture(capture_dir, capture::ReadCaptureOptions{.decode_frames = false});
-  if (!capture.ok()) return capture.status().WithContext("capture " + fitted.id);
-  return capture;
-}
-
 }  // namespace
 
 const char* ToString(JobOutcome outcome) {
@@ -275,66 +222,23 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   nlohmann::json resumed_json;  // when an earlier attempt's starts were kept
   Status prepared;
   {
-    Heartbeat heartbeat(job, worker_id, context, cancel);
+    LeaseHeartbeat heartbeat(JobLease(job, worker_id, context), context.heartbeat_interval, cancel);
     Result<capture::Capture> capture =
         PrepareCapture(job, *stored, worker_id, context, folder.path, cancel, &ingest_json);
     if (!capture.ok()) prepared = capture.status();
-    inverse::FitOptions options;
-    options.cancel = &cancel;
-    options.on_progress = [&](const inverse::FitProgress& p) {
-      store::ProgressEvent event;
-      event.kind = store::ProgressKind::kIteration;
-      event.iteration = p.iteration;
-      event.cost = p.cost;
-      event.gradient_norm = p.gradient_norm;
-      event.parameters = FittedParametersJson(*config, p.parameters);
-      event.elapsed_s = std::chrono::duration<double>(Stopwatch::now() - started).count();
-      event.start = p.start;
-      event.num_starts = p.num_starts;
-      event.remaining_s = p.remaining_seconds;
-      if (p.num_starts > 1) {
-        event.message = "start " + std::to_string(p.start + 1) + "/" + std::to_string(p.num_starts);
-      }
-      if (p.num_stages > 1) {
-        // The cost of a continuation stage is over a prefix of the frames.
-        event.message += (event.message.empty() ? "" : ", ") + std::string("frames 0-") +
-                         std::to_string(p.horizon_frame) + " (stage " +
-                         std::to_string(p.stage + 1) + "/" + std::to_string(p.num_stages) + ")";
-      }
-      if (p.unconverged_steps > 0) {
-        event.message += (event.message.empty() ? "" : ", ") + std::to_string(p.unconverged_steps) +
-                         " of " + std::to_string(p.simulation_steps) + " steps unconverged";
-      }
-      if (Result<int64_t> seq = context.jobs->AppendProgress(job.id, event); !seq.ok()) {
-        log->warn("job {}: progress of iteration {} not recorded: {}", job.id, p.iteration,
-                  seq.status().message());
-      }
-      context.events->Notify(job.id);
-      if (context.metrics != nullptr && p.iteration > 0) context.metrics->CountIteration();
-      log->debug("job {}: iteration {}/{} cost {:.4e}", job.id, p.iteration, p.max_iterations,
-                 p.cost);
-      Result<bool> requested = context.jobs->IsCancelRequested(job.id);
-      if (requested.ok() && *requested) {
-        heartbeat.set_cancel_requested();
-        cancel.store(true);
-      }
-    };
-    // Starts an earlier attempt finished are kept; every start that finishes now is saved.
     if (resume_from) {
-      options.resume_from = &*resume_from;
       resumed_json = ResumedJson(job, *resume_from);
       AppendNote(job, context,
                  "resumed from a checkpoint: " + std::to_string(resume_from->finished.size()) +
                      " of " + std::to_string(resume_from->num_starts) +
                      " starts finished on an earlier attempt");
     }
-    options.on_checkpoint = [&](const inverse::FitCheckpoint& checkpoint) {
-      if (Status saved = context.jobs->SaveCheckpoint(job.id, inverse::ToJson(checkpoint));
-          !saved.ok()) {
-        log->warn("job {}: checkpoint not saved: {}", job.id, saved.message());
-      }
-    };
-    if (capture.ok() && !cancel.load()) result = inverse::Fit(*capture, *config, options);
+    if (capture.ok() && !cancel.load()) {
+      result =
+          context.fan_out_starts
+              ? FitByStartTasks(job, *capture, *config, resume_from, worker_id, context, cancel)
+              : FitHere(job, *capture, *config, resume_from, context, started, cancel, heartbeat);
+    }
     if (result.ok() && !result->cancelled && config->uncertainty) {
       Result<inverse::FitUncertainty> estimated =
           inverse::EstimateFitUncertainty(*capture, *config, *result);
@@ -352,7 +256,7 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
       report_json = DrawReport(job, *capture, *config, *result, cancel, context, report_dir);
     }
     lost = heartbeat.lost();
-    cancel_requested = heartbeat.cancel_requested();
+    cancel_requested = heartbeat.stop_requested();
   }
 
   if (lost) return JobOutcome::kLost;

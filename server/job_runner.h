@@ -10,6 +10,7 @@
 #include <atomic>
 #include <chrono>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <shared_mutex>
 #include <string>
@@ -44,6 +45,14 @@ struct JobRunnerContext {
   std::shared_mutex* blob_puts = nullptr;
   // Where a finished job's report (its PNGs) is kept; null: no report is drawn.
   const JobReports* reports = nullptr;
+  // Runs a job's starts as tasks any worker can claim (start_tasks.h), instead of all of them
+  // in the job's worker. For several worker processes sharing a store.
+  bool fan_out_starts = false;
+  // How often a job's worker looks whether the tasks running elsewhere have finished.
+  std::chrono::milliseconds task_poll_interval{500};
+  // Wakes this process's idle workers (new start tasks to claim); may be empty. Other processes'
+  // workers find them at their next poll.
+  std::function<void()> wake_workers;
 };
 
 enum class JobOutcome {

@@ -86,6 +86,17 @@ int main(int argc, char** argv) {
       ->envname("SOFTID_WORKERS")
       ->check(CLI::NonNegativeNumber)
       ->capture_default_str();
+  app.add_flag("--fan-out-starts", options.fan_out_starts,
+               "run each job's random starts as tasks that any worker sharing the --store "
+               "claims, so a many-start job runs on several workers at once")
+      ->envname("SOFTID_FAN_OUT_STARTS");
+  double lease_seconds = options.lease.count() / 1000.0;
+  app.add_option("--lease-seconds", lease_seconds,
+                 "a job (or start task) whose worker stops renewing its lease this long runs "
+                 "again elsewhere: how soon a dead worker's work is retried")
+      ->envname("SOFTID_LEASE_SECONDS")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   app.add_option("--max-queued", options.max_queued_jobs,
                  "queued jobs accepted before CreateJob answers RESOURCE_EXHAUSTED")
       ->envname("SOFTID_MAX_QUEUED")
@@ -230,6 +241,7 @@ int main(int argc, char** argv) {
   }
   options.upload_limits.idle_timeout =
       std::chrono::milliseconds(static_cast<int64_t>(upload_idle_timeout_s * 1000.0));
+  options.lease = std::chrono::milliseconds(static_cast<int64_t>(lease_seconds * 1000.0));
   spdlog::set_level(spdlog::level::from_str(log_level));
   softid::server::ConfigureLogging(*softid::server::LogFormatFromString(log_format));
   // libpng (through OpenCV) and others write warnings to stderr: logged as lines instead.

@@ -112,6 +112,12 @@ Status ServerOptions::Validate() const {
     return Status::InvalidArgument("max_attempts = " + std::to_string(max_attempts) +
                                    ": must be at least 1");
   }
+  if (lease < 2 * heartbeat_interval) {
+    return Status::InvalidArgument("lease = " + std::to_string(lease.count() / 1000.0) +
+                                   " s: must be at least twice the " +
+                                   std::to_string(heartbeat_interval.count() / 1000.0) +
+                                   " s heartbeat, or a busy worker loses its jobs");
+  }
   SOFTID_RETURN_IF_ERROR(tls.Validate());
   if (!tls.enabled() && !allow_insecure && !IsLoopbackAddress(listen_address)) {
     return Status::InvalidArgument(
@@ -250,6 +256,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& requested,
   pool_options.metrics = &parts->metrics;
   pool_options.blob_puts = &parts->blob_puts;
   pool_options.reports = &*parts->reports;
+  pool_options.fan_out_starts = options.fan_out_starts;
   parts->pool = std::make_unique<WorkerPool>(parts->jobs.get(), &*parts->blobs, &parts->events,
                                              pool_options, parts->logger);
 

@@ -48,7 +48,11 @@ struct ServerOptions {
   std::string store_url;
   ServerRole role = ServerRole::kAll;  // kApi runs no workers whatever num_workers says
   int num_workers = 1;                 // >= 0; >= 1 for kWorker
-  int64_t max_queued_jobs = 1000;      // >= 1
+  // A job's starts run as tasks any worker of any process sharing the store claims
+  // (start_tasks.h); without it each job runs every start in its own worker. Workers run other
+  // processes' start tasks either way.
+  bool fan_out_starts = false;
+  int64_t max_queued_jobs = 1000;  // >= 1
   // A job whose worker was lost (crash, kill -9, or shutdown mid-fit) is re-run until it was
   // started this many times, then FAILED: a job that crashes the server every time must not
   // crash it forever.

@@ -7,6 +7,7 @@
 #include <thread>
 
 #include "server/log_context.h"
+#include "server/start_tasks.h"
 
 namespace softid::server {
 
@@ -25,6 +26,8 @@ WorkerPool::WorkerPool(store::JobStore* jobs, const store::BlobStore* blobs, Job
   context_.metrics = options_.metrics;
   context_.blob_puts = options_.blob_puts;
   context_.reports = options_.reports;
+  context_.fan_out_starts = options_.fan_out_starts;
+  context_.wake_workers = [this] { WakeAll(); };
   if (options_.metrics != nullptr) options_.metrics->SetWorkers(options_.num_workers);
 }
 
@@ -46,6 +49,14 @@ void WorkerPool::Wake() {
     ++wakes_;
   }
   wake_.notify_one();
+}
+
+void WorkerPool::WakeAll() {
+  {
+    std::lock_guard lock(mutex_);
+    ++wakes_;
+  }
+  wake_.notify_all();
 }
 
 void WorkerPool::Stop() {
@@ -75,6 +86,34 @@ void WorkerPool::RecordCrash(const std::string& job_id, const std::string& error
   context_.events->Notify(job_id);
 }
 
+bool WorkerPool::RunOneStartTask(const std::string& worker_id) {
+  Result<std::optional<store::StartTask>> task = jobs_->ClaimStartTask(worker_id, options_.lease);
+  if (!task.ok()) {
+    context_.logger->error("{}: cannot claim a start task: {}", worker_id, task.status().message());
+  }
+  if (!task.ok() || !task->has_value()) return false;
+  std::atomic<bool> stop{false};
+  {
+    std::lock_guard lock(mutex_);
+    if (stopping_.load()) stop.store(true);  // claimed while Stop ran: released at once
+    running_.insert(&stop);
+  }
+  if (options_.metrics != nullptr) options_.metrics->AddBusyWorkers(1);
+  const ScopedJobLog job_log((*task)->job_id);
+  // Exceptions must not cross the thread boundary; the task's lease then expires and another
+  // worker runs it.
+  try {
+    RunStartTask(**task, worker_id, context_, stop);
+  } catch (const std::exception& e) {
+    context_.logger->error("job {} start {}: internal error: {}", (*task)->job_id, (*task)->index,
+                           e.what());
+  }
+  if (options_.metrics != nullptr) options_.metrics->AddBusyWorkers(-1);
+  std::lock_guard lock(mutex_);
+  running_.erase(&stop);
+  return true;
+}
+
 void WorkerPool::WorkerLoop(int index) {
   const std::string worker_id = options_.worker_id_prefix + "-" + std::to_string(index);
   const auto& log = context_.logger;
@@ -84,6 +123,8 @@ void WorkerPool::WorkerLoop(int index) {
       std::lock_guard lock(mutex_);
       seen_wakes = wakes_;
     }
+    // Starts of running jobs first: they finish a job that is already under way.
+    if (RunOneStartTask(worker_id)) continue;
     Result<std::optional<store::Job>> claimed = jobs_->ClaimNextJob(worker_id, options_.lease);
     if (!claimed.ok()) {
       log->error("{}: cannot claim a job: {}", worker_id, claimed.status().message());

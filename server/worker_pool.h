@@ -46,6 +46,8 @@ struct WorkerPoolOptions {
   std::shared_mutex* blob_puts = nullptr;
   // See JobRunnerContext::reports; may be null.
   const JobReports* reports = nullptr;
+  // See JobRunnerContext::fan_out_starts. Workers run other jobs' start tasks either way.
+  bool fan_out_starts = false;
 };
 
 class WorkerPool {
@@ -60,11 +62,15 @@ class WorkerPool {
   void Start();
   // A job was queued: an idle worker claims it now rather than at its next poll.
   void Wake();
+  // Work for every idle worker (a job split into start tasks): all of them look now.
+  void WakeAll();
   // Idempotent.
   void Stop();
 
  private:
   void WorkerLoop(int index);
+  // Claims a start task of a running job and runs it; false when there was none.
+  bool RunOneStartTask(const std::string& worker_id);
   // FAILED for a job whose run threw.
   void RecordCrash(const std::string& job_id, const std::string& error);
 

@@ -20,10 +20,12 @@
 #include <fstream>
 #include <functional>
 #include <latch>
+#include <map>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <random>
+#include <regex>
 #include <set>
 #include <sstream>
 #include <string>
@@ -57,6 +59,26 @@ std::string FitConfig(int max_iterations, int starts = 1) {
                         {"substeps", 2},
                         {"fixed", {{"ground", {{"normal", {0, 0, 1}}, {"offset", 0}}}}}}
       .dump();
+}
+
+// A config fitting Young's modulus from `starts` random starts between half and twice `truth`.
+std::string StartsConfig(double truth, int starts, int max_iterations) {
+  nlohmann::json config = nlohmann::json::parse(FitConfig(max_iterations, starts));
+  config["initial"] = {{"youngs_modulus", {{"min", 0.5 * truth}, {"max", 2.0 * truth}}}};
+  return config.dump();
+}
+
+// The workers a server's log shows running the start tasks of `job_id` ("job ... start k:
+// RUNNING on <worker> (task attempt n)"), with how many each ran.
+std::map<std::string, int> StartTaskWorkers(const fs::path& log, const std::string& job_id) {
+  std::map<std::string, int> workers;
+  const std::regex line("job " + job_id + " start [0-9]+: RUNNING on ([^ ]+) ");
+  std::ifstream in(log);
+  for (std::string text; std::getline(in, text);) {
+    std::smatch match;
+    if (std::regex_search(text, match, line)) ++workers[match[1].str()];
+  }
+  return workers;
 }
 
 std::string ReadFile(const fs::path& path) {
@@ -401,9 +423,8 @@ TEST_F(ServerProcessTest, KillNineWhileRunningThenRestartCompletesTheJob) {
 // server resumes from the job's checkpoint, runs only the other two, and the result is the one an
 // uninterrupted run of the same job computes.
 TEST_F(ServerProcessTest, KillNineAfterAFinishedStartResumesFromTheCheckpoint) {
-  const double truth = capture_->truth.youngs_modulus;
-  nlohmann::json config = nlohmann::json::parse(FitConfig(/*max_iterations=*/4, /*starts=*/3));
-  config["initial"] = {{"youngs_modulus", {{"min", 0.5 * truth}, {"max", 2.0 * truth}}}};
+  const nlohmann::json config = nlohmann::json::parse(
+      StartsConfig(capture_->truth.youngs_modulus, /*starts=*/3, /*max_iterations=*/4));
   std::string job_id, capture_id;
   {
     std::unique_ptr<ServerProcess> server = Start({.workers = 1});
@@ -451,6 +472,48 @@ TEST_F(ServerProcessTest, KillNineAfterAFinishedStartResumesFromTheCheckpoint) {
         << "start " << s;
     EXPECT_EQ(resumed_json["starts"][s]["iterations"],
               uninterrupted_json["starts"][s]["iterations"]);
+  }
+  StopCleanly(*server);
+}
+
+// --fan-out-starts: a job's four starts run as tasks on both workers of the process, and the
+// result is the one a server without fan-out computes for the same job, start for start.
+TEST_F(ServerProcessTest, FannedOutStartsRunOnEveryWorkerAndMatchTheOneWorkerResult) {
+  const std::string config = StartsConfig(capture_->truth.youngs_modulus, 4, 6);
+  std::string capture_id;
+  nlohmann::json fanned;
+  {
+    std::unique_ptr<ServerProcess> server = Start({.workers = 2, .extra = {"--fan-out-starts"}});
+    ASSERT_NE(server, nullptr);
+    ReconstructionClient client = server->Client();
+    capture_id = Upload(client);
+    const std::string job = CreateOk(client, capture_id, config).id();
+    ASSERT_EQ(WatchToEnd(client, job).back().state(), v1::SUCCEEDED) << ReadFile(log_file());
+    v1::Result result;
+    ASSERT_TRUE(client.GetResult(job, &result).ok());
+    fanned = nlohmann::json::parse(result.result_json());
+    const std::map<std::string, int> workers = StartTaskWorkers(log_file(), job);
+    EXPECT_EQ(workers.size(), 2u) << ReadFile(log_file());
+    int tasks = 0;
+    for (const auto& [worker, count] : workers) tasks += count;
+    EXPECT_EQ(tasks, 4);
+    StopCleanly(*server);
+  }
+  std::unique_ptr<ServerProcess> server = Start({.workers = 1});
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient client = server->Client();
+  const std::string job = CreateOk(client, capture_id, config).id();
+  ASSERT_EQ(WatchToEnd(client, job).back().state(), v1::SUCCEEDED);
+  v1::Result result;
+  ASSERT_TRUE(client.GetResult(job, &result).ok());
+  const nlohmann::json alone = nlohmann::json::parse(result.result_json());
+  EXPECT_TRUE(StartTaskWorkers(log_file(), job).empty());
+  EXPECT_EQ(fanned["parameters"], alone["parameters"]);
+  EXPECT_EQ(fanned["best_start"], alone["best_start"]);
+  ASSERT_EQ(fanned["starts"].size(), 4u);
+  for (int s = 0; s < 4; ++s) {
+    EXPECT_EQ(fanned["starts"][s]["parameters"], alone["starts"][s]["parameters"]) << s;
+    EXPECT_EQ(fanned["starts"][s]["cost"], alone["starts"][s]["cost"]) << s;
   }
   StopCleanly(*server);
 }
@@ -1293,6 +1356,49 @@ TEST_F(PostgresServerProcessTest, RunsAJobWithItsStoreInPostgres) {
   ASSERT_EQ(row->rows(), 1);
   EXPECT_EQ(row->Text(0, 0), "SUCCEEDED");
   EXPECT_EQ(row->Text(0, 1), "lab-pg");
+}
+
+// Fan-out over processes: an API and two worker processes with --fan-out-starts share the store.
+// The second worker is killed (kill -9) while it runs one of the job's start tasks; once that
+// task's lease expires the first worker runs it again, and the job SUCCEEDS with every start.
+TEST_F(PostgresServerProcessTest, AStartTaskOfAKilledWorkerRunsAgainElsewhere) {
+  auto flags = [&](const std::string& role, const std::string& name) {
+    ServerProcess::Flags f;
+    f.extra = {"--store", url_, "--role", role, "--fan-out-starts", "--lease-seconds", "5"};
+    f.name = name;
+    return f;
+  };
+  const fs::path api_log = root_.path() / "api.log", a_log = root_.path() / "worker-a.log",
+                 b_log = root_.path() / "worker-b.log";
+  auto api = std::make_unique<ServerProcess>(data_dir(), api_log, flags("api", "-api"));
+  ASSERT_TRUE(api->WaitUntilServing());
+  ReconstructionClient client = api->Client();
+  const std::string job =
+      CreateOk(client, Upload(client), StartsConfig(capture_->truth.youngs_modulus, 4, 12)).id();
+  auto a = std::make_unique<ServerProcess>(data_dir(), a_log, flags("worker", "-a"));
+  ASSERT_TRUE(a->WaitUntilServing());
+  WatchUntilFirstIteration(*api, job);
+  auto b = std::make_unique<ServerProcess>(data_dir(), b_log, flags("worker", "-b"));
+  ASSERT_TRUE(b->WaitUntilServing());
+  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (StartTaskWorkers(b_log, job).empty() && std::chrono::steady_clock::now() < give_up) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_FALSE(StartTaskWorkers(b_log, job).empty()) << ReadFile(b_log);
+  b->Signal(SIGKILL);
+  EXPECT_EQ(b->Wait(std::chrono::seconds(10)), 128 + SIGKILL);
+
+  ASSERT_EQ(WatchToEnd(client, job).back().state(), v1::SUCCEEDED) << ReadFile(a_log);
+  EXPECT_NE(ReadFile(a_log).find("(task attempt 2)"), std::string::npos) << ReadFile(a_log);
+  v1::Result result;
+  ASSERT_TRUE(client.GetResult(job, &result).ok());
+  const nlohmann::json json = nlohmann::json::parse(result.result_json());
+  ASSERT_EQ(json["starts"].size(), 4u);
+  for (const nlohmann::json& start : json["starts"]) {
+    EXPECT_FALSE(start["failed"].get<bool>());
+    EXPECT_GT(start["evaluations"].get<int>(), 0);
+  }
+  EXPECT_EQ(GetJob(client, job).attempts(), 1);  // the job's own worker was never lost
 }
 
 }  // namespace
