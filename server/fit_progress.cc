@@ -61,4 +61,23 @@ void RecordIteration(const store::Job& job, const store::ProgressEvent& event,
                         event.iteration, event.cost);
 }
 
+void RecordNote(const store::Job& job, const std::string& note, const JobRunnerContext& context) {
+  store::ProgressEvent event;
+  event.kind = store::ProgressKind::kState;
+  event.message = note;
+  if (Result<int64_t> seq = context.jobs->AppendProgress(job.id, event); !seq.ok()) {
+    context.logger->warn("job {}: note not recorded: {}", job.id, seq.status().message());
+  }
+  context.events->Notify(job.id);
+}
+
+void NoteKeptStarts(const store::Job& job, size_t kept, int num_starts,
+                    const JobRunnerContext& context) {
+  if (kept == 0) return;
+  RecordNote(job,
+             "resumed from a checkpoint: " + std::to_string(kept) + " of " +
+                 std::to_string(num_starts) + " starts finished on an earlier attempt",
+             context);
+}
+
 }  // namespace softid::server

@@ -43,17 +43,6 @@ JobOutcome Fail(const store::Job& job, const JobRunnerContext& context, const st
   return JobOutcome::kFailed;
 }
 
-// A note in the job's history (a kState event that changes nothing), pushed to watchers.
-void AppendNote(const store::Job& job, const JobRunnerContext& context, const std::string& note) {
-  store::ProgressEvent event;
-  event.kind = store::ProgressKind::kState;
-  event.message = note;
-  if (Result<int64_t> seq = context.jobs->AppendProgress(job.id, event); !seq.ok()) {
-    context.logger->warn("job {}: note not recorded: {}", job.id, seq.status().message());
-  }
-  context.events->Notify(job.id);
-}
-
 // The checkpoint an earlier attempt of the job saved (a worker lost or a server stopped midway),
 // when there is one this attempt can resume from; one that cannot be read is logged and ignored
 // (the fit then starts afresh, which is always correct).
@@ -70,12 +59,19 @@ std::optional<inverse::FitCheckpoint> EarlierCheckpoint(const store::Job& job,
   return std::move(checkpoint).value();
 }
 
-// Which starts an earlier attempt finished: the history note and result.json's "resumed".
-nlohmann::json ResumedJson(const store::Job& job, const inverse::FitCheckpoint& checkpoint) {
+// The starts `checkpoint` finished, noted in the job's history as kept.
+std::vector<int> FinishedStarts(const store::Job& job, const inverse::FitCheckpoint& checkpoint,
+                                const JobRunnerContext& context) {
   std::vector<int> starts;
   for (const inverse::StartResult& start : checkpoint.finished) starts.push_back(start.index);
-  std::sort(starts.begin(), starts.end());
-  return {{"attempt", job.attempts}, {"finished_starts", starts}};
+  NoteKeptStarts(job, starts.size(), checkpoint.num_starts, context);
+  return starts;
+}
+
+// result.json's "resumed": the starts an earlier attempt finished, kept by this one.
+nlohmann::json ResumedJson(const store::Job& job, std::vector<int> kept_starts) {
+  std::sort(kept_starts.begin(), kept_starts.end());
+  return {{"attempt", job.attempts}, {"finished_starts", kept_starts}};
 }
 
 // The job's lease, renewed while it runs; a cancel request stops it.
@@ -136,7 +132,7 @@ nlohmann::json RunDiagnosis(const store::Job& job, const capture::Capture& captu
   if (context.reports != nullptr) options.plot_directory = report_dir / "diagnosis";
   options.fit.cancel = &cancel;
   options.on_stage = [&](const std::string& stage) {
-    AppendNote(job, context, "diagnosis: " + stage);
+    RecordNote(job, "diagnosis: " + stage, context);
   };
   Result<diagnosis::DiagnosisReport> report = diagnosis::Diagnose(capture, config, options, &fit);
   if (!report.ok()) {
@@ -226,19 +222,17 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
     Result<capture::Capture> capture =
         PrepareCapture(job, *stored, worker_id, context, folder.path, cancel, &ingest_json);
     if (!capture.ok()) prepared = capture.status();
-    if (resume_from) {
-      resumed_json = ResumedJson(job, *resume_from);
-      AppendNote(job, context,
-                 "resumed from a checkpoint: " + std::to_string(resume_from->finished.size()) +
-                     " of " + std::to_string(resume_from->num_starts) +
-                     " starts finished on an earlier attempt");
-    }
+    std::vector<int> kept_starts;  // finished on an earlier attempt
     if (capture.ok() && !cancel.load()) {
-      result =
-          context.fan_out_starts
-              ? FitByStartTasks(job, *capture, *config, resume_from, worker_id, context, cancel)
-              : FitHere(job, *capture, *config, resume_from, context, started, cancel, heartbeat);
+      if (context.fan_out_starts) {
+        result = FitByStartTasks(job, *capture, *config, resume_from, worker_id, context, cancel,
+                                 &kept_starts);
+      } else {
+        if (resume_from) kept_starts = FinishedStarts(job, *resume_from, context);
+        result = FitHere(job, *capture, *config, resume_from, context, started, cancel, heartbeat);
+      }
     }
+    if (!kept_starts.empty()) resumed_json = ResumedJson(job, kept_starts);
     if (result.ok() && !result->cancelled && config->uncertainty) {
       Result<inverse::FitUncertainty> estimated =
           inverse::EstimateFitUncertainty(*capture, *config, *result);

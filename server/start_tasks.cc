@@ -174,12 +174,10 @@ Result<std::vector<store::StartTask>> RunAndAwaitTasks(const store::Job& job,
 
 }  // namespace
 
-Result<inverse::FitResult> FitByStartTasks(const store::Job& job, const capture::Capture& capture,
-                                           const inverse::JobConfig& config,
-                                           const std::optional<inverse::FitCheckpoint>& earlier,
-                                           const std::string& worker_id,
-                                           const JobRunnerContext& context,
-                                           std::atomic<bool>& cancel) {
+Result<inverse::FitResult> FitByStartTasks(
+    const store::Job& job, const capture::Capture& capture, const inverse::JobConfig& config,
+    const std::optional<inverse::FitCheckpoint>& earlier, const std::string& worker_id,
+    const JobRunnerContext& context, std::atomic<bool>& cancel, std::vector<int>* kept_starts) {
   inverse::FitCheckpoint prepared;
   if (earlier) {
     prepared = *earlier;
@@ -191,6 +189,16 @@ Result<inverse::FitResult> FitByStartTasks(const store::Job& job, const capture:
   SOFTID_RETURN_IF_ERROR(context.jobs->CreateStartTasks(job.id, worker_id, prepared.num_starts));
   context.logger->info("job {}: {} starts split into tasks", job.id, prepared.num_starts);
   if (context.wake_workers) context.wake_workers();
+  if (job.attempts > 1) {
+    SOFTID_ASSIGN_OR_RETURN(const std::vector<store::StartTask> existing,
+                            context.jobs->ListStartTasks(job.id));
+    std::vector<int> kept;
+    for (const store::StartTask& task : existing) {
+      if (task.state == store::StartTaskState::kDone) kept.push_back(task.index);
+    }
+    NoteKeptStarts(job, kept.size(), prepared.num_starts, context);
+    if (kept_starts != nullptr) *kept_starts = std::move(kept);
+  }
   SOFTID_ASSIGN_OR_RETURN(const std::vector<store::StartTask> tasks,
                           RunAndAwaitTasks(job, worker_id, context, cancel));
   inverse::FitCheckpoint all = prepared;

@@ -15,6 +15,7 @@
 #include <atomic>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "core/capture/capture.h"
 #include "core/common/status.h"
@@ -50,11 +51,13 @@ StartTaskOutcome RunStartTask(const store::StartTask& task, const std::string& w
 // attempt's checkpoint: its discretisation is kept, and so are the starts it finished. Stops with
 // StatusCode::kCancelled once `cancel` is set; fails naming the start when one of this worker's
 // own tasks cannot run (a capture or config the job cannot fit), with the fit's errors otherwise.
+// `kept_starts` (may be null) receives the starts whose tasks an earlier attempt finished.
 Result<inverse::FitResult> FitByStartTasks(const store::Job& job, const capture::Capture& capture,
                                            const inverse::JobConfig& config,
                                            const std::optional<inverse::FitCheckpoint>& earlier,
                                            const std::string& worker_id,
                                            const JobRunnerContext& context,
-                                           std::atomic<bool>& cancel);
+                                           std::atomic<bool>& cancel,
+                                           std::vector<int>* kept_starts = nullptr);
 
 }  // namespace softid::server
