@@ -1,19 +1,24 @@
 #include "server/self_signed_certificate.h"
 
 #include <arpa/inet.h>
+#include <fcntl.h>
 #include <openssl/bio.h>
 #include <openssl/bn.h>
 #include <openssl/evp.h>
 #include <openssl/pem.h>
 #include <openssl/x509.h>
 #include <openssl/x509v3.h>
+#include <sys/file.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <fstream>
 #include <memory>
 #include <sstream>
+#include <utility>
 
 namespace softid::server {
 namespace {
@@ -157,6 +162,35 @@ Result<std::string> ToPem(Write write) {
   return std::string(data, static_cast<size_t>(size));
 }
 
+// An exclusive lock on DIR/.lock while held: processes sharing the folder (pods starting
+// together on one volume) decide and write one at a time, so the later ones reuse the pair the
+// first made instead of each replacing the others'.
+class FolderLock {
+ public:
+  static Result<FolderLock> Take(const fs::path& dir) {
+    const fs::path path = dir / ".lock";
+    const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0600);
+    if (fd < 0)
+      return Status::IoError("cannot open " + path.string() + ": " + std::strerror(errno));
+    while (::flock(fd, LOCK_EX) != 0) {
+      if (errno == EINTR) continue;
+      const std::string why = std::strerror(errno);
+      ::close(fd);
+      return Status::IoError("cannot lock " + path.string() + ": " + why);
+    }
+    return FolderLock(fd);
+  }
+  FolderLock(FolderLock&& other) noexcept : fd_(std::exchange(other.fd_, -1)) {}
+  FolderLock& operator=(FolderLock&&) = delete;
+  ~FolderLock() {
+    if (fd_ >= 0) ::close(fd_);  // releases the lock
+  }
+
+ private:
+  explicit FolderLock(int fd) : fd_(fd) {}
+  int fd_;
+};
+
 // Writes `text` to `path` with `perms`, through a temporary file in the same folder.
 Status WriteFileAtomically(const fs::path& path, const std::string& text, fs::perms perms) {
   const fs::path temporary = path.string() + ".tmp";
@@ -212,6 +246,7 @@ Result<SelfSignedCertificate> EnsureSelfSignedCertificate(
   if (!error) fs::permissions(dir, fs::perms::owner_all, fs::perm_options::replace, error);
   if (error) return Status::IoError("cannot create " + dir.string() + ": " + error.message());
 
+  SOFTID_ASSIGN_OR_RETURN(const FolderLock lock, FolderLock::Take(dir));
   SelfSignedCertificate result;
   result.cert_file = dir / "server.crt";
   result.key_file = dir / "server.key";

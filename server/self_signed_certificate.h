@@ -7,7 +7,8 @@
 // still matches: key and certificate belong together, the certificate is valid for at least
 // another 30 days, and it names every requested host. Otherwise a new pair replaces it (clients
 // must then copy the new certificate); the files are written to temporary names and renamed, so a
-// crash leaves either the old pair or the new one.
+// crash leaves either the old pair or the new one. Processes sharing the folder take turns (a
+// lock file in it), so servers starting together on one volume all serve the pair the first made.
 #pragma once
 
 #include <filesystem>

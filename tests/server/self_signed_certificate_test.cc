@@ -9,6 +9,8 @@
 #include <cstdlib>
 #include <fstream>
 #include <string>
+#include <thread>
+#include <vector>
 
 #include "tests/server/temp_dir.h"
 
@@ -71,6 +73,32 @@ TEST(SelfSignedCertificate, MadeOnceWithAPrivateKeyThenReused) {
   // Fewer names than it has: still fits.
   options.host_names = {"10.1.2.3"};
   EXPECT_FALSE(EnsureSelfSignedCertificate(dir, options)->created);
+}
+
+// Servers starting together on one empty volume (pods of a Deployment) take turns: one makes the
+// pair, every other reuses it, and all serve the certificate that is in the folder.
+TEST(SelfSignedCertificate, ServersStartingTogetherShareOnePair) {
+  TempDir data;
+  const fs::path dir = data.path() / "tls";
+  constexpr int kServers = 8;
+  std::vector<Result<SelfSignedCertificate>> results(kServers, Status::Internal("not run"));
+  {
+    std::vector<std::jthread> servers;
+    for (int i = 0; i < kServers; ++i) {
+      servers.emplace_back([&, i] { results[i] = EnsureSelfSignedCertificate(dir, {}); });
+    }
+  }
+  int created = 0;
+  for (const Result<SelfSignedCertificate>& result : results) {
+    ASSERT_TRUE(result.ok()) << result.status().ToString();
+    created += result->created ? 1 : 0;
+    EXPECT_EQ(result->sha256_fingerprint, results[0]->sha256_fingerprint);
+  }
+  EXPECT_EQ(created, 1);
+  Result<SelfSignedCertificate> after = EnsureSelfSignedCertificate(dir, {});
+  ASSERT_TRUE(after.ok());
+  EXPECT_FALSE(after->created);
+  EXPECT_EQ(after->sha256_fingerprint, results[0]->sha256_fingerprint);
 }
 
 TEST(SelfSignedCertificate, ReplacedWhenItNoLongerFits) {
