@@ -76,6 +76,11 @@ int main(int argc, char** argv) {
                  "tokens there instead of the SQLite database under --data (uploaded files stay "
                  "under --data)")
       ->envname("SOFTID_STORE");
+  app.add_option("--store-connections", options.store_connections,
+                 "connections to the --store PostgreSQL database this process may hold at once "
+                 "(default: workers + 4)")
+      ->envname("SOFTID_STORE_CONNECTIONS")
+      ->check(CLI::PositiveNumber);
   std::string role = "all";
   app.add_option("--role", role,
                  "all: take RPCs and run jobs; api: take RPCs only; worker: run jobs only "

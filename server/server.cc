@@ -104,6 +104,10 @@ Status ServerOptions::Validate() const {
     return Status::InvalidArgument("workers = " + std::to_string(num_workers) +
                                    ": must not be negative");
   }
+  if (store_connections < 0) {
+    return Status::InvalidArgument("store_connections = " + std::to_string(store_connections) +
+                                   ": must not be negative");
+  }
   if (max_queued_jobs < 1) {
     return Status::InvalidArgument("max_queued = " + std::to_string(max_queued_jobs) +
                                    ": must be at least 1");
@@ -221,8 +225,11 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& requested,
   SOFTID_RETURN_IF_ERROR(ResetFolder(work));
   SOFTID_ASSIGN_OR_RETURN(const TlsOptions tls, ResolveTls(options, *log));
 
-  SOFTID_ASSIGN_OR_RETURN(store::OpenedStore opened,
-                          store::OpenStore(options.store_url, options.data_dir, parts->logger));
+  SOFTID_ASSIGN_OR_RETURN(
+      store::OpenedStore opened,
+      store::OpenStore(
+          options.store_url, options.data_dir, parts->logger,
+          options.store_connections > 0 ? options.store_connections : options.num_workers + 4));
   parts->jobs = std::move(opened.jobs);
   parts->tokens = opened.tokens;
   log->info("job store: {}", opened.description);

@@ -46,6 +46,9 @@ struct ServerOptions {
   // data_dir/softid.db, or a postgresql:// URL for a PostgreSQL database that several servers may
   // share (--store). Blobs, staging and work folders stay under data_dir either way.
   std::string store_url;
+  // Connections to a PostgreSQL store this process may hold at once (opened as needed); 0: the
+  // workers plus 4 (a call holds one while it runs; the API's calls are short).
+  int store_connections = 0;  // >= 0
   ServerRole role = ServerRole::kAll;  // kApi runs no workers whatever num_workers says
   int num_workers = 1;                 // >= 0; >= 1 for kWorker
   // A job's starts run as tasks any worker of any process sharing the store claims

@@ -9,7 +9,7 @@
 namespace softid::server::store {
 
 Result<OpenedStore> OpenStore(const std::string& store_url, const std::filesystem::path& data_dir,
-                              std::shared_ptr<spdlog::logger> logger) {
+                              std::shared_ptr<spdlog::logger> logger, int max_connections) {
   OpenedStore opened;
   if (store_url.empty()) {
     SqliteJobStoreOptions options;
@@ -29,6 +29,7 @@ Result<OpenedStore> OpenStore(const std::string& store_url, const std::filesyste
                                    "SQLite database under --data)");
   }
   PostgresJobStoreOptions options;
+  options.max_connections = max_connections;
   options.logger = std::move(logger);
   Result<std::unique_ptr<PostgresJobStore>> store = PostgresJobStore::Open(store_url, options);
   // The store's messages start with the redacted URL already; the flag tells the operator where

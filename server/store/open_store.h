@@ -25,8 +25,10 @@ struct OpenedStore {
 
 // `store_url` empty: SQLite at data_dir/softid.db. Otherwise a postgresql:// (or postgres://) URL;
 // any other value is InvalidArgument. Errors name the flag and the URL with its password redacted,
-// e.g. "--store postgresql://softid:****@db:5432/softid: cannot connect: ...".
+// e.g. "--store postgresql://softid:****@db:5432/softid: cannot connect: ...". PostgreSQL:
+// `max_connections` (>= 1) bounds the connections this process opens (lazily).
 Result<OpenedStore> OpenStore(const std::string& store_url, const std::filesystem::path& data_dir,
-                              std::shared_ptr<spdlog::logger> logger = nullptr);
+                              std::shared_ptr<spdlog::logger> logger = nullptr,
+                              int max_connections = 4);
 
 }  // namespace softid::server::store

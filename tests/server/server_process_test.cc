@@ -1132,7 +1132,7 @@ class PostgresServerProcessTest : public ServerProcessTest {
 // and the API serves its progress, result and report.
 TEST_F(PostgresServerProcessTest, ApiAndWorkerProcessesShareTheStoreAndTheData) {
   ServerProcess::Flags api_flags;
-  api_flags.extra = {"--store", url_, "--role", "api"};
+  api_flags.extra = {"--store", url_, "--role", "api", "--store-connections", "2"};
   api_flags.name = "-api";
   ServerProcess::Flags worker_flags;
   worker_flags.extra = {"--store", url_, "--role", "worker"};
