@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "core/common/json_fields.h"
+#include "server/store/job_rules.h"
 #include "server/store/page_token.h"
 #include "server/store/postgres_schema.h"
 #include "server/store/resource_id.h"
@@ -36,30 +37,6 @@ constexpr int kQueueLock = 3;           // the queue, while a bounded create cou
 
 // A transaction that lost a race is tried again up to this many times in all.
 constexpr int kMaxTransactionAttempts = 8;
-
-// Never throws: strings that are not valid UTF-8 are stored with U+FFFD in place of the bad bytes
-// rather than failing the call (the server would reject invalid JSON text).
-std::string DumpJson(const nlohmann::json& value) {
-  return value.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-}
-
-Result<nlohmann::json> ParseStoredJson(const std::string& text, std::string_view what) {
-  nlohmann::json value = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
-  if (value.is_discarded()) {
-    return Status::Internal("corrupt " + std::string(what) + " in the database: not JSON");
-  }
-  return value;
-}
-
-std::optional<Timestamp> OptionalTimestamp(const std::optional<int64_t>& us) {
-  if (!us.has_value()) return std::nullopt;
-  return FromUnixMicros(*us);
-}
-
-std::optional<std::string> NullIfEmpty(const std::string& text) {
-  if (text.empty()) return std::nullopt;
-  return text;
-}
 
 // Reads row `r` of a result selected with kJobColumns.
 Result<Job> ReadJob(const PostgresResult& rows, int r) {
@@ -160,42 +137,6 @@ std::string Placeholder(PostgresParams& params, const T& value) {
   return placeholder;
 }
 
-Status CheckJobId(const std::string& job_id) {
-  return CheckResourceId(job_id, kJobIdPrefix, "job id");
-}
-
-Status CheckLease(std::chrono::milliseconds lease) {
-  if (lease.count() <= 0) {
-    return Status::InvalidArgument("lease = " + std::to_string(lease.count()) +
-                                   " ms: must be positive");
-  }
-  return Status::Ok();
-}
-
-Status CheckWorkerId(const std::string& worker_id) {
-  if (worker_id.empty()) return Status::InvalidArgument("worker_id = '': must not be empty");
-  return Status::Ok();
-}
-
-Status CheckPageSize(int page_size) {
-  if (page_size < 0) {
-    return Status::InvalidArgument("page_size = " + std::to_string(page_size) +
-                                   ": must not be negative");
-  }
-  return Status::Ok();
-}
-
-int EffectivePageSize(int requested) {
-  return std::min(requested == 0 ? ListJobsRequest::kDefaultPageSize : requested,
-                  ListJobsRequest::kMaxPageSize);
-}
-
-// "job job-... is SUCCEEDED: <requirement>" for a transition the job's state does not allow.
-Status WrongState(const Job& job, const std::string& requirement) {
-  return Status::FailedPrecondition("job " + job.id + " is " + ToString(job.state) + ": " +
-                                    requirement);
-}
-
 constexpr std::string_view kStartTaskColumns =
     "job_id, idx, state, attempts, lease_owner, lease_expires_at, result";
 
@@ -227,17 +168,6 @@ Result<StartTask> LoadStartTaskForUpdate(PostgresConnection& db, const std::stri
                             " not found");
   }
   return ReadStartTask(rows, 0);
-}
-
-Status NotLeasedTo(const Job& job, const std::string& worker_id) {
-  return Status::FailedPrecondition("job " + job.id + " is leased to " + job.lease_owner +
-                                    ", not " + worker_id);
-}
-
-// Seconds the current attempt has been running, for state events; 0 before the first claim.
-double ElapsedSeconds(const Job& job, Timestamp now) {
-  if (!job.started_at.has_value()) return 0.0;
-  return std::chrono::duration<double>(now - *job.started_at).count();
 }
 
 bool IsRetriable(const std::string& sqlstate) {
@@ -1210,10 +1140,7 @@ Result<std::vector<StartTask>> PostgresJobStore::ListStartTasks(const std::strin
 }
 
 Result<RecoverySummary> PostgresJobStore::RecoverAfterCrash(int max_attempts, RecoveryScope scope) {
-  if (max_attempts < 1) {
-    return Status::InvalidArgument("max_attempts = " + std::to_string(max_attempts) +
-                                   ": must be at least 1");
-  }
+  SOFTID_RETURN_IF_ERROR(CheckMaxAttempts(max_attempts));
   return Write([&](PostgresConnection& db) -> Result<RecoverySummary> {
     const Timestamp now = Now();
     // Locked in one order (as every sweep does) so two sweeps cannot deadlock; a row whose worker
@@ -1227,24 +1154,17 @@ Result<RecoverySummary> PostgresJobStore::RecoverAfterCrash(int max_attempts, Re
     SOFTID_ASSIGN_OR_RETURN(PostgresResult rows, db.Query(sql, params));
 
     RecoverySummary summary;
-    const std::string cause = scope == RecoveryScope::kAllRunning
-                                  ? "its worker was lost (the server restarted)"
-                                  : "its worker's lease expired";
     for (int r = 0; r < rows.rows(); ++r) {
       SOFTID_ASSIGN_OR_RETURN(Job job, ReadJob(rows, r));
-      if (job.cancel_requested) {
+      const RecoveryVerdict verdict = DecideRecovery(job, max_attempts, scope);
+      if (verdict.state == JobState::kCancelled) {
         ++summary.num_cancelled;
         SOFTID_RETURN_IF_ERROR(
-            FinishRunningJob(db, job, JobState::kCancelled, std::nullopt, "",
-                             "cancelled: " + cause + " after the cancel was requested"));
-      } else if (const int counted = job.attempts - job.released_attempts;
-                 counted >= max_attempts) {
+            FinishRunningJob(db, job, JobState::kCancelled, std::nullopt, "", verdict.message));
+      } else if (verdict.state == JobState::kFailed) {
         ++summary.num_failed;
-        const std::string error = "gave up after " + std::to_string(counted) +
-                                  " attempt(s) (max_attempts " + std::to_string(max_attempts) +
-                                  "): " + cause + " while RUNNING";
-        SOFTID_RETURN_IF_ERROR(
-            FinishRunningJob(db, job, JobState::kFailed, std::nullopt, error, error));
+        SOFTID_RETURN_IF_ERROR(FinishRunningJob(db, job, JobState::kFailed, std::nullopt,
+                                                verdict.error, verdict.message));
       } else {
         ++summary.num_requeued;
         SOFTID_RETURN_IF_ERROR(db.Query("UPDATE jobs SET state = 'QUEUED', lease_owner = NULL, "
@@ -1252,11 +1172,7 @@ Result<RecoverySummary> PostgresJobStore::RecoverAfterCrash(int max_attempts, Re
                                         job.id)
                                    .status());
         job.state = JobState::kQueued;
-        SOFTID_RETURN_IF_ERROR(AppendStateEvent(db, job,
-                                                "requeued: " + cause + " during attempt " +
-                                                    std::to_string(job.attempts),
-                                                now)
-                                   .status());
+        SOFTID_RETURN_IF_ERROR(AppendStateEvent(db, job, verdict.message, now).status());
       }
     }
     return summary;

@@ -4,6 +4,7 @@
 #include <utility>
 
 #include "core/common/json_fields.h"
+#include "server/store/job_rules.h"
 #include "server/store/page_token.h"
 #include "server/store/resource_id.h"
 #include "server/store/sha256.h"
@@ -24,30 +25,6 @@ constexpr std::string_view kJobColumns =
 constexpr std::string_view kProgressColumns =
     "seq, attempt, event, iteration, cost, gradient_norm, parameters, elapsed_s, state, message, "
     "created_at, start, num_starts, remaining_s";
-
-// Never throws: strings that are not valid UTF-8 are stored with U+FFFD in place of the bad bytes
-// rather than failing the call (SQLite's json_valid would reject invalid text anyway).
-std::string DumpJson(const nlohmann::json& value) {
-  return value.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace);
-}
-
-Result<nlohmann::json> ParseStoredJson(const std::string& text, std::string_view what) {
-  nlohmann::json value = nlohmann::json::parse(text, nullptr, /*allow_exceptions=*/false);
-  if (value.is_discarded()) {
-    return Status::Internal("corrupt " + std::string(what) + " in the database: not JSON");
-  }
-  return value;
-}
-
-std::optional<Timestamp> OptionalTimestamp(const std::optional<int64_t>& us) {
-  if (!us.has_value()) return std::nullopt;
-  return FromUnixMicros(*us);
-}
-
-std::optional<std::string> NullIfEmpty(const std::string& text) {
-  if (text.empty()) return std::nullopt;
-  return text;
-}
 
 // Reads a row selected with kJobColumns.
 Result<Job> ReadJob(const SqliteStatement& row) {
@@ -128,35 +105,6 @@ Result<StartTask> LoadStartTask(SqliteDatabase& db, const std::string& job_id, i
                             " not found");
   }
   return ReadStartTask(stmt);
-}
-
-Status CheckJobId(const std::string& job_id) {
-  return CheckResourceId(job_id, kJobIdPrefix, "job id");
-}
-
-Status CheckLease(std::chrono::milliseconds lease) {
-  if (lease.count() <= 0) {
-    return Status::InvalidArgument("lease = " + std::to_string(lease.count()) +
-                                   " ms: must be positive");
-  }
-  return Status::Ok();
-}
-
-Status CheckWorkerId(const std::string& worker_id) {
-  if (worker_id.empty()) return Status::InvalidArgument("worker_id = '': must not be empty");
-  return Status::Ok();
-}
-
-// "job job-... is SUCCEEDED: <requirement>" for a transition the job's state does not allow.
-Status WrongState(const Job& job, const std::string& requirement) {
-  return Status::FailedPrecondition("job " + job.id + " is " + ToString(job.state) + ": " +
-                                    requirement);
-}
-
-// Seconds the current attempt has been running, for state events; 0 before the first claim.
-double ElapsedSeconds(const Job& job, Timestamp now) {
-  if (!job.started_at.has_value()) return 0.0;
-  return std::chrono::duration<double>(now - *job.started_at).count();
 }
 
 }  // namespace
@@ -733,10 +681,7 @@ Status SqliteJobStore::RenewLease(const std::string& job_id, const std::string& 
   return Write([&]() -> Status {
     SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(job_id));
     if (job.state != JobState::kRunning) return WrongState(job, "only a RUNNING job has a lease");
-    if (job.lease_owner != worker_id) {
-      return Status::FailedPrecondition("job " + job_id + " is leased to " + job.lease_owner +
-                                        ", not " + worker_id);
-    }
+    if (job.lease_owner != worker_id) return NotLeasedTo(job, worker_id);
     const Timestamp expires = Now() + std::chrono::duration_cast<std::chrono::microseconds>(lease);
     SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
                             db_.Prepare("UPDATE jobs SET lease_expires_at = ?2 WHERE id = ?1"));
@@ -874,10 +819,7 @@ Status SqliteJobStore::SetDerivedCapture(const std::string& job_id, const std::s
     if (job.state != JobState::kRunning) {
       return WrongState(job, "only a RUNNING job derives a capture");
     }
-    if (job.lease_owner != worker_id) {
-      return Status::FailedPrecondition("job " + job_id + " is leased to " + job.lease_owner +
-                                        ", not " + worker_id);
-    }
+    if (job.lease_owner != worker_id) return NotLeasedTo(job, worker_id);
     {
       SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt,
                               db_.Prepare("SELECT 1 FROM captures WHERE id = ?1"));
@@ -947,10 +889,7 @@ Status SqliteJobStore::ReleaseJob(const std::string& job_id, const std::string& 
   return Write([&]() -> Status {
     SOFTID_ASSIGN_OR_RETURN(Job job, LoadJob(job_id));
     if (job.state != JobState::kRunning) return WrongState(job, "only a RUNNING job is released");
-    if (job.lease_owner != worker_id) {
-      return Status::FailedPrecondition("job " + job_id + " is leased to " + job.lease_owner +
-                                        ", not " + worker_id);
-    }
+    if (job.lease_owner != worker_id) return NotLeasedTo(job, worker_id);
     const Timestamp now = Now();
     std::string message;
     if (job.cancel_requested) {
@@ -1134,10 +1073,7 @@ Result<std::vector<StartTask>> SqliteJobStore::ListStartTasks(const std::string&
 }
 
 Result<RecoverySummary> SqliteJobStore::RecoverAfterCrash(int max_attempts, RecoveryScope scope) {
-  if (max_attempts < 1) {
-    return Status::InvalidArgument("max_attempts = " + std::to_string(max_attempts) +
-                                   ": must be at least 1");
-  }
+  SOFTID_RETURN_IF_ERROR(CheckMaxAttempts(max_attempts));
   return Write([&]() -> Result<RecoverySummary> {
     const Timestamp now = Now();
     std::vector<Job> lost;
@@ -1159,30 +1095,20 @@ Result<RecoverySummary> SqliteJobStore::RecoverAfterCrash(int max_attempts, Reco
 
     RecoverySummary summary;
     for (Job& job : lost) {
-      const std::string cause = scope == RecoveryScope::kAllRunning
-                                    ? "its worker was lost (the server restarted)"
-                                    : "its worker's lease expired";
-      std::string message;
+      const RecoveryVerdict verdict = DecideRecovery(job, max_attempts, scope);
       std::string sql;
-      if (job.cancel_requested) {
-        job.state = JobState::kCancelled;
-        message = "cancelled: " + cause + " after the cancel was requested";
+      if (verdict.state == JobState::kCancelled) {
         sql = "UPDATE jobs SET state = 'CANCELLED', finished_at = ?2";
         ++summary.num_cancelled;
-      } else if (const int counted = job.attempts - job.released_attempts;
-                 counted >= max_attempts) {
-        job.state = JobState::kFailed;
-        job.error = "gave up after " + std::to_string(counted) + " attempt(s) (max_attempts " +
-                    std::to_string(max_attempts) + "): " + cause + " while RUNNING";
-        message = job.error;
+      } else if (verdict.state == JobState::kFailed) {
         sql = "UPDATE jobs SET state = 'FAILED', finished_at = ?2, error = ?3";
         ++summary.num_failed;
       } else {
-        job.state = JobState::kQueued;
-        message = "requeued: " + cause + " during attempt " + std::to_string(job.attempts);
         sql = "UPDATE jobs SET state = 'QUEUED'";
         ++summary.num_requeued;
       }
+      job.state = verdict.state;
+      job.error = verdict.error;
       sql += ", lease_owner = NULL, lease_expires_at = NULL WHERE id = ?1";
       SOFTID_ASSIGN_OR_RETURN(SqliteStatement stmt, db_.Prepare(sql));
       if (job.state == JobState::kQueued) {
@@ -1193,7 +1119,7 @@ Result<RecoverySummary> SqliteJobStore::RecoverAfterCrash(int max_attempts, Reco
         SOFTID_RETURN_IF_ERROR(stmt.Bind(job.id, ToUnixMicros(now), job.error));
       }
       SOFTID_RETURN_IF_ERROR(stmt.Run());
-      SOFTID_RETURN_IF_ERROR(AppendStateEvent(job, message, now).status());
+      SOFTID_RETURN_IF_ERROR(AppendStateEvent(job, verdict.message, now).status());
     }
     return summary;
   });
