@@ -112,6 +112,14 @@ StartTaskOutcome RunStartTask(const store::StartTask& task, const std::string& w
     };
     LeaseHeartbeat heartbeat(std::move(calls), context.heartbeat_interval, stop);
     Result<TaskInputs> inputs = LoadTaskInputs(task, context);
+    // A start whose earlier run stopped (a lost or stopped worker) begins again at iteration 0:
+    // the history says why its iterations repeat.
+    if (inputs.ok() && task.attempts > 1) {
+      RecordNote(inputs->job,
+                 "start " + std::to_string(task.index + 1) + " runs again (task attempt " +
+                     std::to_string(task.attempts) + ")",
+                 context);
+    }
     if (inputs.ok()) {
       finished = FitOneStart(task, *inputs, worker_id, context, stop, &why);
     } else {
