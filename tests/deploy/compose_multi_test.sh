@@ -204,21 +204,23 @@ submitted=$("${station[@]}" --json submit "$tmp/capture" --config "$tmp/job.json
 job=$(sed -n 's/.*"id":"\(job-[0-9a-f]*\)".*/\1/p' <<<"$submitted")
 [ -n "$job" ] || fail "no job id in: $submitted"
 "${station[@]}" watch "$job" >/dev/null || fail "watching $job"
-"${station[@]}" --json status "$job" | grep -q '"state":"SUCCEEDED"' || fail "$job did not succeed"
+final=$("${station[@]}" --json status "$job")
+grep -q '"state":"SUCCEEDED"' <<<"$final" || fail "$job did not succeed: $final"
 echo "$job SUCCEEDED in $(($(date +%s) - job_start)) s"
 
 echo "== who ran it (logs)"
+# Logs to files first: `podman logs | grep -q` fails under pipefail when grep stops reading early.
+for name in "$api" "${workers[@]}"; do "${podman[@]}" logs "$name" >"$tmp/$name.log" 2>&1; done
 ran_on=()
 for worker in "${workers[@]}"; do
-  if "${podman[@]}" logs "$worker" 2>&1 | grep -q "job $job: RUNNING on"; then ran_on+=("$worker"); fi
+  if grep -q "job $job: RUNNING on" "$tmp/$worker.log"; then ran_on+=("$worker"); fi
 done
 [ "${#ran_on[@]}" -ge 1 ] || fail "no worker container logged running $job"
-"${podman[@]}" logs "${ran_on[0]}" 2>&1 | grep -q "job $job: SUCCEEDED" ||
-  fail "${ran_on[0]} did not log $job SUCCEEDED"
-if "${podman[@]}" logs "$api" 2>&1 | grep -Eq "RUNNING on|job $job: SUCCEEDED"; then
+grep -q "job $job: SUCCEEDED" "$tmp/${ran_on[0]}.log" || fail "${ran_on[0]} did not log $job SUCCEEDED"
+if grep -Eq "RUNNING on|job $job: SUCCEEDED" "$tmp/$api.log"; then
   fail "the API container ran a fit"
 fi
-"${podman[@]}" logs "$api" 2>&1 | grep -q "job $job: " || fail "the API container did not log taking $job"
+grep -q "job $job: QUEUED" "$tmp/$api.log" || fail "the API container did not log taking $job"
 echo "ran on ${ran_on[*]}; the API only took the job"
 
 echo "== stop (SIGTERM to the softid services): every container exits 0"
@@ -227,7 +229,8 @@ for name in "$api" "${workers[@]}" "$postgres"; do
   status=$("${podman[@]}" inspect -f '{{.State.ExitCode}}' "$name")
   [ "$status" = 0 ] || fail "$name exited with $status"
 done
-"${podman[@]}" logs "$api" 2>&1 | grep -q "shut down" || fail "$api did not log its shutdown"
+"${podman[@]}" logs "$api" >"$tmp/$api.log" 2>&1
+grep -q "shut down" "$tmp/$api.log" || fail "$api did not log its shutdown"
 if [ "$keep" != 1 ]; then
   "${compose[@]}" down -v >"$tmp/down.log" 2>&1 || { cat "$tmp/down.log" >&2; fail "podman-compose down"; }
   [ -z "$("${podman[@]}" ps -aq --filter "label=io.podman.compose.project=$project")" ] ||
