@@ -13,7 +13,9 @@
 # Prepares podman (idempotent); removes the containers, volumes, network and images it made,
 # unless SOFTID_COMPOSE_KEEP=1. SOFTID_COMPOSE_IMAGE=TAG uses an image already built from
 # deploy/Dockerfile instead of building one (the build takes 15-20 minutes on 2 cores; the rest
-# about 3). Exit 77 (CTest: skipped) when podman or podman-compose cannot be installed or run.
+# about a minute); SOFTID_CONTAINER_KEEP_CACHE=1 keeps the build's layers, as in container_test.sh
+# (run after it, the build then takes seconds). Exit 77 (CTest: skipped) when podman or
+# podman-compose cannot be installed or run.
 set -euo pipefail
 
 source_dir=$(cd "$1" && pwd)
@@ -109,7 +111,9 @@ cleanup() {
   # and given back to the image it named before the test.
   if [ "$made_image" = 1 ]; then
     "${podman[@]}" rmi "$image" >/dev/null 2>&1 || true
-    if [ -z "$reuse" ]; then "${podman[@]}" image prune -f >/dev/null 2>&1 || true; fi
+    if [ -z "$reuse" ] && [ "${SOFTID_CONTAINER_KEEP_CACHE:-0}" != 1 ]; then
+      "${podman[@]}" image prune -f >/dev/null 2>&1 || true
+    fi
   fi
   if [ -n "$previous_image" ]; then "${podman[@]}" tag "$previous_image" "$image" || true; fi
   rm -rf "$tmp"
