@@ -27,6 +27,11 @@ expect "build stage on debian:bookworm" '^FROM debian:bookworm AS build$' "$dock
 expect "build stage uses the CI dependency script" '^RUN .*bash deploy/install-deps\.sh' "$dockerfile"
 expect "runtime stage on debian:bookworm-slim" '^FROM debian:bookworm-slim$' "$dockerfile"
 expect "runtime packages come from the list" '^COPY deploy/runtime-packages\.txt ' "$dockerfile"
+# Packages marked [libs only]: apt skips them, the build stage copies their loaded libraries.
+expect "apt skips packages marked [libs only]" '^ && sed -e .*libs only\\\]/d' "$dockerfile"
+expect "the build stage copies the marked packages' loaded libraries" 'bash deploy/copy-loaded-libs\.sh deploy/runtime-packages\.txt /opt/softid/lib' "$dockerfile"
+expect "those libraries go into the runtime stage" '^COPY --from=build /opt/softid/lib/ ' "$dockerfile"
+expect "the runtime stage checks that every loaded library is there" "ldd /usr/local/bin/softid-server .*grep 'not found'" "$dockerfile"
 expect "binaries come from the build stage" '^COPY --from=build ' "$dockerfile"
 expect "a data volume" '^VOLUME .*/var/lib/softid' "$dockerfile"
 expect "the server's data directory is the volume" 'SOFTID_DATA=/var/lib/softid' "$dockerfile"

@@ -3,7 +3,9 @@
 # The runtime image installs only deploy/runtime-packages.txt. Proves without a Docker engine
 # that this is enough: installs the binaries to a temporary prefix, resolves every shared library
 # they load (ldd), finds the Debian package that ships it (dpkg -S), and requires that package to
-# be on the list. Exit 77 (CTest skip) only when ldd or dpkg is missing (not a Debian system).
+# be on the list; and every package marked [libs only] (the image takes just its loaded libraries)
+# must ship one of them. Exit 77 (CTest skip) only when ldd or dpkg is missing (not a Debian
+# system).
 set -euo pipefail
 
 source_dir=$1
@@ -112,6 +114,12 @@ for package in "${!listed[@]}"; do
   [ -n "${needed[$package]:-}" ] || unused+=("$package")
 done
 echo "ok: the ${#needed[@]} packages that ship the binaries' libraries are all listed"
+
+# The image installs the packages marked [libs only] as just their loaded libraries: each mark
+# must still name a package that ships one (deploy/copy-loaded-libs.sh fails otherwise).
+bash "$source_dir/deploy/copy-loaded-libs.sh" "$list" "$prefix/libs-only" \
+  "$prefix/bin/softid-server" "$prefix/bin/softid" "$prefix/bin/softid-lab" ||
+  fail "deploy/copy-loaded-libs.sh failed on the installed binaries"
 if [ "${#unused[@]}" -gt 0 ]; then
   echo "listed but not loaded by a binary (tools, or worth removing): ${unused[*]}"
 fi
