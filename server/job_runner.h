@@ -48,6 +48,9 @@ struct JobRunnerContext {
   // Runs a job's starts as tasks any worker can claim (start_tasks.h), instead of all of them
   // in the job's worker. For several worker processes sharing a store.
   bool fan_out_starts = false;
+  // A start task claimed this many times over (its workers lost, or it could not run on them)
+  // fails its job, as a job does after max_attempts lost workers (ServerOptions::max_attempts).
+  int max_attempts = 3;
   // How often a job's worker looks whether the tasks running elsewhere have finished.
   std::chrono::milliseconds task_poll_interval{500};
   // Wakes this process's idle workers (new start tasks to claim); may be empty. Other processes'

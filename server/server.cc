@@ -256,6 +256,7 @@ Result<std::unique_ptr<Server>> Server::Start(const ServerOptions& requested,
   WorkerPoolOptions pool_options;
   pool_options.num_workers = options.num_workers;
   pool_options.lease = options.lease;
+  pool_options.max_attempts = options.max_attempts;
   pool_options.heartbeat_interval = options.heartbeat_interval;
   pool_options.idle_poll_interval = options.idle_poll_interval;
   pool_options.work_root = work;

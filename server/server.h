@@ -48,7 +48,7 @@ struct ServerOptions {
   std::string store_url;
   // Connections to a PostgreSQL store this process may hold at once (opened as needed); 0: the
   // workers plus 4 (a call holds one while it runs; the API's calls are short).
-  int store_connections = 0;  // >= 0
+  int store_connections = 0;           // >= 0
   ServerRole role = ServerRole::kAll;  // kApi runs no workers whatever num_workers says
   int num_workers = 1;                 // >= 0; >= 1 for kWorker
   // A job's starts run as tasks any worker of any process sharing the store claims

@@ -83,6 +83,18 @@ std::optional<inverse::StartResult> FitOneStart(const store::StartTask& task, co
 
 }  // namespace
 
+Status CheckTaskAttempts(const std::vector<store::StartTask>& tasks,
+                         const JobRunnerContext& context) {
+  for (const store::StartTask& task : tasks) {
+    if (task.state != store::StartTaskState::kDone && task.attempts > 2 * context.max_attempts) {
+      return Status::FailedPrecondition("start " + std::to_string(task.index) +
+                                        " did not finish in " + std::to_string(task.attempts) +
+                                        " claims by workers (see their logs)");
+    }
+  }
+  return Status::Ok();
+}
+
 const char* ToString(StartTaskOutcome outcome) {
   switch (outcome) {
     case StartTaskOutcome::kDone: return "done";
@@ -129,8 +141,15 @@ StartTaskOutcome RunStartTask(const store::StartTask& task, const std::string& w
   }
   if (lost) return StartTaskOutcome::kLost;
   if (!finished) {
-    if (!why.empty()) log->warn("{}: cannot run: {}", name, why);
     if (error != nullptr) *error = why;
+    // A task that could not run here is left to its lease rather than handed straight back: an
+    // idle worker would take it again at once and fail the same way. The job's worker fails the
+    // job once the task was claimed too often (RunAndAwaitTasks).
+    if (!why.empty() && outer_stop == nullptr) {
+      log->warn("{}: cannot run here, left to its lease: {}", name, why);
+      return StartTaskOutcome::kReleased;
+    }
+    if (!why.empty()) log->warn("{}: cannot run: {}", name, why);
     if (Status released = context.jobs->ReleaseStartTask(task.job_id, task.index, worker_id);
         !released.ok()) {
       log->warn("{}: not released: {}", name, released.message());
@@ -176,6 +195,7 @@ Result<std::vector<store::StartTask>> RunAndAwaitTasks(const store::Job& job,
       return t.state == store::StartTaskState::kDone;
     });
     if (all_done) return tasks;
+    SOFTID_RETURN_IF_ERROR(CheckTaskAttempts(tasks, context));
     std::this_thread::sleep_for(context.task_poll_interval);
   }
 }

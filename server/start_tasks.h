@@ -36,6 +36,12 @@ enum class StartTaskOutcome {
 
 const char* ToString(StartTaskOutcome outcome);
 
+// FailedPrecondition naming a start whose task was claimed more than 2 x context.max_attempts
+// times without finishing (shutdowns hand tasks back too, hence the margin): its workers keep
+// dying or cannot run it. The job's worker fails the job with it.
+Status CheckTaskAttempts(const std::vector<store::StartTask>& tasks,
+                         const JobRunnerContext& context);
+
 // Runs `task`, just claimed by `worker_id`: lays out its job's capture in a folder of its own,
 // fits the one start from the job's checkpoint with progress into the job's history, keeps the
 // task's lease alive, and completes the task with the start's result (a start that diverged is a

@@ -19,6 +19,7 @@ WorkerPool::WorkerPool(store::JobStore* jobs, const store::BlobStore* blobs, Job
   context_.events = events;
   context_.work_root = options_.work_root;
   context_.lease = options_.lease;
+  context_.max_attempts = options_.max_attempts;
   context_.heartbeat_interval = options_.heartbeat_interval;
   const int cores = static_cast<int>(std::thread::hardware_concurrency());
   context_.cores_per_job = cores > 0 ? std::max(1, cores / std::max(1, options_.num_workers)) : 0;

@@ -35,6 +35,8 @@ struct WorkerPoolOptions {
   // a periodic sweep (multi-node).
   std::chrono::milliseconds lease{60000};
   std::chrono::milliseconds heartbeat_interval{2000};
+  // See JobRunnerContext::max_attempts.
+  int max_attempts = 3;
   // How often an idle worker looks for jobs without a Wake().
   std::chrono::milliseconds idle_poll_interval{1000};
   std::filesystem::path work_root;
