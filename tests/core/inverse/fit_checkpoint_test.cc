@@ -14,18 +14,7 @@ namespace softid::inverse {
 namespace {
 
 JobConfig ThreeStartConfig(const fem::PhysicalParameters& truth) {
-  JobConfig config;
-  config.fit = {"youngs_modulus"};
-  config.initial["youngs_modulus"].range =
-      ScalarRange{0.3 * truth.youngs_modulus, 3.0 * truth.youngs_modulus};
-  config.fixed = fem::ToJson(truth);
-  config.fixed.erase("youngs_modulus");
-  config.fixed.erase("density");  // from the capture's mass
-  config.cells = 8;
-  config.substeps = 2;
-  config.starts = 3;
-  config.max_iterations = 8;
-  return config;
+  return testing::YoungsModulusConfig(truth, /*starts=*/3, /*max_iterations=*/8);
 }
 
 class FitCheckpointTest : public ::testing::Test {

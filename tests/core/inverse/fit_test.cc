@@ -13,18 +13,7 @@ namespace softid::inverse {
 namespace {
 
 JobConfig YoungsModulusConfig(const fem::PhysicalParameters& truth) {
-  JobConfig config;
-  config.fit = {"youngs_modulus"};
-  config.initial["youngs_modulus"].range =
-      ScalarRange{0.3 * truth.youngs_modulus, 3.0 * truth.youngs_modulus};
-  config.fixed = fem::ToJson(truth);
-  config.fixed.erase("youngs_modulus");
-  config.fixed.erase("density");  // from the capture's mass
-  config.cells = 8;
-  config.substeps = 2;
-  config.starts = 2;
-  config.max_iterations = 20;
-  return config;
+  return testing::YoungsModulusConfig(truth, /*starts=*/2, /*max_iterations=*/20);
 }
 
 // One start from `scale` x the true Young's modulus.

@@ -1,4 +1,5 @@
-// A small synthetic capture written to a temporary folder, loaded back as the fit sees it.
+// A small synthetic capture written to a temporary folder, loaded back as the fit sees it, and a
+// config that fits its Young's modulus.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -9,6 +10,7 @@
 #include <string>
 
 #include "core/capture/capture.h"
+#include "core/inverse/job_config.h"
 #include "core/inverse/observed_frames.h"
 #include "core/scenes/scene.h"
 #include "core/scenes/synthesize.h"
@@ -76,6 +78,24 @@ inline SmallCapture MakeSmallCapture(const std::string& name, double duration, i
   out.frames = std::make_shared<const std::vector<ObservedFrame>>(std::move(*frames));
   out.ok = true;
   return out;
+}
+
+// Young's modulus from `starts` random starts between 0.3 and 3 times the truth, everything
+// else fixed at the truth (density from the capture's mass), on an 8-cell grid with 2 substeps.
+inline JobConfig YoungsModulusConfig(const fem::PhysicalParameters& truth, int starts,
+                                     int max_iterations) {
+  JobConfig config;
+  config.fit = {"youngs_modulus"};
+  config.initial["youngs_modulus"].range =
+      ScalarRange{0.3 * truth.youngs_modulus, 3.0 * truth.youngs_modulus};
+  config.fixed = fem::ToJson(truth);
+  config.fixed.erase("youngs_modulus");
+  config.fixed.erase("density");  // from the capture's mass
+  config.cells = 8;
+  config.substeps = 2;
+  config.starts = starts;
+  config.max_iterations = max_iterations;
+  return config;
 }
 
 }  // namespace softid::inverse::testing
