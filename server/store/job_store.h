@@ -201,6 +201,14 @@ class JobStore {
   // their number differs). FailedPrecondition when the job is not RUNNING or leased to another.
   virtual Status CreateStartTasks(const std::string& job_id, const std::string& worker_id,
                                   int num_tasks) = 0;
+  // Adds a batch of tasks named `batch` (CheckBatchName), one per input (>= 1; each task's
+  // `input`), to the RUNNING job leased to `worker_id`, at the indexes after the job's existing
+  // tasks; returns the first. Idempotent: a batch of that name made before is kept as it is and
+  // its first index returned (FailedPrecondition when its size differs). FailedPrecondition when
+  // the job is not RUNNING or leased to another.
+  virtual Result<int> CreateTaskBatch(const std::string& job_id, const std::string& worker_id,
+                                      const std::string& batch,
+                                      const std::vector<nlohmann::json>& inputs) = 0;
   // Atomically takes the first claimable task for `worker_id`: a QUEUED one, or a RUNNING one
   // whose lease expired (its worker was lost); attempts + 1, lease until now + `lease`. Only
   // tasks of RUNNING jobs without a cancel request; of `job_id` only when it is not empty, else
@@ -220,7 +228,8 @@ class JobStore {
   // RUNNING (held by `worker_id`) -> QUEUED: the worker gives it back unfinished (a shutdown).
   virtual Status ReleaseStartTask(const std::string& job_id, int index,
                                   const std::string& worker_id) = 0;
-  // The job's tasks by index (none when it was not split). NotFound for an unknown job.
+  // The job's tasks of every batch by index (none when it was not split). NotFound for an
+  // unknown job.
   virtual Result<std::vector<StartTask>> ListStartTasks(const std::string& job_id) = 0;
 
   // --- Maintenance --------------------------------------------------------------------------

@@ -243,9 +243,9 @@ Result<PostgresConnection> PostgresConnection::Connect(const std::string& url) {
   }
   // Timeouts of our own rather than a server or role default that could cut a migration or a
   // lock wait short (settings any user may change; lc_messages, for one, is not).
-  SOFTID_RETURN_IF_ERROR(connection.Exec(
-      "SET statement_timeout TO 0; SET lock_timeout TO 0; "
-      "SET idle_in_transaction_session_timeout TO 0"));
+  SOFTID_RETURN_IF_ERROR(
+      connection.Exec("SET statement_timeout TO 0; SET lock_timeout TO 0; "
+                      "SET idle_in_transaction_session_timeout TO 0"));
   return connection;
 }
 

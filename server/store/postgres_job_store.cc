@@ -138,7 +138,7 @@ std::string Placeholder(PostgresParams& params, const T& value) {
 }
 
 constexpr std::string_view kStartTaskColumns =
-    "job_id, idx, state, attempts, lease_owner, lease_expires_at, result";
+    "job_id, idx, state, attempts, lease_owner, lease_expires_at, result, batch, input";
 
 // Reads row `r` of a result selected with kStartTaskColumns.
 Result<StartTask> ReadStartTask(const PostgresResult& rows, int r) {
@@ -151,6 +151,10 @@ Result<StartTask> ReadStartTask(const PostgresResult& rows, int r) {
   task.lease_expires_at = OptionalTimestamp(rows.OptionalInt64(r, 5));
   if (!rows.IsNull(r, 6)) {
     SOFTID_ASSIGN_OR_RETURN(task.result, ParseStoredJson(rows.Text(r, 6), "start_tasks.result"));
+  }
+  task.batch = rows.Text(r, 7);
+  if (!rows.IsNull(r, 8)) {
+    SOFTID_ASSIGN_OR_RETURN(task.input, ParseStoredJson(rows.Text(r, 8), "start_tasks.input"));
   }
   return task;
 }
@@ -1025,8 +1029,9 @@ Status PostgresJobStore::CreateStartTasks(const std::string& job_id, const std::
     // The job's row lock orders this against another create and the job's transitions.
     SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(db, job_id, RowLock::kForUpdate));
     SOFTID_RETURN_IF_ERROR(CheckTaskOwner(job, worker_id));
-    SOFTID_ASSIGN_OR_RETURN(PostgresResult count,
-                            db.Query("SELECT count(*) FROM start_tasks WHERE job_id = $1", job_id));
+    SOFTID_ASSIGN_OR_RETURN(
+        PostgresResult count,
+        db.Query("SELECT count(*) FROM start_tasks WHERE job_id = $1 AND batch = ''", job_id));
     const int64_t existing = count.Int64(0, 0);
     SOFTID_RETURN_IF_ERROR(CheckExistingTasks(job_id, existing, num_tasks));
     if (existing == num_tasks) return Status::Ok();
@@ -1036,6 +1041,39 @@ Status PostgresJobStore::CreateStartTasks(const std::string& job_id, const std::
         SELECT $1, i, 'QUEUED', $3::bigint FROM generate_series(0, $2::integer - 1) AS i)sql",
                job_id, num_tasks, ToUnixMicros(Now()))
         .status();
+  });
+}
+
+Result<int> PostgresJobStore::CreateTaskBatch(const std::string& job_id,
+                                              const std::string& worker_id,
+                                              const std::string& batch,
+                                              const std::vector<nlohmann::json>& inputs) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  SOFTID_RETURN_IF_ERROR(CheckBatchName(batch));
+  SOFTID_RETURN_IF_ERROR(CheckTaskCount(static_cast<int>(inputs.size())));
+  return Write([&](PostgresConnection& db) -> Result<int> {
+    // The job's row lock orders this against another create and the job's transitions.
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(db, job_id, RowLock::kForUpdate));
+    SOFTID_RETURN_IF_ERROR(CheckTaskOwner(job, worker_id));
+    SOFTID_ASSIGN_OR_RETURN(PostgresResult existing, db.Query(R"sql(
+        SELECT count(*), coalesce(min(idx), -1),
+               (SELECT coalesce(max(idx), -1) FROM start_tasks WHERE job_id = $1)
+        FROM start_tasks WHERE job_id = $1 AND batch = $2)sql",
+                                                              job_id, batch));
+    const int num_tasks = static_cast<int>(inputs.size());
+    SOFTID_RETURN_IF_ERROR(CheckExistingBatch(job_id, batch, existing.Int64(0, 0), num_tasks));
+    if (existing.Int64(0, 0) == num_tasks) return static_cast<int>(existing.Int64(0, 1));
+    const int first = static_cast<int>(existing.Int64(0, 2)) + 1;
+    const int64_t now = ToUnixMicros(Now());
+    for (int i = 0; i < num_tasks; ++i) {
+      SOFTID_RETURN_IF_ERROR(db.Query(R"sql(
+          INSERT INTO start_tasks (job_id, idx, state, created_at, batch, input)
+          VALUES ($1, $2, 'QUEUED', $3, $4, $5))sql",
+                                      job_id, first + i, now, batch, DumpJson(inputs[i]))
+                                 .status());
+    }
+    return first;
   });
 }
 

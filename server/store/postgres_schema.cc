@@ -129,6 +129,11 @@ CREATE TABLE start_tasks (
 -- Claiming walks the tasks not DONE in creation order.
 CREATE INDEX start_tasks_by_state ON start_tasks (state, created_at, job_id, idx);
 )sql",
+    // 2 -> 3: batches of other fits (the diagnosis' refits) as tasks beside the job's starts.
+    R"sql(
+ALTER TABLE start_tasks ADD COLUMN batch TEXT NOT NULL DEFAULT '';
+ALTER TABLE start_tasks ADD COLUMN input JSON;
+)sql",
 };
 
 // The number of tables in the connection's current schema.

@@ -13,7 +13,7 @@
 namespace softid::server::store {
 
 // The schema version this build writes and understands.
-inline constexpr int kPostgresSchemaVersion = 2;
+inline constexpr int kPostgresSchemaVersion = 3;
 
 // Brings the database to kPostgresSchemaVersion inside one transaction that holds an advisory lock,
 // so two processes starting on a new database at once do not both create the tables (the second

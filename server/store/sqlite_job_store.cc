@@ -77,7 +77,7 @@ Result<ProgressEvent> ReadProgress(const SqliteStatement& row) {
 }
 
 constexpr std::string_view kStartTaskColumns =
-    "job_id, idx, state, attempts, lease_owner, lease_expires_at, result";
+    "job_id, idx, state, attempts, lease_owner, lease_expires_at, result, batch, input";
 
 // Reads a row selected with kStartTaskColumns.
 Result<StartTask> ReadStartTask(const SqliteStatement& row) {
@@ -90,6 +90,10 @@ Result<StartTask> ReadStartTask(const SqliteStatement& row) {
   task.lease_expires_at = OptionalTimestamp(row.ColumnOptionalInt64(5));
   if (!row.IsNull(6)) {
     SOFTID_ASSIGN_OR_RETURN(task.result, ParseStoredJson(row.ColumnText(6), "start_tasks.result"));
+  }
+  task.batch = row.ColumnText(7);
+  if (!row.IsNull(8)) {
+    SOFTID_ASSIGN_OR_RETURN(task.input, ParseStoredJson(row.ColumnText(8), "start_tasks.input"));
   }
   return task;
 }
@@ -955,8 +959,8 @@ Status SqliteJobStore::CreateStartTasks(const std::string& job_id, const std::st
   return Write([&]() -> Status {
     SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(job_id));
     SOFTID_RETURN_IF_ERROR(CheckTaskOwner(job, worker_id));
-    SOFTID_ASSIGN_OR_RETURN(SqliteStatement count,
-                            db_.Prepare("SELECT count(*) FROM start_tasks WHERE job_id = ?1"));
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement count, db_.Prepare("SELECT count(*) FROM start_tasks "
+                                                               "WHERE job_id = ?1 AND batch = ''"));
     SOFTID_RETURN_IF_ERROR(count.Bind(job_id));
     SOFTID_RETURN_IF_ERROR(count.Step().status());
     SOFTID_RETURN_IF_ERROR(CheckExistingTasks(job_id, count.ColumnInt64(0), num_tasks));
@@ -970,6 +974,39 @@ Status SqliteJobStore::CreateStartTasks(const std::string& job_id, const std::st
       SOFTID_RETURN_IF_ERROR(insert.Run());
     }
     return Status::Ok();
+  });
+}
+
+Result<int> SqliteJobStore::CreateTaskBatch(const std::string& job_id, const std::string& worker_id,
+                                            const std::string& batch,
+                                            const std::vector<nlohmann::json>& inputs) {
+  SOFTID_RETURN_IF_ERROR(CheckJobId(job_id));
+  SOFTID_RETURN_IF_ERROR(CheckWorkerId(worker_id));
+  SOFTID_RETURN_IF_ERROR(CheckBatchName(batch));
+  SOFTID_RETURN_IF_ERROR(CheckTaskCount(static_cast<int>(inputs.size())));
+  return Write([&]() -> Result<int> {
+    SOFTID_ASSIGN_OR_RETURN(const Job job, LoadJob(job_id));
+    SOFTID_RETURN_IF_ERROR(CheckTaskOwner(job, worker_id));
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement existing, db_.Prepare(R"sql(
+        SELECT count(*), coalesce(min(idx), -1),
+               (SELECT coalesce(max(idx), -1) FROM start_tasks WHERE job_id = ?1)
+        FROM start_tasks WHERE job_id = ?1 AND batch = ?2)sql"));
+    SOFTID_RETURN_IF_ERROR(existing.Bind(job_id, batch));
+    SOFTID_RETURN_IF_ERROR(existing.Step().status());
+    const int num_tasks = static_cast<int>(inputs.size());
+    SOFTID_RETURN_IF_ERROR(CheckExistingBatch(job_id, batch, existing.ColumnInt64(0), num_tasks));
+    if (existing.ColumnInt64(0) == num_tasks) return static_cast<int>(existing.ColumnInt64(1));
+    const int first = static_cast<int>(existing.ColumnInt64(2)) + 1;
+    SOFTID_ASSIGN_OR_RETURN(SqliteStatement insert, db_.Prepare(R"sql(
+        INSERT INTO start_tasks (job_id, idx, state, created_at, batch, input)
+        VALUES (?1, ?2, 'QUEUED', ?3, ?4, ?5))sql"));
+    const int64_t now = ToUnixMicros(Now());
+    for (int i = 0; i < num_tasks; ++i) {
+      insert.Reset();
+      SOFTID_RETURN_IF_ERROR(insert.Bind(job_id, first + i, now, batch, DumpJson(inputs[i])));
+      SOFTID_RETURN_IF_ERROR(insert.Run());
+    }
+    return first;
   });
 }
 

@@ -93,6 +93,9 @@ class SqliteJobStore final : public JobStore, public TokenStore {
 
   Status CreateStartTasks(const std::string& job_id, const std::string& worker_id,
                           int num_tasks) override;
+  Result<int> CreateTaskBatch(const std::string& job_id, const std::string& worker_id,
+                              const std::string& batch,
+                              const std::vector<nlohmann::json>& inputs) override;
   Result<std::optional<StartTask>> ClaimStartTask(const std::string& worker_id,
                                                   std::chrono::milliseconds lease,
                                                   const std::string& job_id = "") override;

@@ -143,6 +143,11 @@ CREATE TABLE start_tasks (
 -- Claiming walks the tasks not DONE in creation order.
 CREATE INDEX start_tasks_by_state ON start_tasks (state, created_at, job_id, idx);
 )sql",
+    // 7 -> 8: batches of other fits (the diagnosis' refits) as tasks beside the job's starts.
+    R"sql(
+ALTER TABLE start_tasks ADD COLUMN batch TEXT NOT NULL DEFAULT '';
+ALTER TABLE start_tasks ADD COLUMN input TEXT CHECK (input IS NULL OR json_valid(input));
+)sql",
 };
 
 Result<int64_t> ReadPragma(SqliteDatabase& db, std::string_view pragma) {

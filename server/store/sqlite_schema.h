@@ -12,7 +12,7 @@
 namespace softid::server::store {
 
 // The schema version this build writes and understands.
-inline constexpr int kSqliteSchemaVersion = 7;
+inline constexpr int kSqliteSchemaVersion = 8;
 // "SFID" in ASCII, stored in the database header so `file` and we can tell the file apart from
 // other SQLite databases.
 inline constexpr int32_t kSqliteApplicationId = 0x53464944;

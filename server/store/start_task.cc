@@ -1,5 +1,7 @@
 #include "server/store/start_task.h"
 
+#include <algorithm>
+
 namespace softid::server::store {
 
 const char* ToString(StartTaskState state) {
@@ -23,6 +25,22 @@ Result<StartTaskState> StartTaskStateFromString(std::string_view text) {
 Status CheckTaskCount(int num_tasks) {
   if (num_tasks >= 1) return Status::Ok();
   return Status::InvalidArgument("num_tasks = " + std::to_string(num_tasks) + ": must be >= 1");
+}
+
+Status CheckBatchName(std::string_view batch) {
+  const bool printable =
+      std::all_of(batch.begin(), batch.end(), [](char c) { return c >= 0x20 && c < 0x7f; });
+  if (!batch.empty() && batch.size() <= 100 && printable) return Status::Ok();
+  return Status::InvalidArgument("batch = '" + std::string(batch.substr(0, 40)) +
+                                 "': must be 1 to 100 printable ASCII characters");
+}
+
+Status CheckExistingBatch(const std::string& job_id, std::string_view batch, int64_t existing,
+                          int num_tasks) {
+  if (existing == 0 || existing == num_tasks) return Status::Ok();
+  return Status::FailedPrecondition("job " + job_id + " has " + std::to_string(existing) +
+                                    " tasks in batch '" + std::string(batch) + "' already, not " +
+                                    std::to_string(num_tasks));
 }
 
 Status CheckTaskOwner(const Job& job, const std::string& worker_id) {

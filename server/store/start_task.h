@@ -8,6 +8,10 @@
 //                       `--lease expired--> claimed again by the next claimer
 //
 // Tasks live as long as their job and survive its requeue: a later attempt keeps those DONE.
+//
+// Besides the starts of the job's fit (batch ""), a job may add named batches of other fits
+// (JobStore::CreateTaskBatch): the diagnosis' refits, each task with its fit's config as `input`.
+// A batch's tasks take the indexes after the job's existing tasks; all share one life cycle.
 #pragma once
 
 #include <nlohmann/json.hpp>
@@ -29,7 +33,11 @@ Result<StartTaskState> StartTaskStateFromString(std::string_view text);
 
 struct StartTask {
   std::string job_id;
-  int index = 0;  // the start's index in the job's fit, 0 .. num_tasks - 1
+  // Unique within the job: the start's index in the job's fit (0 .. num_starts - 1), then the
+  // batches' tasks in the order they were added.
+  int index = 0;
+  std::string batch;                    // "" = a start of the job's fit; else its batch
+  std::optional<nlohmann::json> input;  // what a batch's task fits; none for the job's fit
   StartTaskState state = StartTaskState::kQueued;
   int attempts = 0;                           // claims so far
   std::string lease_owner;                    // worker id while RUNNING; empty otherwise
@@ -43,6 +51,11 @@ struct StartTask {
 // the backends agree; each returns the error the call reports.
 // num_tasks must be >= 1 (InvalidArgument).
 Status CheckTaskCount(int num_tasks);
+// A batch's name: 1 .. 100 printable ASCII characters (InvalidArgument naming it).
+Status CheckBatchName(std::string_view batch);
+// A batch made before is kept: `existing` (its tasks) must be 0 or `num_tasks`.
+Status CheckExistingBatch(const std::string& job_id, std::string_view batch, int64_t existing,
+                          int num_tasks);
 // Only the worker holding a RUNNING job splits it (FailedPrecondition).
 Status CheckTaskOwner(const Job& job, const std::string& worker_id);
 // A job split before keeps its tasks: `existing` must be 0 or `num_tasks` (FailedPrecondition).

@@ -1154,6 +1154,55 @@ TEST_P(JobStoreConformance, StartTasksFollowTheirJob) {
   EXPECT_EQ(store_->ListStartTasks(job.id).status().code(), StatusCode::kNotFound);
 }
 
+// Batches of other fits go after the job's starts: their tasks carry their inputs, take the next
+// indexes and the same life cycle; adding a batch again returns its first index and keeps it (a
+// requeued job's next attempt reuses what finished); another size or a bad name is refused.
+TEST_P(JobStoreConformance, TaskBatchesFollowTheJobsStarts) {
+  const Capture capture = NewCapture();
+  const Job job = NewJob(capture.id);
+  const std::vector<nlohmann::json> inputs = {{{"config", {{"starts", 1}}}},
+                                              {{"config", {{"starts", 2}}}}};
+  EXPECT_EQ(store_->CreateTaskBatch(job.id, "worker-1", "refits 1", inputs).status().code(),
+            StatusCode::kFailedPrecondition);  // QUEUED: nobody holds it
+  Claim("worker-1");
+  ASSERT_TRUE(store_->CreateStartTasks(job.id, "worker-1", 2).ok());
+  EXPECT_EQ(store_->CreateTaskBatch(job.id, "worker-1", "", inputs).status().message(),
+            "batch = '': must be 1 to 100 printable ASCII characters");
+  EXPECT_EQ(store_->CreateTaskBatch(job.id, "worker-1", "refits 1", {}).status().code(),
+            StatusCode::kInvalidArgument);
+  EXPECT_EQ(store_->CreateTaskBatch(job.id, "worker-2", "refits 1", inputs).status().code(),
+            StatusCode::kFailedPrecondition);
+  Result<int> first = store_->CreateTaskBatch(job.id, "worker-1", "refits 1", inputs);
+  ASSERT_TRUE(first.ok()) << first.status().ToString();
+  EXPECT_EQ(*first, 2);
+  EXPECT_EQ(*store_->CreateTaskBatch(job.id, "worker-1", "refits 1", inputs), 2);  // kept
+  EXPECT_EQ(store_->CreateTaskBatch(job.id, "worker-1", "refits 1", {inputs[0]}).status().message(),
+            "job " + job.id + " has 2 tasks in batch 'refits 1' already, not 1");
+  EXPECT_EQ(*store_->CreateTaskBatch(job.id, "worker-1", "refits 2", {inputs[1]}), 4);
+  // The job's own starts still count alone.
+  EXPECT_TRUE(store_->CreateStartTasks(job.id, "worker-1", 2).ok());
+
+  Result<std::vector<StartTask>> tasks = store_->ListStartTasks(job.id);
+  ASSERT_TRUE(tasks.ok()) << tasks.status().ToString();
+  ASSERT_EQ(tasks->size(), 5u);
+  EXPECT_EQ((*tasks)[1].batch, "");
+  EXPECT_FALSE((*tasks)[1].input.has_value());
+  EXPECT_EQ((*tasks)[3].batch, "refits 1");
+  EXPECT_EQ((*tasks)[3].input, inputs[1]);
+  EXPECT_EQ((*tasks)[4].batch, "refits 2");
+
+  // Claimed in index order, completed like any task.
+  for (int i = 0; i < 2; ++i)
+    ASSERT_TRUE(store_->ClaimStartTask("worker-a", seconds(30))->has_value());
+  Result<std::optional<StartTask>> refit = store_->ClaimStartTask("worker-b", seconds(30), job.id);
+  ASSERT_TRUE(refit.ok() && refit->has_value());
+  EXPECT_EQ((*refit)->index, 2);
+  EXPECT_EQ((*refit)->batch, "refits 1");
+  EXPECT_EQ((*refit)->input, inputs[0]);
+  ASSERT_TRUE(store_->CompleteStartTask(job.id, 2, "worker-b", {{"cost", 1.0}}).ok());
+  EXPECT_EQ(store_->ListStartTasks(job.id)->at(2).state, StartTaskState::kDone);
+}
+
 // Four threads claiming and completing the tasks of three jobs: each task is completed exactly
 // once.
 TEST_P(JobStoreConformance, ThreadsSharingAStoreNeverClaimTheSameStartTask) {
