@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "core/common/json_fields.h"
+#include "core/diagnosis/fit_batch.h"
 #include "core/diagnosis/likelihood_ratio.h"
 #include "core/diagnosis/plots.h"
 #include "core/diagnosis/report.h"
@@ -319,41 +320,90 @@ struct DiagnosisRun {
     return Status::Ok();
   }
 
-  // The refit of `freed` from each of `starts` (every base parameter free as well); the lowest
-  // fitted cost wins. *tried lists each start's extension values and fitted cost.
-  Result<inverse::FitResult> Refit(const Candidate& candidate,
-                                   const std::vector<std::string>& freed,
-                                   const std::vector<fem::PhysicalParameters>& starts,
-                                   nlohmann::json* tried, inverse::JobConfig* used,
-                                   const std::vector<fem::PhysicalParameters>& fallbacks = {}) {
+  // The fits of `configs`, in their order: by options.run_fits (another worker may run them),
+  // here one after the other by default.
+  std::vector<Result<inverse::FitResult>> RunFits(
+      const std::vector<inverse::JobConfig>& configs) const {
+    if (configs.empty()) return {};
+    if (!options.run_fits) return RunFitsInProcess(capture, configs, options.fit);
+    std::vector<Result<inverse::FitResult>> results = options.run_fits(configs);
+    if (results.size() == configs.size()) return results;
+    const Status wrong =
+        Status::Internal("the fit batch runner returned " + std::to_string(results.size()) +
+                         " results for " + std::to_string(configs.size()) + " fits");
+    return std::vector<Result<inverse::FitResult>>(configs.size(), wrong);
+  }
+
+  // A refit of `freed` (every base parameter free as well) from each of `starts`; `fallbacks`
+  // only while no start succeeded. The refits of a stage are planned first and run as one batch.
+  struct RefitPlan {
+    const Candidate* candidate = nullptr;
+    std::vector<std::string> freed;
+    std::vector<fem::PhysicalParameters> starts;
+    std::vector<fem::PhysicalParameters> fallbacks;
+    std::vector<Result<inverse::FitResult>> fits;  // one per start, once run
+  };
+
+  // Every plan's starts in one batch.
+  void RunRefits(std::vector<RefitPlan>* plans) const {
+    std::vector<inverse::JobConfig> configs;
+    for (const RefitPlan& plan : *plans) {
+      for (const fem::PhysicalParameters& start : plan.starts)
+        configs.push_back(RefitConfig(config, plan.freed, start));
+    }
+    std::vector<Result<inverse::FitResult>> results = RunFits(configs);
+    size_t next = 0;
+    for (RefitPlan& plan : *plans) {
+      for (size_t i = 0; i < plan.starts.size(); ++i)
+        plan.fits.push_back(std::move(results[next++]));
+    }
+  }
+
+  // The plan's refit with the lowest fitted cost, running fallback starts one by one while none
+  // succeeded. *tried lists each start's extension values and fitted cost, *used the winner's
+  // config.
+  Result<inverse::FitResult> BestRefit(RefitPlan& plan, nlohmann::json* tried,
+                                       inverse::JobConfig* used) const {
     Result<inverse::FitResult> best = Status::Internal("no refit start");
     const double k0 =
         fem::DefaultContactStiffness(p0.youngs_modulus, context.rest_bounds.sizes().maxCoeff());
-    std::vector<fem::PhysicalParameters> all = starts;
-    all.insert(all.end(), fallbacks.begin(), fallbacks.end());
-    for (size_t i = 0; i < all.size(); ++i) {
-      // Fallback starts only while no start has succeeded.
-      if (i >= starts.size() && best.ok()) break;
-      const fem::PhysicalParameters& start = all[i];
-      const inverse::JobConfig c = RefitConfig(config, freed, start);
-      Result<inverse::FitResult> fit = inverse::Fit(capture, c, options.fit);
-      nlohmann::json entry = {{"start", ExtensionValues(candidate.extension, start, k0)}};
-      if (i >= starts.size()) entry["fallback"] = true;
+    const Extension extension = plan.candidate->extension;
+    auto consider = [&](const fem::PhysicalParameters& start, Result<inverse::FitResult> fit,
+                        bool fallback) {
+      nlohmann::json entry = {{"start", ExtensionValues(extension, start, k0)}};
+      if (fallback) entry["fallback"] = true;
       if (fit.ok()) {
         entry["cost"] = fit->Best().final_cost;
-        entry["found"] = ExtensionValues(candidate.extension, fit->Best().final, k0);
+        entry["found"] = ExtensionValues(extension, fit->Best().final, k0);
       } else {
         entry["error"] = fit.status().message();
       }
       tried->push_back(entry);
       if (fit.ok() && (!best.ok() || fit->Best().final_cost < best->Best().final_cost)) {
         best = std::move(fit);
-        *used = c;
+        *used = RefitConfig(config, plan.freed, start);
       } else if (!best.ok() && !fit.ok()) {
         best = fit.status();
       }
+    };
+    for (size_t i = 0; i < plan.starts.size(); ++i)
+      consider(plan.starts[i], std::move(plan.fits[i]), false);
+    for (const fem::PhysicalParameters& start : plan.fallbacks) {
+      if (best.ok()) break;
+      consider(start, std::move(RunFits({RefitConfig(config, plan.freed, start)}).front()), true);
     }
     return best;
+  }
+
+  // "refits with friction, contact (3 fits)": what a batch of refits is about to run.
+  static std::string RefitStage(const std::vector<RefitPlan>& plans, const std::string& given) {
+    std::string names;
+    size_t fits = 0;
+    for (const RefitPlan& plan : plans) {
+      names += (names.empty() ? "" : ", ") + std::string(ToString(plan.candidate->extension));
+      fits += plan.starts.size();
+    }
+    return "refits with " + names + given + " (" + std::to_string(fits) + " fits)";
   }
 
   // 4. Steps 1a-1e of the rule for a finished refit: `tested.test` holds the null's costs
@@ -488,23 +538,44 @@ struct DiagnosisRun {
     }
   }
 
-  // 4. One refit per screened extension that predicts an improvement, judged alone.
+  // 4. One refit per screened extension that predicts an improvement, judged alone; the refits
+  // run as one batch.
   void TestCandidatesAlone() {
+    std::vector<RefitPlan> plans = PlanRefitsAlone();
+    if (plans.empty()) return;
+    Stage(RefitStage(plans, ""));
+    RunRefits(&plans);
+    for (RefitPlan& plan : plans) {
+      TestedCandidate tested;
+      tested.test.extension = plan.candidate->extension;
+      tested.test.cost_before = r0.cost;
+      tested.test.heldout_before = r0.heldout;
+      tested.starts = nlohmann::json::array();
+      inverse::JobConfig used = config;
+      const Result<inverse::FitResult> fit = BestRefit(plan, &tested.starts, &used);
+      Judge(*plan.candidate, fit, used, &tested);
+      report.tested.push_back(std::move(tested));
+    }
+  }
+
+  // The refits TestCandidatesAlone runs: at most max_refits, one per extension (the stiffness
+  // split is screened once per axis), a two-sided variable from its best start on each side.
+  std::vector<RefitPlan> PlanRefitsAlone() const {
+    std::vector<RefitPlan> plans;
     for (const ScreenedCandidate& s : report.screening) {
-      if (static_cast<int>(report.tested.size()) >= rule.max_refits) break;
+      if (static_cast<int>(plans.size()) >= rule.max_refits) break;
       if (!s.applicable || !(s.predicted_lr > 0.0)) continue;
-      // One refit per extension (the stiffness split is screened once per axis).
-      if (std::any_of(report.tested.begin(), report.tested.end(),
-                      [&](const TestedCandidate& t) { return t.test.extension == s.extension; }))
+      if (std::any_of(plans.begin(), plans.end(),
+                      [&](const RefitPlan& p) { return p.candidate->extension == s.extension; }))
         continue;
       if (Cancelled()) break;
-      const Candidate& candidate = GetCandidate(s.extension);
-      Stage(std::string("refit with ") + ToString(s.extension));
-      // A two-sided variable is refitted from its best start on each side of the null.
-      std::vector<fem::PhysicalParameters> starts = s.refit_starts;
-      if (starts.empty()) starts = {s.start};
-      std::vector<fem::PhysicalParameters> fallbacks = s.fallback_starts;
-      for (auto* list : {&starts, &fallbacks}) {
+      RefitPlan plan;
+      plan.candidate = &GetCandidate(s.extension);
+      plan.freed = plan.candidate->parameters;
+      plan.starts = s.refit_starts;
+      if (plan.starts.empty()) plan.starts = {s.start};
+      plan.fallbacks = s.fallback_starts;
+      for (auto* list : {&plan.starts, &plan.fallbacks}) {
         for (fem::PhysicalParameters& start : *list) {
           if (s.extension == Extension::kContact && !(start.contact_stiffness > 0.0)) {
             start.contact_stiffness = fem::DefaultContactStiffness(
@@ -512,17 +583,9 @@ struct DiagnosisRun {
           }
         }
       }
-      TestedCandidate tested;
-      tested.test.extension = s.extension;
-      tested.test.cost_before = r0.cost;
-      tested.test.heldout_before = r0.heldout;
-      tested.starts = nlohmann::json::array();
-      inverse::JobConfig used = config;
-      const Result<inverse::FitResult> fit =
-          Refit(candidate, candidate.parameters, starts, &tested.starts, &used, fallbacks);
-      Judge(candidate, fit, used, &tested);
-      report.tested.push_back(std::move(tested));
+      plans.push_back(std::move(plan));
     }
+    return plans;
   }
 
   // Step 2 of the rule: a physics candidate that improves the fit, tested given each nuisance
@@ -530,8 +593,54 @@ struct DiagnosisRun {
   // from the better (forward cost) of the nuisance's refit with the candidate's found values and
   // the candidate's refit with the nuisance's found values.
   void TestPhysicsGivenNuisances() {
+    std::vector<JointRefit> joints = PlanJointRefits();
+    if (joints.empty()) return;
+    std::vector<RefitPlan> plans;
+    for (const JointRefit& joint : joints) plans.push_back(joint.plan);
+    Stage(RefitStage(plans, " given a nuisance"));
+    RunRefits(&plans);
+    report.tested.reserve(report.tested.size() + joints.size());  // references stay valid
+    for (size_t j = 0; j < joints.size(); ++j) {
+      const TestedCandidate& nuisance = report.tested[joints[j].nuisance];
+      const TestedCandidate& physics = report.tested[joints[j].physics];
+      const Candidate& candidate = *plans[j].candidate;
+      const Candidate& nuisance_candidate = GetCandidate(nuisance.test.extension);
+      TestedCandidate tested;
+      tested.test.extension = candidate.extension;
+      tested.test.conditional = true;
+      tested.test.given = nuisance_candidate.extension;
+      tested.test.cost_before = nuisance.test.cost_after;
+      tested.test.heldout_before = nuisance.test.heldout_after;
+      tested.test.physics_cost = physics.test.cost_after;
+      tested.test.physics_heldout = physics.test.heldout_after;
+      tested.starts = nlohmann::json::array();
+      inverse::JobConfig used = config;
+      const Result<inverse::FitResult> fit = BestRefit(plans[j], &tested.starts, &used);
+      Judge(candidate, fit, used, &tested);
+      if (tested.test.refit_error.empty()) {
+        tested.test.nuisance_lr = LikelihoodRatioStatistic(
+            tested.test.physics_cost, tested.test.cost_after, tested.test.n_eff);
+        tested.nuisance_values = ExtensionValues(nuisance_candidate.extension, tested.parameters,
+                                                 DefaultK(tested.parameters));
+      }
+      ApplyNuisanceCheck(rule, nuisance_candidate, &tested.test);
+      report.tested.push_back(std::move(tested));
+    }
+  }
+
+  // A joint refit of the physics candidate report.tested[physics] given the nuisance
+  // report.tested[nuisance].
+  struct JointRefit {
+    size_t nuisance = 0;
+    size_t physics = 0;
+    RefitPlan plan;
+  };
+
+  // The joint refits step 2 runs: each nuisance that improves the fit with a plausible value with
+  // each physics candidate that improves it, from the better start (forward cost).
+  std::vector<JointRefit> PlanJointRefits() const {
+    std::vector<JointRefit> joints;
     const size_t num_single = report.tested.size();
-    report.tested.reserve(num_single * (num_single + 1));  // references below stay valid
     for (size_t n = 0; n < num_single; ++n) {
       const CandidateTest& fitted_nuisance = report.tested[n].test;
       if (!fitted_nuisance.nuisance || !fitted_nuisance.refit_error.empty() ||
@@ -545,8 +654,6 @@ struct DiagnosisRun {
         const TestedCandidate& physics = report.tested[i];
         const Candidate& candidate = GetCandidate(physics.test.extension);
         const Candidate& nuisance_candidate = GetCandidate(nuisance.test.extension);
-        Stage(std::string("refit with ") + ToString(candidate.extension) + " given " +
-              ToString(nuisance_candidate.extension));
         fem::PhysicalParameters start =
             CopyExtension(candidate.extension, physics.parameters, nuisance.parameters);
         const fem::PhysicalParameters other =
@@ -554,33 +661,17 @@ struct DiagnosisRun {
         Result<inverse::ObjectiveEvaluation> a = context.objective->Evaluate(start, false);
         Result<inverse::ObjectiveEvaluation> b = context.objective->Evaluate(other, false);
         if (b.ok() && !b->diverged && (!a.ok() || a->diverged || b->cost < a->cost)) start = other;
-        std::vector<std::string> freed = nuisance_candidate.parameters;
-        for (const std::string& name : candidate.parameters) freed.push_back(name);
-        TestedCandidate tested;
-        tested.test.extension = candidate.extension;
-        tested.test.conditional = true;
-        tested.test.given = nuisance_candidate.extension;
-        tested.test.cost_before = nuisance.test.cost_after;
-        tested.test.heldout_before = nuisance.test.heldout_after;
-        tested.test.physics_cost = physics.test.cost_after;
-        tested.test.physics_heldout = physics.test.heldout_after;
-        tested.starts = nlohmann::json::array();
-        inverse::JobConfig used = config;
-        const Result<inverse::FitResult> fit =
-            Refit(candidate, freed, {start}, &tested.starts, &used);
-        Judge(candidate, fit, used, &tested);
-        if (tested.test.refit_error.empty()) {
-          tested.test.nuisance_lr = LikelihoodRatioStatistic(
-              tested.test.physics_cost, tested.test.cost_after, tested.test.n_eff);
-          tested.nuisance_values =
-              ExtensionValues(nuisance_candidate.extension, tested.parameters,
-                              fem::DefaultContactStiffness(tested.parameters.youngs_modulus,
-                                                           context.rest_bounds.sizes().maxCoeff()));
-        }
-        ApplyNuisanceCheck(rule, nuisance_candidate, &tested.test);
-        report.tested.push_back(std::move(tested));
+        JointRefit joint;
+        joint.nuisance = n;
+        joint.physics = i;
+        joint.plan.candidate = &candidate;
+        joint.plan.freed = nuisance_candidate.parameters;
+        for (const std::string& name : candidate.parameters) joint.plan.freed.push_back(name);
+        joint.plan.starts = {start};
+        joints.push_back(std::move(joint));
       }
     }
+    return joints;
   }
 
   // 5. The decision from the tests.
@@ -599,30 +690,36 @@ struct DiagnosisRun {
   Result<std::optional<DiagnosisReport>> RestartFromABetterBase() {
     if (report.decision == "unexplained" && options.max_base_restarts > 0) {
       const double critical = ChiBarSquareCriticalValue(1, 0, rule.alpha);
-      std::optional<inverse::FitResult> better;
-      double better_cost = r0.cost;
-      std::string via;
+      // The null model refitted from each refit that lowered the first base's cost
+      // significantly (gate 1a' may have fitted that very start already); the rest in a batch.
+      std::vector<const TestedCandidate*> sources;
+      std::vector<inverse::JobConfig> configs;
       for (const TestedCandidate& t : report.tested) {
         // Against the first base (a null refitted in gate 1a' may have replaced cost_before).
         if (t.test.conditional || !t.test.refit_error.empty() ||
             !(LikelihoodRatioStatistic(r0.cost, t.test.cost_after, ess0.n_eff) > critical))
           continue;
-        if (options.fit.cancel != nullptr && options.fit.cancel->load()) break;
-        // Gate 1a' may have fitted this very start already.
-        Result<inverse::FitResult> fit = Status::Internal("not fitted");
-        if (t.null_fit) {
-          fit = *t.null_fit;
-        } else {
-          Stage(std::string("base model refitted from the ") + ToString(t.test.extension) +
-                " refit");
-          const fem::PhysicalParameters start =
-              NullModelStart(t.test.extension, p0, t.parameters, context.rest_bounds);
-          fit = inverse::Fit(capture, RefitConfig(config, {}, start), options.fit);
-        }
+        sources.push_back(&t);
+        if (t.null_fit) continue;
+        const fem::PhysicalParameters start =
+            NullModelStart(t.test.extension, p0, t.parameters, context.rest_bounds);
+        configs.push_back(RefitConfig(config, {}, start));
+      }
+      if (Cancelled()) return std::optional<DiagnosisReport>();
+      if (!configs.empty()) {
+        Stage("base model refitted from " + std::to_string(configs.size()) + " refit(s)");
+      }
+      std::vector<Result<inverse::FitResult>> fits = RunFits(configs);
+      std::optional<inverse::FitResult> better;
+      double better_cost = r0.cost;
+      std::string via;
+      size_t next = 0;
+      for (const TestedCandidate* t : sources) {
+        Result<inverse::FitResult> fit = t->null_fit ? *t->null_fit : std::move(fits[next++]);
         if (!fit.ok() || !(fit->Best().final_cost < better_cost)) continue;
         better_cost = fit->Best().final_cost;
         better = std::move(*fit);
-        via = ToString(t.test.extension);
+        via = ToString(t->test.extension);
       }
       if (better && LikelihoodRatioStatistic(r0.cost, better_cost, ess0.n_eff) > critical) {
         std::ostringstream why;

@@ -23,6 +23,7 @@
 #include "core/capture/capture.h"
 #include "core/common/status.h"
 #include "core/diagnosis/decision.h"
+#include "core/diagnosis/fit_batch.h"
 #include "core/diagnosis/localization.h"
 #include "core/diagnosis/motion_phases.h"
 #include "core/diagnosis/noise_floor.h"
@@ -54,6 +55,8 @@ struct DiagnoseOptions {
   // Stage messages ("base fit", "screening", ...), and the fits' progress and cancellation.
   std::function<void(const std::string&)> on_stage;
   inverse::FitOptions fit;
+  // Runs each batch of refits (fit_batch.h); empty = here, one after the other, with `fit`.
+  FitBatchRunner run_fits;
   Status Validate() const;
 };
 

@@ -99,6 +99,61 @@ TEST(Diagnose, FindsConcealedFrictionOnARamp) {
   EXPECT_TRUE(json["final_fit"]["parameters"].contains("friction_coefficient"));
 }
 
+// Timing aside: what a diagnosis report says.
+nlohmann::json WithoutTiming(nlohmann::json json) {
+  if (json.is_object()) {
+    for (auto it = json.begin(); it != json.end();) {
+      const std::string& key = it.key();
+      if (key == "timing" || key == "seconds" || key.ends_with("_seconds")) {
+        it = json.erase(it);
+      } else {
+        *it = WithoutTiming(*it);
+        ++it;
+      }
+    }
+  } else if (json.is_array()) {
+    for (nlohmann::json& item : json) item = WithoutTiming(item);
+  }
+  return json;
+}
+
+// The refits run in batches through options.run_fits; a runner that runs each batch's fits in
+// reverse order (as workers elsewhere may) gives the report the diagnosis makes alone.
+TEST(Diagnose, RefitsRunInBatchesAnywhereWithTheSameReport) {
+  RampCapture ramp(0.3);
+  DiagnoseOptions options = SmallOptions();
+  options.decision.max_refits = 2;
+  const Result<inverse::FitResult> base = inverse::Fit(ramp.capture, ramp.BaseConfig());
+  ASSERT_TRUE(base.ok()) << base.status().ToString();
+  Result<DiagnosisReport> alone = Diagnose(ramp.capture, ramp.BaseConfig(), options, &*base);
+  ASSERT_TRUE(alone.ok()) << alone.status().ToString();
+
+  std::vector<size_t> batch_sizes;
+  options.run_fits = [&](const std::vector<inverse::JobConfig>& configs) {
+    batch_sizes.push_back(configs.size());
+    std::vector<Result<inverse::FitResult>> results(configs.size(), Status::Internal("not run"));
+    for (size_t i = configs.size(); i-- > 0;)
+      results[i] = inverse::Fit(ramp.capture, configs[i], inverse::FitOptions());
+    return results;
+  };
+  Result<DiagnosisReport> batched = Diagnose(ramp.capture, ramp.BaseConfig(), options, &*base);
+  ASSERT_TRUE(batched.ok()) << batched.status().ToString();
+  ASSERT_FALSE(batch_sizes.empty());
+  EXPECT_GE(batch_sizes.front(), 2u) << "the candidates' refits form one batch";
+  EXPECT_EQ(batched->decision, "friction");
+  EXPECT_EQ(WithoutTiming(ToJson(*batched)), WithoutTiming(ToJson(*alone)));
+
+  // A runner that loses a result is an error of every refit, never a crash.
+  options.run_fits = [](const std::vector<inverse::JobConfig>&) {
+    return std::vector<Result<inverse::FitResult>>();
+  };
+  Result<DiagnosisReport> broken = Diagnose(ramp.capture, ramp.BaseConfig(), options, &*base);
+  ASSERT_TRUE(broken.ok()) << broken.status().ToString();
+  ASSERT_FALSE(broken->tested.empty());
+  EXPECT_NE(broken->tested[0].test.refit_error.find("returned 0 results"), std::string::npos);
+  EXPECT_EQ(broken->decision, "unexplained");
+}
+
 // The same ramp without friction: the base model is the truth, the decision is "none".
 TEST(Diagnose, ControlWithoutEffectGivesNone) {
   RampCapture ramp(0.0);
