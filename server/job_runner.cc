@@ -21,6 +21,7 @@
 #include "server/job_capture.h"
 #include "server/lease_heartbeat.h"
 #include "server/redact_paths.h"
+#include "server/refit_tasks.h"
 #include "server/start_tasks.h"
 #include "server/work_folder.h"
 
@@ -124,13 +125,20 @@ Result<inverse::FitResult> FitHere(const store::Job& job, const capture::Capture
 // job's progress history, and its report goes into the result as "diagnosis". A diagnosis that
 // fails leaves the fit's result standing, with {"error": ...} as its report. Its plots go into
 // the job's report folder (report_dir/diagnosis).
+// With fan-out, its refits run as tasks any worker can claim (refit_tasks.h).
 nlohmann::json RunDiagnosis(const store::Job& job, const capture::Capture& capture,
                             const inverse::JobConfig& config, const inverse::FitResult& fit,
-                            std::atomic<bool>& cancel, const JobRunnerContext& context,
-                            const fs::path& report_dir) {
+                            const std::string& worker_id, std::atomic<bool>& cancel,
+                            const JobRunnerContext& context, const fs::path& report_dir) {
   diagnosis::DiagnoseOptions options;
   if (context.reports != nullptr) options.plot_directory = report_dir / "diagnosis";
   options.fit.cancel = &cancel;
+  int batches = 0;
+  if (context.fan_out_starts) {
+    options.run_fits = [&](const std::vector<inverse::JobConfig>& configs) {
+      return FitBatchByTasks(job, capture, configs, ++batches, worker_id, context, cancel);
+    };
+  }
   options.on_stage = [&](const std::string& stage) {
     RecordNote(job, "diagnosis: " + stage, context);
   };
@@ -140,7 +148,13 @@ nlohmann::json RunDiagnosis(const store::Job& job, const capture::Capture& captu
     return {{"error", report.status().message()}};
   }
   context.logger->info("job {}: diagnosis: {}", job.id, report->decision);
-  return diagnosis::ToJson(*report);
+  nlohmann::json json = diagnosis::ToJson(*report);
+  // Plots by their names in the job's report (DownloadArtifact), not the worker's folder.
+  for (nlohmann::json& plot : json["plots"]) {
+    if (plot.is_string())
+      plot = fs::path(plot.get<std::string>()).lexically_relative(report_dir).generic_string();
+  }
+  return json;
 }
 
 // The fit's pictures into `dir` (core/diagnosis/fit_report.h); what result.json records of them,
@@ -244,7 +258,8 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
       }
     }
     if (result.ok() && !result->cancelled && config->diagnose) {
-      diagnosis_json = RunDiagnosis(job, *capture, *config, *result, cancel, context, report_dir);
+      diagnosis_json =
+          RunDiagnosis(job, *capture, *config, *result, worker_id, cancel, context, report_dir);
     }
     if (result.ok() && !result->cancelled && !cancel.load() && context.reports != nullptr) {
       report_json = DrawReport(job, *capture, *config, *result, cancel, context, report_dir);

@@ -9,6 +9,7 @@
 #include "server/fit_progress.h"
 #include "server/job_capture.h"
 #include "server/lease_heartbeat.h"
+#include "server/refit_tasks.h"
 #include "server/work_folder.h"
 
 namespace softid::server {
@@ -28,7 +29,7 @@ struct TaskInputs {
   store::Job job;
   inverse::JobConfig config;
   store::Capture stored;
-  inverse::FitCheckpoint checkpoint;
+  inverse::FitCheckpoint checkpoint;  // the job's fit's starts only
 };
 
 Result<TaskInputs> LoadTaskInputs(const store::StartTask& task, const JobRunnerContext& context) {
@@ -40,6 +41,7 @@ Result<TaskInputs> LoadTaskInputs(const store::StartTask& task, const JobRunnerC
   if (in.config.threads == 0 && context.cores_per_job > 0)
     in.config.threads = context.cores_per_job;
   SOFTID_ASSIGN_OR_RETURN(in.stored, context.jobs->GetCapture(in.job.capture_id));
+  if (!task.batch.empty()) return in;  // a refit: its config is the task's input
   SOFTID_ASSIGN_OR_RETURN(std::optional<nlohmann::json> saved,
                           context.jobs->LoadCheckpoint(task.job_id));
   if (!saved) return Status::FailedPrecondition("the job has no checkpoint to start from");
@@ -50,17 +52,9 @@ Result<TaskInputs> LoadTaskInputs(const store::StartTask& task, const JobRunnerC
 // Fits the task's start; its result once it ran to its end (nullopt when stopped, or when it
 // could not run: then `error` says why).
 std::optional<inverse::StartResult> FitOneStart(const store::StartTask& task, const TaskInputs& in,
-                                                const std::string& worker_id,
+                                                const capture::Capture& capture,
                                                 const JobRunnerContext& context,
                                                 std::atomic<bool>& stop, std::string* error) {
-  WorkFolder folder(context.work_root / (task.job_id + "-start-" + std::to_string(task.index)));
-  nlohmann::json ingest_report;  // the job's worker reported the ingest
-  Result<capture::Capture> capture =
-      PrepareCapture(in.job, in.stored, worker_id, context, folder.path, stop, &ingest_report);
-  if (!capture.ok()) {
-    *error = capture.status().message();
-    return std::nullopt;
-  }
   std::optional<inverse::StartResult> finished;
   inverse::FitOptions options;
   options.cancel = &stop;
@@ -76,9 +70,36 @@ std::optional<inverse::StartResult> FitOneStart(const store::StartTask& task, co
   };
   // A start that diverged makes the fit fail ("every start failed"), but it finished: its
   // result says so, and the job's worker combines it with the others.
-  Result<inverse::FitResult> fit = inverse::Fit(*capture, in.config, options);
+  Result<inverse::FitResult> fit = inverse::Fit(capture, in.config, options);
   if (!finished && !fit.ok() && !stop.load()) *error = fit.status().message();
   return finished;
+}
+
+// Runs the task in a folder of its own: a start of the job's fit, or a refit of a batch. The
+// result to complete it with once it ran to its end; nullopt when stopped, or when it could not
+// run (then `error` says why).
+std::optional<nlohmann::json> RunTask(const store::StartTask& task, const TaskInputs& in,
+                                      const std::string& worker_id, const JobRunnerContext& context,
+                                      std::atomic<bool>& stop, std::string* error) {
+  WorkFolder folder(context.work_root / (task.job_id + "-task-" + std::to_string(task.index)));
+  nlohmann::json ingest_report;  // the job's worker reported the ingest
+  Result<capture::Capture> capture =
+      PrepareCapture(in.job, in.stored, worker_id, context, folder.path, stop, &ingest_report);
+  if (!capture.ok()) {
+    *error = capture.status().message();
+    return std::nullopt;
+  }
+  if (!task.batch.empty()) return RunRefitTask(task, *capture, stop, error);
+  std::optional<inverse::StartResult> finished =
+      FitOneStart(task, in, *capture, context, stop, error);
+  if (!finished) return std::nullopt;
+  return inverse::StartCheckpointJson(*finished);
+}
+
+// "start 2", or "refit task 9 (diagnosis 1 ...)": a task as logs and errors name it.
+std::string TaskName(const store::StartTask& task) {
+  if (task.batch.empty()) return "start " + std::to_string(task.index);
+  return "refit task " + std::to_string(task.index) + " (" + task.batch + ")";
 }
 
 }  // namespace
@@ -87,8 +108,8 @@ Status CheckTaskAttempts(const std::vector<store::StartTask>& tasks,
                          const JobRunnerContext& context) {
   for (const store::StartTask& task : tasks) {
     if (task.state != store::StartTaskState::kDone && task.attempts > 2 * context.max_attempts) {
-      return Status::FailedPrecondition("start " + std::to_string(task.index) +
-                                        " did not finish in " + std::to_string(task.attempts) +
+      return Status::FailedPrecondition(TaskName(task) + " did not finish in " +
+                                        std::to_string(task.attempts) +
                                         " claims by workers (see their logs)");
     }
   }
@@ -108,10 +129,10 @@ StartTaskOutcome RunStartTask(const store::StartTask& task, const std::string& w
                               const JobRunnerContext& context, std::atomic<bool>& stop,
                               const std::atomic<bool>* outer_stop, std::string* error) {
   const auto& log = context.logger;
-  const std::string name = "job " + task.job_id + " start " + std::to_string(task.index);
+  const std::string name = "job " + task.job_id + " " + TaskName(task);
   log->info("{}: RUNNING on {} (task attempt {})", name, worker_id, task.attempts);
   std::string why;
-  std::optional<inverse::StartResult> finished;
+  std::optional<nlohmann::json> finished;
   bool lost = false;
   {
     LeaseCalls calls;
@@ -127,13 +148,14 @@ StartTaskOutcome RunStartTask(const store::StartTask& task, const std::string& w
     // A start whose earlier run stopped (a lost or stopped worker) begins again at iteration 0:
     // the history says why its iterations repeat.
     if (inputs.ok() && task.attempts > 1) {
+      const std::string what =
+          task.batch.empty() ? "start " + std::to_string(task.index + 1) : TaskName(task);
       RecordNote(inputs->job,
-                 "start " + std::to_string(task.index + 1) + " runs again (task attempt " +
-                     std::to_string(task.attempts) + ")",
+                 what + " runs again (task attempt " + std::to_string(task.attempts) + ")",
                  context);
     }
     if (inputs.ok()) {
-      finished = FitOneStart(task, *inputs, worker_id, context, stop, &why);
+      finished = RunTask(task, *inputs, worker_id, context, stop, &why);
     } else {
       why = inputs.status().message();
     }
@@ -156,25 +178,22 @@ StartTaskOutcome RunStartTask(const store::StartTask& task, const std::string& w
     }
     return StartTaskOutcome::kReleased;
   }
-  if (Status completed = context.jobs->CompleteStartTask(task.job_id, task.index, worker_id,
-                                                         inverse::StartCheckpointJson(*finished));
+  if (Status completed =
+          context.jobs->CompleteStartTask(task.job_id, task.index, worker_id, *finished);
       !completed.ok()) {
     log->warn("{}: result not recorded: {}", name, completed.message());
     return StartTaskOutcome::kLost;
   }
   context.events->Notify(task.job_id);
-  log->info("{}: done in {:.1f} s (cost {:.4e})", name, finished->seconds, finished->final_cost);
+  log->info("{}: done", name);
   return StartTaskOutcome::kDone;
 }
 
-namespace {
-
-// Runs the job's own tasks while any is claimable and waits for those running elsewhere; the
-// finished tasks once every one is DONE.
 Result<std::vector<store::StartTask>> RunAndAwaitTasks(const store::Job& job,
                                                        const std::string& worker_id,
                                                        const JobRunnerContext& context,
-                                                       std::atomic<bool>& cancel) {
+                                                       std::atomic<bool>& cancel,
+                                                       const std::string& batch) {
   while (true) {
     if (cancel.load()) return Status::Cancelled("the fit was cancelled");
     SOFTID_ASSIGN_OR_RETURN(std::optional<store::StartTask> own,
@@ -185,12 +204,13 @@ Result<std::vector<store::StartTask>> RunAndAwaitTasks(const store::Job& job,
       const StartTaskOutcome outcome =
           RunStartTask(*own, worker_id, context, stop, &cancel, &error);
       if (outcome == StartTaskOutcome::kReleased && !error.empty() && !cancel.load()) {
-        return Status::FailedPrecondition("start " + std::to_string(own->index) + ": " + error);
+        return Status::FailedPrecondition(TaskName(*own) + ": " + error);
       }
       continue;
     }
     SOFTID_ASSIGN_OR_RETURN(std::vector<store::StartTask> tasks,
                             context.jobs->ListStartTasks(job.id));
+    std::erase_if(tasks, [&](const store::StartTask& t) { return t.batch != batch; });
     const bool all_done = std::all_of(tasks.begin(), tasks.end(), [](const store::StartTask& t) {
       return t.state == store::StartTaskState::kDone;
     });
@@ -199,8 +219,6 @@ Result<std::vector<store::StartTask>> RunAndAwaitTasks(const store::Job& job,
     std::this_thread::sleep_for(context.task_poll_interval);
   }
 }
-
-}  // namespace
 
 Result<inverse::FitResult> FitByStartTasks(
     const store::Job& job, const capture::Capture& capture, const inverse::JobConfig& config,
@@ -222,13 +240,14 @@ Result<inverse::FitResult> FitByStartTasks(
                             context.jobs->ListStartTasks(job.id));
     std::vector<int> kept;
     for (const store::StartTask& task : existing) {
-      if (task.state == store::StartTaskState::kDone) kept.push_back(task.index);
+      if (task.batch.empty() && task.state == store::StartTaskState::kDone)
+        kept.push_back(task.index);
     }
     NoteKeptStarts(job, kept.size(), prepared.num_starts, context);
     if (kept_starts != nullptr) *kept_starts = std::move(kept);
   }
   SOFTID_ASSIGN_OR_RETURN(const std::vector<store::StartTask> tasks,
-                          RunAndAwaitTasks(job, worker_id, context, cancel));
+                          RunAndAwaitTasks(job, worker_id, context, cancel, ""));
   inverse::FitCheckpoint all = prepared;
   all.finished.clear();
   for (const store::StartTask& task : tasks) {

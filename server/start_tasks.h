@@ -53,6 +53,16 @@ StartTaskOutcome RunStartTask(const store::StartTask& task, const std::string& w
                               const std::atomic<bool>* outer_stop = nullptr,
                               std::string* error = nullptr);
 
+// Runs the job's own tasks (any batch) while any is claimable and waits for those of `batch` (""
+// = the starts of the job's fit) running elsewhere; the batch's tasks by index once every one is
+// DONE. Cancelled once `cancel` is set; FailedPrecondition naming a task of the job's own that
+// cannot run here, or one claimed too often (CheckTaskAttempts).
+Result<std::vector<store::StartTask>> RunAndAwaitTasks(const store::Job& job,
+                                                       const std::string& worker_id,
+                                                       const JobRunnerContext& context,
+                                                       std::atomic<bool>& cancel,
+                                                       const std::string& batch);
+
 // The fit of `job` (claimed by `worker_id`) with its starts run as tasks. `earlier` is an earlier
 // attempt's checkpoint: its discretisation is kept, and so are the starts it finished. Stops with
 // StatusCode::kCancelled once `cancel` is set; fails naming the start when one of this worker's

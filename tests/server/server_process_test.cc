@@ -352,6 +352,74 @@ TEST_F(ServerProcessTest, FannedOutStartsRunOnEveryWorkerAndMatchTheOneWorkerRes
   StopCleanly(*server);
 }
 
+// Timing aside: what a result says.
+nlohmann::json WithoutTiming(nlohmann::json json) {
+  if (json.is_object()) {
+    for (auto it = json.begin(); it != json.end();) {
+      const std::string& key = it.key();
+      if (key == "timing" || key == "seconds" || key.ends_with("_seconds")) {
+        it = json.erase(it);
+      } else {
+        *it = WithoutTiming(*it);
+        ++it;
+      }
+    }
+  } else if (json.is_array()) {
+    for (nlohmann::json& item : json) item = WithoutTiming(item);
+  }
+  return json;
+}
+
+// --fan-out-starts with "diagnose": true: the diagnosis' refits run as tasks on both workers, and
+// the diagnosis is the one a server without fan-out makes for the same job. The base model is
+// told a wrong sideways launch, so the motion misfits and candidates are refitted.
+TEST_F(ServerProcessTest, FannedOutDiagnosisRefitsRunOnEveryWorkerAndMatchTheOneWorkerDiagnosis) {
+  nlohmann::json config = nlohmann::json::parse(FitConfig(/*max_iterations=*/6));
+  config["fixed"]["initial_velocity"] = {0.3, 0.0, 0.0};
+  config["diagnose"] = true;
+  std::string capture_id;
+  nlohmann::json fanned;
+  {
+    std::unique_ptr<ServerProcess> server = Start({.workers = 2, .extra = {"--fan-out-starts"}});
+    ASSERT_NE(server, nullptr);
+    ReconstructionClient client = server->Client();
+    capture_id = Upload(client);
+    const std::string job = CreateOk(client, capture_id, config.dump()).id();
+    ASSERT_EQ(WatchToEnd(client, job).back().state(), v1::SUCCEEDED) << ReadFile(log_file());
+    v1::Result result;
+    ASSERT_TRUE(client.GetResult(job, &result).ok());
+    fanned = nlohmann::json::parse(result.result_json());
+    std::map<std::string, int> workers;
+    const std::regex line("job " + job +
+                          " refit task [0-9]+ \\(diagnosis [^)]*\\): RUNNING on ([^ ]+) ");
+    std::istringstream log(ReadFile(log_file()));
+    for (std::string text; std::getline(log, text);) {
+      std::smatch match;
+      if (std::regex_search(text, match, line)) ++workers[match[1].str()];
+    }
+    EXPECT_EQ(workers.size(), 2u) << ReadFile(log_file());
+    StopCleanly(*server);
+  }
+  ASSERT_TRUE(fanned.contains("diagnosis"));
+  ASSERT_FALSE(fanned["diagnosis"].contains("error")) << fanned["diagnosis"].dump(1);
+  EXPECT_GE(fanned["diagnosis"].value("candidates", nlohmann::json::array()).size(), 2u)
+      << fanned["diagnosis"].dump(1);
+  // The plots are named inside the job's report, not where its worker drew them.
+  EXPECT_EQ(fanned["diagnosis"]["plots"][0], "diagnosis/residual_per_frame.png");
+  std::unique_ptr<ServerProcess> server = Start({.workers = 1});
+  ASSERT_NE(server, nullptr);
+  ReconstructionClient client = server->Client();
+  const std::string job = CreateOk(client, capture_id, config.dump()).id();
+  ASSERT_EQ(WatchToEnd(client, job).back().state(), v1::SUCCEEDED);
+  v1::Result result;
+  ASSERT_TRUE(client.GetResult(job, &result).ok());
+  const nlohmann::json alone = nlohmann::json::parse(result.result_json());
+  EXPECT_EQ(ReadFile(log_file()).find("job " + job + " refit task"), std::string::npos);
+  EXPECT_EQ(WithoutTiming(fanned["diagnosis"]), WithoutTiming(alone["diagnosis"]));
+  EXPECT_EQ(fanned["parameters"], alone["parameters"]);
+  StopCleanly(*server);
+}
+
 // SIGTERM while a job runs: exit status 0, the job QUEUED at once (nothing left RUNNING, so the
 // next start recovers nothing), and the interrupted attempt is not held against max_attempts:
 // with --max-attempts 1 the job still runs to SUCCEEDED afterwards.
