@@ -1,10 +1,41 @@
 #include "core/lab/scene_flags.h"
 
+#include <algorithm>
 #include <fstream>
 
 #include "core/common/json_fields.h"
+#include "core/fem/parameter_registry.h"
 
 namespace softid::lab {
+
+namespace {
+
+// "--initial-velocity" for "initial_velocity".
+std::string FlagName(std::string_view parameter) {
+  std::string flag = "--" + std::string(parameter);
+  std::replace(flag.begin(), flag.end(), '_', '-');
+  return flag;
+}
+
+bool HasFlag(const fem::ParameterInfo& p) {
+  return p.shape == fem::ParameterShape::kScalar || p.shape == fem::ParameterShape::kVector3;
+}
+
+}  // namespace
+
+// One flag per scalar or 3-vector parameter: "--youngs-modulus" takes Young's modulus in Pa.
+void SceneFlags::RegisterParameterFlags(CLI::App* app) {
+  for (const fem::ParameterInfo& p : fem::ParameterRegistry()) {
+    if (!HasFlag(p)) continue;
+    std::string names = FlagName(p.name);
+    if (p.name == "friction_coefficient") names += ",--friction";  // the short spelling
+    const bool scalar = p.shape == fem::ParameterShape::kScalar;
+    app->add_option(names, parameter_values[std::string(p.name)],
+                    std::string(p.description) + " [" + std::string(p.unit) + "]" +
+                        (scalar ? "" : " (3 numbers)"))
+        ->expected(scalar ? 1 : 3);
+  }
+}
 
 void SceneFlags::Register(CLI::App* app) {
   std::string names;
@@ -13,27 +44,11 @@ void SceneFlags::Register(CLI::App* app) {
   app->add_option("--mesh", mesh, "drop any mesh (OBJ/PLY/STL, metres) instead of a scene");
   app->add_option("--parameters", parameters_file,
                   "JSON file of parameters (public names) applied over the scene's");
-  app->add_option("--youngs-modulus", youngs_modulus, "Young's modulus E [Pa]");
-  app->add_option("--poisson-ratio", poisson_ratio, "Poisson ratio nu in (0, 0.5)");
-  app->add_option("--density", density, "density [kg/m^3]");
-  app->add_option("--mass-damping", mass_damping, "Rayleigh mass damping alpha [1/s]");
-  app->add_option("--stiffness-damping", stiffness_damping, "Rayleigh stiffness damping beta [s]");
-  app->add_option("--gravity", gravity, "gravity vector [m/s^2]")->expected(3);
-  app->add_option("--initial-velocity", initial_velocity, "initial velocity [m/s]")->expected(3);
-  app->add_option("--initial-angular-velocity", initial_angular_velocity,
-                  "initial angular velocity about the centre of mass [rad/s]")
-      ->expected(3);
+  RegisterParameterFlags(app);
   app->add_option("--ground-normal", ground_normal, "ground plane normal n (n.x = offset)")
       ->expected(3);
   app->add_option("--ground-offset", ground_offset, "ground plane offset [m]");
   app->add_flag("--no-ground", no_ground, "remove the ground plane");
-  app->add_option("--contact-stiffness", contact_stiffness, "penalty [Pa/m]; 0 = 100 E / L");
-  app->add_option("--contact-damping", contact_damping, "contact damping [s]");
-  app->add_option("--friction-coefficient,--friction", friction_coefficient,
-                  "Coulomb mu (hidden physics)");
-  app->add_option("--drag-linear", drag_linear, "linear air drag [kg/(m^2 s)] (hidden physics)");
-  app->add_option("--drag-quadratic", drag_quadratic,
-                  "quadratic air drag [kg/m^3] (hidden physics)");
   app->add_option("--stiffness-field", stiffness_field,
                   "JSON stiffness field, e.g. {\"kind\":\"linear\",\"origin\":[0,0,0],"
                   "\"log_gradient\":[3,0,0]} (hidden physics)");
@@ -48,6 +63,18 @@ void SceneFlags::Register(CLI::App* app) {
       ->check(CLI::Range(0.0, 1.0));
   app->add_option("--fps", fps, "frames per second")->capture_default_str();
   app->add_option("--duration", duration, "seconds to simulate (default: the scene's)");
+}
+
+Status SceneFlags::ApplyParameterFlags(fem::PhysicalParameters* p) const {
+  for (const auto& [name, values] : parameter_values) {
+    if (values.empty()) continue;
+    const fem::ParameterInfo* parameter = fem::FindParameter(name);
+    if (parameter == nullptr) return Status::Internal("no parameter " + name);
+    const nlohmann::json value =
+        values.size() == 1 ? nlohmann::json(values[0]) : nlohmann::json(values);
+    SOFTID_RETURN_IF_ERROR(fem::ParameterFromJson(value, *parameter, FlagName(name), p));
+  }
+  return Status::Ok();
 }
 
 namespace {
@@ -71,21 +98,7 @@ Result<scenes::Scene> SceneFlags::BuildScene() const {
       return Status::InvalidArgument("--parameters = " + parameters_file + ": not valid JSON");
     SOFTID_ASSIGN_OR_RETURN(p, fem::PhysicalParametersFromJson(j, p));
   }
-  if (youngs_modulus) p.youngs_modulus = *youngs_modulus;
-  if (poisson_ratio) p.poisson_ratio = *poisson_ratio;
-  if (density) p.density = *density;
-  if (mass_damping) p.mass_damping = *mass_damping;
-  if (stiffness_damping) p.stiffness_damping = *stiffness_damping;
-  if (!gravity.empty()) {
-    SOFTID_ASSIGN_OR_RETURN(p.gravity, Vector(gravity, "--gravity"));
-  }
-  if (!initial_velocity.empty()) {
-    SOFTID_ASSIGN_OR_RETURN(p.initial_velocity, Vector(initial_velocity, "--initial-velocity"));
-  }
-  if (!initial_angular_velocity.empty()) {
-    SOFTID_ASSIGN_OR_RETURN(p.initial_angular_velocity,
-                            Vector(initial_angular_velocity, "--initial-angular-velocity"));
-  }
+  SOFTID_RETURN_IF_ERROR(ApplyParameterFlags(&p));
   if (!ground_normal.empty() || ground_offset) {
     fem::GroundPlane plane = p.ground.value_or(fem::GroundPlane{});
     if (!ground_normal.empty()) {
@@ -98,11 +111,6 @@ Result<scenes::Scene> SceneFlags::BuildScene() const {
     p.ground = plane;
   }
   if (no_ground) p.ground.reset();
-  if (contact_stiffness) p.contact_stiffness = *contact_stiffness;
-  if (contact_damping) p.contact_damping = *contact_damping;
-  if (friction_coefficient) p.friction_coefficient = *friction_coefficient;
-  if (drag_linear) p.drag_linear = *drag_linear;
-  if (drag_quadratic) p.drag_quadratic = *drag_quadratic;
   if (!stiffness_field.empty()) {
     nlohmann::json j = nlohmann::json::parse(stiffness_field, nullptr, false);
     if (j.is_discarded())

@@ -1,8 +1,11 @@
 // Command-line flags shared by softid-lab commands that run a scene: which scene, every physical
-// parameter under its public name (dashes for underscores), and the simulation resolution.
+// parameter under its public name (dashes for underscores), and the simulation resolution. The
+// scalar and 3-vector parameters' flags come from the parameter registry (core/fem), so a new
+// parameter has its flag without an edit here.
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -17,12 +20,11 @@ struct SceneFlags {
   std::string scene = "torus-drop";
   std::string mesh;
   std::string parameters_file;
-  std::optional<double> youngs_modulus, poisson_ratio, density, mass_damping, stiffness_damping;
-  std::vector<double> gravity, initial_velocity, initial_angular_velocity, ground_normal;
+  // The values given for registry parameters, by name: 1 number for a scalar, 3 for a vector.
+  std::map<std::string, std::vector<double>> parameter_values;
+  std::vector<double> ground_normal;
   std::optional<double> ground_offset;
   bool no_ground = false;
-  std::optional<double> contact_stiffness, contact_damping, friction_coefficient;
-  std::optional<double> drag_linear, drag_quadratic;
   std::string stiffness_field;
   std::optional<double> stiffness_halves;
   // Simulation.
@@ -37,6 +39,11 @@ struct SceneFlags {
   // The scene with every flag applied; errors name the flag and value.
   Result<scenes::Scene> BuildScene() const;
   scenes::RunOptions BuildRunOptions() const;
+
+ private:
+  void RegisterParameterFlags(CLI::App* app);
+  // The registry parameters' flags applied to *p; errors name the flag and value.
+  Status ApplyParameterFlags(fem::PhysicalParameters* p) const;
 };
 
 }  // namespace softid::lab
