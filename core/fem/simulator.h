@@ -246,6 +246,7 @@ class Simulator {
   std::vector<std::array<double, 8>> element_stiffness_weights_;
   std::vector<double> element_scale_;  // stiffness field scale per element
   StepSummary NewtonSolve(Mode mode);
+  struct NewtonRun;  // NewtonSolve's stages and the state they share (simulator.cc)
   // Whether the next dynamic step first tries the preconditioner's estimate as its only update:
   // after a step that converged with one Newton update. Reset with the state, so a run depends on
   // its start alone.
