@@ -580,230 +580,301 @@ LinearSolver::Symmetry Simulator::TangentSymmetry(Mode mode) const {
              : LinearSolver::Symmetry::kGeneral;
 }
 
-StepSummary Simulator::NewtonSolve(Mode mode) {
-  StepSummary summary;
-  const bool dynamic = mode == Mode::kDynamic;
-  const double dt = options_.time_step;
-  const double h = mesh_.CellSize();
-  // A factor renewed in the background takes over at the start of a step, at the same point
-  // whatever the timing: once the solves since have done about its work, at the latest at the
-  // kMaxFactorizationSteps-th step.
-  if (dynamic)
-    solver_.FinishFactorizeWhenDue(kMaxFactorizationSteps);
-  else
-    solver_.FinishFactorize();
-  if (dynamic) RecordFactor();
-  u_next_ = state_.u;
-  v_next_ = state_.v;
-  a_next_ = state_.a;
-  if (dynamic) {
-    // Predictor: a_{n+1} = a_n.
-    u_next_ = state_.u + dt * state_.v + (0.5 * dt * dt) * state_.a;
-    for (int i = 0; i < mesh_.NumNodes(); ++i) {
-      if (fixed_[i]) u_next_.segment<3>(3 * i).setZero();
-    }
-    NewmarkKinematics(u_next_, &v_next_, &a_next_);
-  } else {
-    v_next_.setZero();
-    a_next_.setZero();
+// One NewtonSolve: the settings fixed for the solve, and the state its stages share: the iterate
+// (the simulator's u_next_, v_next_, a_next_ with the work vectors residual_, rhs_, update_), the
+// body rotation and residual norm of the last assembly, and the summary.
+struct Simulator::NewtonRun {
+  NewtonRun(Simulator& simulator, Mode mode);
+  // The friction iterate and the tangent recording serve this solve only.
+  ~NewtonRun() {
+    sim.use_friction_iterate_ = false;
+    sim.record_tangent_ = false;
   }
-  LinearSolver::Options linear;
-  linear.relative_tolerance = options_.linear_tolerance;
-  linear.max_iterations = options_.max_linear_iterations;
+  NewtonRun(const NewtonRun&) = delete;
+  NewtonRun& operator=(const NewtonRun&) = delete;
 
-  // Newton on the step equations with the consistent tangent, less the terms AssembleElement
-  // leaves out of Newton's tangent. Full steps, except that no surface point may be pushed deeper
-  // into the ground than a few contact smoothing lengths beyond where the contact was linearised
-  // (a continuous-collision filter, as in IPC), nor have its slip reversed by more than a few
-  // friction velocity scales: from outside either smooth knee the linearisation sees no stiffness
-  // and would overshoot far across it.
-  // The residual norm is no merit function here: in bending, element forces exceed the net
-  // nodal forces a thousandfold and ||r|| grows over good steps.
-  //
-  // Convergence: the update falls below newton_tolerance * h. After a large update the next one is
-  // first estimated by the preconditioner alone, P^-1 (-r), from the residual (no tangent
-  // assembly, one pair of triangular solves instead of a GMRES solve): when that estimate is
-  // already small it is taken as the last update and the step ends. Otherwise it is GMRES's
-  // initial guess, so the estimate is not wasted. In free flight this saves a full Newton
-  // iteration per step.
+  void TakeOverFactor();
+  void Predict();
+  void BeginIterating();
+  enum class Start { kIterate, kConverged, kDiverged };
+  Start FirstAssembly();
+  Eigen::Matrix3d AssembleAtIterate(bool residual_only, bool reuse_rotations);
+  const LinearSolver::Matrix& StepMatrix();
+  LinearSolver::Summary SolveStep();
+  bool SolveForUpdate();
+  void TakeUpdate(int iteration, double full_step, bool small);
+  double EstimateUpdate();
+  void TakeEstimate(double estimate);
+  StepSummary Finish();
+  StepSummary Diverged() {
+    summary.diverged = true;
+    return summary;
+  }
+  bool ResidualFinite() const { return std::isfinite(residual_norm); }
+
+  Simulator& sim;
+  const Mode mode;
+  const bool dynamic;
+  // Newton's matrix is the residual's Jacobian divided by 1 - alpha_f (see AssembleStep).
+  const double matrix_scale;
+  // Matrix-free: GMRES applies the step matrix by elements (StepTangentOperator) from what every
+  // assembly of this step records; a matrix is assembled only to be factorised.
+  const bool matrix_free;
   // The friction force estimate starts from the law at v_n: a sticking point keeps its force.
-  const bool friction_active = dynamic && parameters_.ground &&
-                               parameters_.friction_coefficient > 0.0 && has_surface_forces_;
+  const bool friction_active;
+  double tolerance = 0.0;  // on the max norm of an update [m]
+  LinearSolver::Options linear;
+  StepSummary summary;
+  Eigen::Matrix3d body_rotation;
+  double residual_norm = 0.0;
+};
+
+Simulator::NewtonRun::NewtonRun(Simulator& simulator, Mode mode)
+    : sim(simulator),
+      mode(mode),
+      dynamic(mode == Mode::kDynamic),
+      matrix_scale(dynamic ? 1.0 - sim.options_.generalized_alpha_f : 1.0),
+      matrix_free(dynamic && sim.newton_tangent_ && sim.options_.matrix_free_newton),
+      friction_active(dynamic && sim.parameters_.ground &&
+                      sim.parameters_.friction_coefficient > 0.0 && sim.has_surface_forces_) {
+  const SimulationOptions& options = sim.options_;
+  linear.relative_tolerance = options.linear_tolerance;
+  linear.max_iterations = options.max_linear_iterations;
   // Under friction the velocities must be solved well inside the friction law's knee too: a
   // velocity error comparable to friction_velocity_scale changes the friction force by a large
   // fraction of mu f_n and accumulates over a slide (see kFrictionVelocityTolerance).
   // (Friction acts where the contact force at the step's start is positive: lagged friction.)
-  double tolerance = options_.newton_tolerance * h;
-  if (friction_active && std::any_of(lagged_normal_force_.begin(), lagged_normal_force_.end(),
-                                     [](double f) { return f > 0.0; })) {
-    const double dv_du = options_.newmark_gamma / (options_.newmark_beta * dt);
+  tolerance = options.newton_tolerance * sim.mesh_.CellSize();
+  if (friction_active &&
+      std::any_of(sim.lagged_normal_force_.begin(), sim.lagged_normal_force_.end(),
+                  [](double f) { return f > 0.0; })) {
+    const double dv_du = options.newmark_gamma / (options.newmark_beta * options.time_step);
     tolerance =
-        std::min(tolerance, kFrictionVelocityTolerance * options_.friction_velocity_scale / dv_du);
+        std::min(tolerance, kFrictionVelocityTolerance * options.friction_velocity_scale / dv_du);
   }
-  struct IterateGuard {
-    bool* flag;
-    ~IterateGuard() { *flag = false; }
-  } guard{&use_friction_iterate_};
-  use_friction_iterate_ = friction_active && options_.primal_dual_friction;
-  if (use_friction_iterate_) {
-    friction_iterate_.resize(force_embedding_.NumPoints());
-    for (int p = 0; p < force_embedding_.NumPoints(); ++p) {
-      friction_iterate_[p] = FrictionForce(
-          contact_, force_embedding_.Interpolate(mesh_, state_.v, p), lagged_normal_force_[p]);
+}
+
+// A factor renewed in the background takes over at the start of a step, at the same point
+// whatever the timing: once the solves since have done about its work, at the latest at the
+// kMaxFactorizationSteps-th step.
+void Simulator::NewtonRun::TakeOverFactor() {
+  if (dynamic)
+    sim.solver_.FinishFactorizeWhenDue(kMaxFactorizationSteps);
+  else
+    sim.solver_.FinishFactorize();
+  if (dynamic) sim.RecordFactor();
+}
+
+// The iterate's start: a dynamic step predicts a_{n+1} = a_n, a static solve starts at rest.
+void Simulator::NewtonRun::Predict() {
+  const SimulationState& state = sim.state_;
+  const double dt = sim.options_.time_step;
+  sim.u_next_ = state.u;
+  sim.v_next_ = state.v;
+  sim.a_next_ = state.a;
+  if (dynamic) {
+    sim.u_next_ = state.u + dt * state.v + (0.5 * dt * dt) * state.a;
+    for (int i = 0; i < sim.mesh_.NumNodes(); ++i) {
+      if (sim.fixed_[i]) sim.u_next_.segment<3>(3 * i).setZero();
     }
-  }
-  // Newton's matrix is the residual's Jacobian divided by 1 - alpha_f (see AssembleStep).
-  const double matrix_scale = dynamic ? 1.0 - options_.generalized_alpha_f : 1.0;
-  // Matrix-free: GMRES applies the step matrix by elements (StepTangentOperator) from what every
-  // assembly of this step records; a matrix is assembled only to be factorised.
-  const bool matrix_free = dynamic && newton_tangent_ && options_.matrix_free_newton;
-  struct RecordGuard {
-    bool* flag;
-    ~RecordGuard() { *flag = false; }
-  } record_guard{&record_tangent_};
-  record_tangent_ = matrix_free;
-  Eigen::Matrix3d body_rotation;
-  const auto assemble = [&](bool residual_only, bool reuse_rotations) {
-    if (!residual_only) ++summary.tangent_assemblies;
-    if (matrix_free && !residual_only) {
-      // A tangent where the last assembly was (reuse_rotations) is already recorded.
-      if (reuse_rotations) return body_rotation;
-      residual_only = true;
-    }
-    if (dynamic) return AssembleStep(u_next_, v_next_, a_next_, residual_only, reuse_rotations);
-    return Assemble(mode, u_next_, v_next_, a_next_, residual_only, reuse_rotations);
-  };
-  // Newton's matrix at u_next_, where the last assembly was, for a factorisation.
-  const auto step_matrix = [&]() -> const LinearSolver::Matrix& {
-    if (matrix_free) AssembleStep(u_next_, v_next_, a_next_, /*residual_only=*/false, true);
-    return assembler_.matrix();
-  };
-  const auto solve_step = [&](const LinearSolver::Options& linear_options) {
-    if (!matrix_free)
-      return solver_.Solve(assembler_.matrix(), rhs_, body_rotation, linear_options, &update_);
-    step_tangent_.Bind(TangentViews());
-    return solver_.Solve(step_tangent_, rhs_, body_rotation, linear_options, &update_);
-  };
-  const auto finish = [&] {
-    if (ExceedsExtent(u_next_)) {
-      summary.diverged = true;
-      return summary;
-    }
-    state_.u = u_next_;
-    state_.v = v_next_;
-    state_.a = a_next_;
-    estimate_first_ = options_.newton_estimate_first && dynamic && summary.converged &&
-                      summary.newton_iterations == 1;
-    return summary;
-  };
-  update_.setZero();
-  double residual_norm = 0.0;
-  // The residual alone at u_next_ and the preconditioner's estimate of the next update from it,
-  // P^-1 (-r), into update_ (one pair of triangular solves instead of a tangent and GMRES):
-  // returns its max norm, NaN when the residual is not finite.
-  const auto estimate_update = [&] {
-    body_rotation = assemble(/*residual_only=*/true, /*reuse_rotations=*/false);
-    residual_norm = residual_.norm();
-    if (!std::isfinite(residual_norm)) return std::numeric_limits<double>::quiet_NaN();
-    rhs_ = (-1.0 / matrix_scale) * residual_;
-    solver_.Precondition(rhs_, body_rotation, &update_);
-    ++summary.linear_iterations;
-    return update_.lpNorm<Eigen::Infinity>();
-  };
-  // A small estimate is taken as the last update: the step has converged.
-  const auto take_estimate = [&](double estimate) {
-    u_next_ += update_;
-    if (dynamic) NewmarkKinematics(u_next_, &v_next_, &a_next_);
-    summary.max_update = estimate;
-    summary.converged = true;
-  };
-  if (dynamic && estimate_first_) {
-    // The previous step needed one Newton update (free flight, gentle contact): the predictor is
-    // nearly right and the rotated factor nearly the step matrix, so the estimate may already be
-    // converged (SimulationOptions::newton_estimate_first).
-    const double estimate = estimate_update();
-    if (!std::isfinite(residual_norm)) {
-      summary.diverged = true;
-      return summary;
-    }
-    if (estimate <= tolerance) {
-      take_estimate(estimate);
-      summary.newton_iterations = 1;
-      return finish();
-    }
-    if (!std::isfinite(estimate)) update_.setZero();
-    body_rotation = assemble(/*residual_only=*/false, /*reuse_rotations=*/true);
+    sim.NewmarkKinematics(sim.u_next_, &sim.v_next_, &sim.a_next_);
   } else {
-    body_rotation = assemble(/*residual_only=*/false, /*reuse_rotations=*/false);
-    residual_norm = residual_.norm();
+    sim.v_next_.setZero();
+    sim.a_next_.setZero();
+  }
+}
+
+// Turns on what this solve's assemblies keep for it (the friction iterate, the recorded tangent).
+void Simulator::NewtonRun::BeginIterating() {
+  sim.use_friction_iterate_ = friction_active && sim.options_.primal_dual_friction;
+  if (sim.use_friction_iterate_) {
+    const int num_points = sim.force_embedding_.NumPoints();
+    sim.friction_iterate_.resize(num_points);
+    for (int p = 0; p < num_points; ++p) {
+      sim.friction_iterate_[p] =
+          FrictionForce(sim.contact_, sim.force_embedding_.Interpolate(sim.mesh_, sim.state_.v, p),
+                        sim.lagged_normal_force_[p]);
+    }
+  }
+  sim.record_tangent_ = matrix_free;
+  sim.update_.setZero();
+  residual_norm = 0.0;
+}
+
+// The residual and Newton's matrix at the iterate (the residual alone when residual_only).
+Eigen::Matrix3d Simulator::NewtonRun::AssembleAtIterate(bool residual_only, bool reuse_rotations) {
+  if (!residual_only) ++summary.tangent_assemblies;
+  if (matrix_free && !residual_only) {
+    // A tangent where the last assembly was (reuse_rotations) is already recorded.
+    if (reuse_rotations) return body_rotation;
+    residual_only = true;
+  }
+  if (dynamic)
+    return sim.AssembleStep(sim.u_next_, sim.v_next_, sim.a_next_, residual_only, reuse_rotations);
+  return sim.Assemble(mode, sim.u_next_, sim.v_next_, sim.a_next_, residual_only, reuse_rotations);
+}
+
+// Newton's matrix at the iterate, where the last assembly was, for a factorisation.
+const LinearSolver::Matrix& Simulator::NewtonRun::StepMatrix() {
+  if (matrix_free)
+    sim.AssembleStep(sim.u_next_, sim.v_next_, sim.a_next_, /*residual_only=*/false, true);
+  return sim.assembler_.matrix();
+}
+
+// GMRES on Newton's system for update_ (its initial guess on entry).
+LinearSolver::Summary Simulator::NewtonRun::SolveStep() {
+  if (!matrix_free)
+    return sim.solver_.Solve(sim.assembler_.matrix(), sim.rhs_, body_rotation, linear,
+                             &sim.update_);
+  sim.step_tangent_.Bind(sim.TangentViews());
+  return sim.solver_.Solve(sim.step_tangent_, sim.rhs_, body_rotation, linear, &sim.update_);
+}
+
+// The first assembly of the step. After a step that converged with one Newton update (free
+// flight, gentle contact) the predictor is nearly right and the rotated factor nearly the step
+// matrix, so the preconditioner's estimate may already be converged
+// (SimulationOptions::newton_estimate_first); otherwise it is GMRES's initial guess.
+Simulator::NewtonRun::Start Simulator::NewtonRun::FirstAssembly() {
+  if (dynamic && sim.estimate_first_) {
+    const double estimate = EstimateUpdate();
+    if (!ResidualFinite()) return Start::kDiverged;
+    if (estimate <= tolerance) {
+      TakeEstimate(estimate);
+      summary.newton_iterations = 1;
+      return Start::kConverged;
+    }
+    if (!std::isfinite(estimate)) sim.update_.setZero();
+    body_rotation = AssembleAtIterate(/*residual_only=*/false, /*reuse_rotations=*/true);
+  } else {
+    body_rotation = AssembleAtIterate(/*residual_only=*/false, /*reuse_rotations=*/false);
+    residual_norm = sim.residual_.norm();
+  }
+  return Start::kIterate;
+}
+
+// Newton's update into update_ from the last assembly. False when none could be had (no static
+// factor, or GMRES failed even with a fresh one).
+bool Simulator::NewtonRun::SolveForUpdate() {
+  LinearSolver& solver = sim.solver_;
+  if (!dynamic && !solver.HasFactor()) {
+    if (!solver.Factorize(sim.assembler_.matrix(), body_rotation).ok()) return false;
+  }
+  sim.rhs_ = (-1.0 / matrix_scale) * sim.residual_;
+  LinearSolver::Summary solve = SolveStep();
+  summary.linear_iterations += solve.iterations;
+  if (dynamic && solve.converged && solver.RefactorPays() && !solver.FactorizationPending()) {
+    // The reference factor no longer fits (large deformation, contact): renew it, in the
+    // background on a team; the steps go on with the old one until the new one is due.
+    summary.refactorized =
+        solver.StartFactorize(StepMatrix(), body_rotation, sim.TangentSymmetry(mode)).ok();
+  } else if (!solve.converged) {
+    // Needed now. When that fails the previous factor stays in use.
+    summary.refactorized =
+        solver.Factorize(StepMatrix(), body_rotation, sim.TangentSymmetry(mode)).ok();
+    if (dynamic) sim.RecordFactor();
+    sim.update_.setZero();
+    solve = SolveStep();
+    summary.linear_iterations += solve.iterations;
+    if (!solve.converged && !(solve.relative_residual < 1e-6)) return false;
+  }
+  return true;
+}
+
+// Moves the iterate along update_: all of it when small (converged), else as far as the contact
+// and friction step limits let it (the line search that stands in for a merit function).
+void Simulator::NewtonRun::TakeUpdate(int iteration, double full_step, bool small) {
+  const double friction_limit =
+      dynamic && !sim.use_friction_iterate_ ? sim.FrictionStepLimit(sim.v_next_, sim.update_) : 1.0;
+  const double step =
+      small ? 1.0 : std::min(sim.ContactStepLimit(sim.u_next_, sim.update_), friction_limit);
+  if (sim.use_friction_iterate_) sim.v_before_ = sim.v_next_;
+  sim.u_next_ += step * sim.update_;
+  if (dynamic) sim.NewmarkKinematics(sim.u_next_, &sim.v_next_, &sim.a_next_);
+  if (sim.use_friction_iterate_) sim.AdvanceFrictionIterate(sim.v_before_, sim.v_next_);
+  summary.newton_iterations = iteration + 1;
+  summary.max_update = step * full_step;
+}
+
+// The residual alone at the iterate and the preconditioner's estimate of the next update from it,
+// P^-1 (-r), into update_ (one pair of triangular solves instead of a tangent and GMRES): returns
+// its max norm, NaN when the residual is not finite.
+double Simulator::NewtonRun::EstimateUpdate() {
+  body_rotation = AssembleAtIterate(/*residual_only=*/true, /*reuse_rotations=*/false);
+  residual_norm = sim.residual_.norm();
+  if (!std::isfinite(residual_norm)) return std::numeric_limits<double>::quiet_NaN();
+  sim.rhs_ = (-1.0 / matrix_scale) * sim.residual_;
+  sim.solver_.Precondition(sim.rhs_, body_rotation, &sim.update_);
+  ++summary.linear_iterations;
+  return sim.update_.lpNorm<Eigen::Infinity>();
+}
+
+// A small estimate is taken as the last update: the step has converged.
+void Simulator::NewtonRun::TakeEstimate(double estimate) {
+  sim.u_next_ += sim.update_;
+  if (dynamic) sim.NewmarkKinematics(sim.u_next_, &sim.v_next_, &sim.a_next_);
+  summary.max_update = estimate;
+  summary.converged = true;
+}
+
+// The iterate becomes the state, unless the body has stretched past belief.
+StepSummary Simulator::NewtonRun::Finish() {
+  if (sim.ExceedsExtent(sim.u_next_)) return Diverged();
+  sim.state_.u = sim.u_next_;
+  sim.state_.v = sim.v_next_;
+  sim.state_.a = sim.a_next_;
+  sim.estimate_first_ = sim.options_.newton_estimate_first && dynamic && summary.converged &&
+                        summary.newton_iterations == 1;
+  return summary;
+}
+
+// Newton on the step equations with the consistent tangent, less the terms AssembleElement leaves
+// out of Newton's tangent. Full steps, except that no surface point may be pushed deeper into the
+// ground than a few contact smoothing lengths beyond where the contact was linearised (a
+// continuous-collision filter, as in IPC), nor have its slip reversed by more than a few friction
+// velocity scales: from outside either smooth knee the linearisation sees no stiffness and would
+// overshoot far across it.
+// The residual norm is no merit function here: in bending, element forces exceed the net nodal
+// forces a thousandfold and ||r|| grows over good steps.
+//
+// Convergence: the update falls below newton_tolerance * h. After a large update the next one is
+// first estimated by the preconditioner alone, P^-1 (-r), from the residual (no tangent assembly,
+// one pair of triangular solves instead of a GMRES solve): when that estimate is already small it
+// is taken as the last update and the step ends. Otherwise it is GMRES's initial guess, so the
+// estimate is not wasted. In free flight this saves a full Newton iteration per step.
+StepSummary Simulator::NewtonSolve(Mode mode) {
+  NewtonRun newton(*this, mode);
+  newton.TakeOverFactor();
+  newton.Predict();
+  newton.BeginIterating();
+  switch (newton.FirstAssembly()) {
+    case NewtonRun::Start::kDiverged: return newton.Diverged();
+    case NewtonRun::Start::kConverged: return newton.Finish();
+    case NewtonRun::Start::kIterate: break;
   }
   for (int it = 0; it < options_.max_newton_iterations; ++it) {
-    if (!std::isfinite(residual_norm)) {
-      summary.diverged = true;
-      return summary;
-    }
-    if (!dynamic && !solver_.HasFactor()) {
-      if (!solver_.Factorize(assembler_.matrix(), body_rotation).ok()) {
-        summary.diverged = true;
-        return summary;
-      }
-    }
-    rhs_ = (-1.0 / matrix_scale) * residual_;
-    LinearSolver::Summary solve = solve_step(linear);
-    summary.linear_iterations += solve.iterations;
-    if (dynamic && solve.converged && solver_.RefactorPays() && !solver_.FactorizationPending()) {
-      // The reference factor no longer fits (large deformation, contact): renew it, in the
-      // background on a team; the steps go on with the old one until the new one is due.
-      summary.refactorized =
-          solver_.StartFactorize(step_matrix(), body_rotation, TangentSymmetry(mode)).ok();
-    } else if (!solve.converged) {
-      // Needed now. When that fails the previous factor stays in use.
-      summary.refactorized =
-          solver_.Factorize(step_matrix(), body_rotation, TangentSymmetry(mode)).ok();
-      if (dynamic) RecordFactor();
-      update_.setZero();
-      solve = solve_step(linear);
-      summary.linear_iterations += solve.iterations;
-      if (!solve.converged && !(solve.relative_residual < 1e-6)) {
-        summary.diverged = true;
-        return summary;
-      }
-    }
+    if (!newton.ResidualFinite() || !newton.SolveForUpdate()) return newton.Diverged();
     const double full_step = update_.lpNorm<Eigen::Infinity>();
-    if (!std::isfinite(full_step)) {
-      summary.diverged = true;
-      return summary;
-    }
-    const bool small = full_step <= tolerance;
-    const double friction_limit =
-        dynamic && !use_friction_iterate_ ? FrictionStepLimit(v_next_, update_) : 1.0;
-    const double step = small ? 1.0 : std::min(ContactStepLimit(u_next_, update_), friction_limit);
-    if (use_friction_iterate_) v_before_ = v_next_;
-    u_next_ += step * update_;
-    if (dynamic) NewmarkKinematics(u_next_, &v_next_, &a_next_);
-    if (use_friction_iterate_) AdvanceFrictionIterate(v_before_, v_next_);
-    summary.newton_iterations = it + 1;
-    summary.max_update = step * full_step;
+    if (!std::isfinite(full_step)) return newton.Diverged();
+    const bool small = full_step <= newton.tolerance;
+    newton.TakeUpdate(it, full_step, small);
     // A converged update needs no new assembly: the state is final.
     if (small) {
-      summary.converged = true;
+      newton.summary.converged = true;
       break;
     }
-    const double estimate = estimate_update();
-    if (!std::isfinite(residual_norm)) break;
-    if (estimate <= tolerance) {
-      take_estimate(estimate);
+    const double estimate = newton.EstimateUpdate();
+    if (!newton.ResidualFinite()) break;
+    if (estimate <= newton.tolerance) {
+      newton.TakeEstimate(estimate);
       break;
     }
     if (it + 1 < options_.max_newton_iterations) {
-      body_rotation = assemble(/*residual_only=*/false, /*reuse_rotations=*/true);
+      newton.body_rotation =
+          newton.AssembleAtIterate(/*residual_only=*/false, /*reuse_rotations=*/true);
     }
   }
-  if (!std::isfinite(residual_norm)) {
-    summary.diverged = true;
-    return summary;
-  }
-  return finish();
+  if (!newton.ResidualFinite()) return newton.Diverged();
+  return newton.Finish();
 }
 
 StepTangentOperator::Views Simulator::TangentViews() {

@@ -235,6 +235,7 @@ class Simulator {
                        Eigen::VectorXd* velocity_adjoint, Eigen::VectorXd* previous_adjoint,
                        ParameterGradient* gradient, bool rotations_current = false,
                        SurfaceAdjoint* surface = nullptr);
+  struct ResidualAdjointPass;  // ResidualAdjoint's stages (simulator_adjoint.cc)
   // Per element the shear part of the stiffness, ElementStiffness(weights, h, 0, 1), without the
   // stiffness field's scale: d K / d poisson_ratio needs it. Built on the first backward pass.
   void BuildShearStiffness();
@@ -246,6 +247,7 @@ class Simulator {
   std::vector<std::array<double, 8>> element_stiffness_weights_;
   std::vector<double> element_scale_;  // stiffness field scale per element
   StepSummary NewtonSolve(Mode mode);
+  struct NewtonRun;  // NewtonSolve's stages and the state they share (simulator.cc)
   // Whether the next dynamic step first tries the preconditioner's estimate as its only update:
   // after a step that converged with one Newton update. Reset with the state, so a run depends on
   // its start alone.

@@ -33,99 +33,90 @@ void Simulator::BuildShearStiffness() {
   }
 }
 
-void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd& v,
-                                const Eigen::VectorXd& a, const Eigen::VectorXd& u_previous,
-                                const Eigen::VectorXd& lambda, Eigen::VectorXd* velocity_adjoint,
-                                Eigen::VectorXd* previous_adjoint, ParameterGradient* gradient,
-                                bool rotations_current, SurfaceAdjoint* surface) {
-  BuildShearStiffness();
-  const PhysicalParameters& p = parameters_;
-  const double h = mesh_.CellSize();
-  const int n = mesh_.NumNodes();
-  velocity_adjoint->setZero(3 * n);
-  previous_adjoint->setZero(3 * n);
+namespace {
 
-  // Lame parameters and their derivatives with respect to the Poisson ratio.
+// Lame parameters and their derivatives with respect to the Poisson ratio.
+struct LameDerivatives {
+  double lambda = 0.0, mu = 0.0;
+  double dlambda_dnu = 0.0, dmu_dnu = 0.0;
+};
+
+LameDerivatives LameDerivativesOf(const PhysicalParameters& p) {
   const double nu = p.poisson_ratio;
-  const double lame_lambda = p.LameLambda();
-  const double lame_mu = p.LameMu();
-  const double dmu_dnu = -p.youngs_modulus / (2.0 * (1.0 + nu) * (1.0 + nu));
-  const double dlambda_dnu = p.youngs_modulus * (1.0 + 2.0 * nu * nu) /
-                             ((1.0 + nu) * (1.0 + nu) * (1.0 - 2.0 * nu) * (1.0 - 2.0 * nu));
-  const double beta_k = p.stiffness_damping;
+  LameDerivatives lame;
+  lame.lambda = p.LameLambda();
+  lame.mu = p.LameMu();
+  lame.dmu_dnu = -p.youngs_modulus / (2.0 * (1.0 + nu) * (1.0 + nu));
+  lame.dlambda_dnu = p.youngs_modulus * (1.0 + 2.0 * nu * nu) /
+                     ((1.0 + nu) * (1.0 + nu) * (1.0 - 2.0 * nu) * (1.0 - 2.0 * nu));
+  return lame;
+}
+
+// One team member's share of the parameter gradient through the elements, and through the
+// surface points: each member sums its own, and the shares are added in member order, so the sum
+// does not depend on the timing.
+struct ElementShare {
+  double youngs_modulus = 0.0, poisson_ratio = 0.0, stiffness_damping = 0.0;
+  std::vector<double> stiffness_field;
+};
+struct SurfaceShare {
+  Eigen::Vector3d ground_normal = Eigen::Vector3d::Zero();
+  double ground_offset = 0.0, stiffness = 0.0, contact_damping = 0.0, friction_coefficient = 0.0;
+  double drag_linear = 0.0, drag_quadratic = 0.0;
+};
+
+}  // namespace
+
+// One ResidualAdjoint: its inputs and outputs, which its stages (elements, nodes, surface points)
+// share.
+struct Simulator::ResidualAdjointPass {
+  // Where the surface forces are evaluated, and where their velocity adjoint goes.
+  struct SurfaceInputs {
+    const Eigen::VectorXd& u;
+    const Eigen::VectorXd& v;
+    Eigen::VectorXd* velocity_adjoint;
+    double dv_du = 0.0;
+    bool drag = false;
+  };
+
+  void AddElements() const;
+  void AddElement(int e, const LameDerivatives& lame, ElementShare* share) const;
+  void AddNodes() const;
+  void AddSurfacePoints() const;
+  void AddSurfacePoint(int pt, const SurfaceInputs& in, SurfaceShare* share) const;
+  void ClearFixedNodes() const;
+
+  const Simulator& sim;
+  const PhysicalParameters& p;
+  const double h;  // cell size [m]
+  const Eigen::VectorXd& u;
+  const Eigen::VectorXd& v;
+  const Eigen::VectorXd& a;
+  const Eigen::VectorXd& u_previous;
+  const Eigen::VectorXd& lambda;
+  const bool rotations_current;
+  Eigen::VectorXd* velocity_adjoint;
+  Eigen::VectorXd* previous_adjoint;
+  ParameterGradient* gradient;
+  SurfaceAdjoint* surface;
+};
+
+// Elements: r_e = R K_e l, l = R^T (x + beta_k v) - X, K_e = s (lambda K_lambda + mu K_mu).
+// Each range of the assembly's partition runs on its own member (an element writes the velocity
+// adjoint of its own nodes only), the shared elements afterwards.
+void Simulator::ResidualAdjointPass::AddElements() const {
+  const LameDerivatives lame = LameDerivativesOf(p);
   const StiffnessField& field = p.stiffness_field;
   if (field.kind == StiffnessField::Kind::kRegions)
     gradient->stiffness_field.resize(field.regions.size(), 0.0);
   if (field.kind == StiffnessField::Kind::kLinear) gradient->stiffness_field.resize(3, 0.0);
-
-  // Elements: r_e = R K_e l, l = R^T (x + beta_k v) - X, K_e = s (lambda K_lambda + mu K_mu).
-  // Each range of the assembly's partition runs on its own member (an element writes the velocity
-  // adjoint of its own nodes only), the shared elements afterwards; each member sums its share of
-  // the parameter gradient, and the shares are added in member order.
-  struct ElementShare {
-    double youngs_modulus = 0.0, poisson_ratio = 0.0, stiffness_damping = 0.0;
-    std::vector<double> stiffness_field;
-  };
-  const auto backpropagate_element = [&](int e, ElementShare* share) {
-    const auto& nodes = mesh_.element_nodes[e];
-    std::array<Eigen::Vector3d, 8> x;
-    Vector24d lambda_local, v_local, l;
-    for (int c = 0; c < 8; ++c) {
-      x[c] = mesh_.rest_positions[nodes[c]] + u.segment<3>(3 * nodes[c]);
-      lambda_local.segment<3>(3 * c) = lambda.segment<3>(3 * nodes[c]);
-    }
-    if (lambda_local.isZero(0.0)) return;
-    const Eigen::Matrix3d r =
-        rotations_current ? element_rotation_[e] : PolarRotation(DeformationGradient(x, h));
-    const Eigen::Matrix3d rt = r.transpose();
-    Vector24d rotated_lambda;  // R^T lambda_e
-    for (int c = 0; c < 8; ++c) {
-      const Eigen::Vector3d vc = v.segment<3>(3 * nodes[c]);
-      v_local.segment<3>(3 * c).noalias() = rt * vc;
-      l.segment<3>(3 * c).noalias() = rt * (x[c] + beta_k * vc) - mesh_.rest_positions[nodes[c]];
-      rotated_lambda.segment<3>(3 * c).noalias() = rt * lambda_local.segment<3>(3 * c);
-    }
-    const Matrix24d& k = StiffnessOf(e);
-    const Vector24d sigma = k * l;
-    // lambda^T r_e = (R^T lambda)^T K l.
-    const double work = rotated_lambda.dot(sigma);
-    share->youngs_modulus -= work / p.youngs_modulus;
-    // d K / d nu l = (dlambda/lambda) K l + s (dmu - mu dlambda/lambda) K_mu l.
-    const double scale = element_scale_[e];
-    const Vector24d shear = ShearStiffnessOf(e) * l;
-    share->poisson_ratio -=
-        (dlambda_dnu / lame_lambda) * work +
-        scale * (dmu_dnu - lame_mu * dlambda_dnu / lame_lambda) * rotated_lambda.dot(shear);
-    // d r_e / d beta_k = R K R^T v.
-    const Vector24d k_rotated_lambda = k * rotated_lambda;
-    share->stiffness_damping -= k_rotated_lambda.dot(v_local);
-    // Velocity: d r_e / d v = beta_k R K R^T.
-    if (beta_k != 0.0) {
-      for (int c = 0; c < 8; ++c) {
-        velocity_adjoint->segment<3>(3 * nodes[c]).noalias() +=
-            beta_k * (r * k_rotated_lambda.segment<3>(3 * c));
-      }
-    }
-    // Stiffness field: r_e is proportional to the element's scale s.
-    if (field.kind == StiffnessField::Kind::kRegions) {
-      const Eigen::Vector3d centre = mesh_.ElementCentre(e);
-      int region = -1;
-      for (size_t i = 0; i < field.regions.size(); ++i) {
-        if (field.regions[i].box.contains(centre)) region = static_cast<int>(i);
-      }
-      if (region >= 0) share->stiffness_field[region] -= work / scale;
-    } else if (field.kind == StiffnessField::Kind::kLinear) {
-      const Eigen::Vector3d offset = mesh_.ElementCentre(e) - field.origin;
-      for (int i = 0; i < 3; ++i) share->stiffness_field[i] -= work * offset[i];
-    }
-  };
-  std::vector<ElementShare> shares(element_chunks_.size() + 1);
+  std::vector<ElementShare> shares(sim.element_chunks_.size() + 1);
   for (ElementShare& share : shares)
     share.stiffness_field.assign(gradient->stiffness_field.size(), 0.0);
-  team_->Run([&](int member) {
-    for (int e : element_chunks_[member]) backpropagate_element(e, &shares[member]);
+  sim.team_->Run([&](int member) {
+    for (int e : sim.element_chunks_[member]) AddElement(e, lame, &shares[member]);
   });
-  for (int e : shared_elements_) backpropagate_element(e, &shares.back());
+  for (int e : sim.shared_elements_) AddElement(e, lame, &shares.back());
   for (const ElementShare& share : shares) {
     gradient->youngs_modulus += share.youngs_modulus;
     gradient->poisson_ratio += share.poisson_ratio;
@@ -133,98 +124,106 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
     for (size_t i = 0; i < share.stiffness_field.size(); ++i)
       gradient->stiffness_field[i] += share.stiffness_field[i];
   }
+}
 
-  // Nodes: inertia, mass damping, gravity; r_i = m_i (a_i + alpha v_i - g).
-  for (int i = 0; i < n; ++i) {
-    if (fixed_[i]) continue;
+void Simulator::ResidualAdjointPass::AddElement(int e, const LameDerivatives& lame,
+                                                ElementShare* share) const {
+  const HexMesh& mesh = sim.mesh_;
+  const double beta_k = p.stiffness_damping;
+  const StiffnessField& field = p.stiffness_field;
+  const auto& nodes = mesh.element_nodes[e];
+  std::array<Eigen::Vector3d, 8> x;
+  Vector24d lambda_local, v_local, l;
+  for (int c = 0; c < 8; ++c) {
+    x[c] = mesh.rest_positions[nodes[c]] + u.segment<3>(3 * nodes[c]);
+    lambda_local.segment<3>(3 * c) = lambda.segment<3>(3 * nodes[c]);
+  }
+  if (lambda_local.isZero(0.0)) return;
+  const Eigen::Matrix3d r =
+      rotations_current ? sim.element_rotation_[e] : PolarRotation(DeformationGradient(x, h));
+  const Eigen::Matrix3d rt = r.transpose();
+  Vector24d rotated_lambda;  // R^T lambda_e
+  for (int c = 0; c < 8; ++c) {
+    const Eigen::Vector3d vc = v.segment<3>(3 * nodes[c]);
+    v_local.segment<3>(3 * c).noalias() = rt * vc;
+    l.segment<3>(3 * c).noalias() = rt * (x[c] + beta_k * vc) - mesh.rest_positions[nodes[c]];
+    rotated_lambda.segment<3>(3 * c).noalias() = rt * lambda_local.segment<3>(3 * c);
+  }
+  const Matrix24d& k = sim.StiffnessOf(e);
+  const Vector24d sigma = k * l;
+  // lambda^T r_e = (R^T lambda)^T K l.
+  const double work = rotated_lambda.dot(sigma);
+  share->youngs_modulus -= work / p.youngs_modulus;
+  // d K / d nu l = (dlambda/lambda) K l + s (dmu - mu dlambda/lambda) K_mu l.
+  const double scale = sim.element_scale_[e];
+  const Vector24d shear = sim.ShearStiffnessOf(e) * l;
+  share->poisson_ratio -=
+      (lame.dlambda_dnu / lame.lambda) * work +
+      scale * (lame.dmu_dnu - lame.mu * lame.dlambda_dnu / lame.lambda) * rotated_lambda.dot(shear);
+  // d r_e / d beta_k = R K R^T v.
+  const Vector24d k_rotated_lambda = k * rotated_lambda;
+  share->stiffness_damping -= k_rotated_lambda.dot(v_local);
+  // Velocity: d r_e / d v = beta_k R K R^T.
+  if (beta_k != 0.0) {
+    for (int c = 0; c < 8; ++c) {
+      velocity_adjoint->segment<3>(3 * nodes[c]).noalias() +=
+          beta_k * (r * k_rotated_lambda.segment<3>(3 * c));
+    }
+  }
+  // Stiffness field: r_e is proportional to the element's scale s.
+  if (field.kind == StiffnessField::Kind::kRegions) {
+    const Eigen::Vector3d centre = mesh.ElementCentre(e);
+    int region = -1;
+    for (size_t i = 0; i < field.regions.size(); ++i) {
+      if (field.regions[i].box.contains(centre)) region = static_cast<int>(i);
+    }
+    if (region >= 0) share->stiffness_field[region] -= work / scale;
+  } else if (field.kind == StiffnessField::Kind::kLinear) {
+    const Eigen::Vector3d offset = mesh.ElementCentre(e) - field.origin;
+    for (int i = 0; i < 3; ++i) share->stiffness_field[i] -= work * offset[i];
+  }
+}
+
+// Nodes: inertia, mass damping, gravity; r_i = m_i (a_i + alpha v_i - g).
+void Simulator::ResidualAdjointPass::AddNodes() const {
+  const Eigen::VectorXd& mass = sim.mass_;
+  for (int i = 0; i < sim.mesh_.NumNodes(); ++i) {
+    if (sim.fixed_[i]) continue;
     const Eigen::Vector3d li = lambda.segment<3>(3 * i);
     const Eigen::Vector3d vi = v.segment<3>(3 * i);
     const Eigen::Vector3d inertial = a.segment<3>(3 * i) + p.mass_damping * vi - p.gravity;
-    gradient->density -= mass_[i] / p.density * li.dot(inertial);
-    gradient->mass_damping -= mass_[i] * li.dot(vi);
-    gradient->gravity += mass_[i] * li;
-    velocity_adjoint->segment<3>(3 * i) += p.mass_damping * mass_[i] * li;
+    gradient->density -= mass[i] / p.density * li.dot(inertial);
+    gradient->mass_damping -= mass[i] * li.dot(vi);
+    gradient->gravity += mass[i] * li;
+    velocity_adjoint->segment<3>(3 * i) += p.mass_damping * mass[i] * li;
   }
+}
 
-  // Surface points: r_i -= w_i f_p, so -lambda^T dr/dq = lambda_p . df_p/dq with
-  // lambda_p = sum_i w_i lambda_i. A point writes to its element's nodes only, so the points run
-  // on the team like the forward assembly's (each range's own, then the shared ones), each member
-  // summing its share of the parameter gradient; the shares are added in member order.
-  const Eigen::VectorXd& surface_u = surface != nullptr && surface->u != nullptr ? *surface->u : u;
-  const Eigen::VectorXd& surface_v = surface != nullptr && surface->v != nullptr ? *surface->v : v;
-  Eigen::VectorXd* surface_velocity_adjoint = velocity_adjoint;
-  const double dv_du = options_.newmark_gamma / (options_.newmark_beta * options_.time_step);
+// Surface points: r_i -= w_i f_p, so -lambda^T dr/dq = lambda_p . df_p/dq with
+// lambda_p = sum_i w_i lambda_i. A point writes to its element's nodes only, so the points run on
+// the team like the forward assembly's (each range's own, then the shared ones).
+void Simulator::ResidualAdjointPass::AddSurfacePoints() const {
+  const int n = sim.mesh_.NumNodes();
+  const SimulationOptions& options = sim.options_;
+  SurfaceInputs in{
+      .u = surface != nullptr && surface->u != nullptr ? *surface->u : u,
+      .v = surface != nullptr && surface->v != nullptr ? *surface->v : v,
+      .velocity_adjoint = velocity_adjoint,
+      .dv_du = options.newmark_gamma / (options.newmark_beta * options.time_step),
+  };
   if (surface != nullptr) {
     surface->velocity_adjoint.setZero(3 * n);
     surface->jacobian_adjoint.setZero(3 * n);
-    surface_velocity_adjoint = &surface->velocity_adjoint;
+    in.velocity_adjoint = &surface->velocity_adjoint;
   }
-  const bool drag = p.drag_linear > 0.0 || p.drag_quadratic > 0.0;
-  struct SurfaceShare {
-    Eigen::Vector3d ground_normal = Eigen::Vector3d::Zero();
-    double ground_offset = 0.0, stiffness = 0.0, contact_damping = 0.0, friction_coefficient = 0.0;
-    double drag_linear = 0.0, drag_quadratic = 0.0;
-  };
-  const auto backpropagate_point = [&](int pt, SurfaceShare* share) {
-    const Eigen::Vector3d lambda_p = force_embedding_.Interpolate(mesh_, lambda, pt);
-    if (lambda_p.isZero(0.0)) return;
-    const Eigen::Vector3d vp = force_embedding_.Interpolate(mesh_, surface_v, pt);
-    const double area = surface_areas_[pt];
-    // Drag f = -(A/4) (c1 + c2 |v|) v; its derivatives exist at c = 0 too (for screening).
-    const double projected = 0.25 * area;
-    const double speed = vp.norm();
-    share->drag_linear -= projected * vp.dot(lambda_p);
-    share->drag_quadratic -= projected * speed * vp.dot(lambda_p);
-    const auto& nodes = mesh_.element_nodes[force_embedding_.element[pt]];
-    const auto& w = force_embedding_.weights[pt];
-    Eigen::Vector3d velocity_part = Eigen::Vector3d::Zero();  // (df/dv)^T lambda_p
-    bool ground_force = false;
-    Eigen::Vector3d xp = Eigen::Vector3d::Zero();
-    if (p.ground) {
-      xp = force_embedding_.rest_positions[pt] + force_embedding_.Interpolate(mesh_, surface_u, pt);
-      const Eigen::Vector3d xp_previous =
-          force_embedding_.rest_positions[pt] + force_embedding_.Interpolate(mesh_, u_previous, pt);
-      ground_force = !GroundContactDerivativesVanish(contact_, xp, xp_previous);
-      if (ground_force) {
-        const GroundForceDerivatives d =
-            GroundContactForceDerivatives(contact_, area, xp, vp, xp_previous);
-        share->ground_normal += d.d_normal.transpose() * lambda_p;
-        share->ground_offset += d.d_offset.dot(lambda_p);
-        share->stiffness += d.d_stiffness.dot(lambda_p);
-        share->contact_damping += d.d_damping.dot(lambda_p);
-        share->friction_coefficient += d.d_friction.dot(lambda_p);
-        velocity_part += d.d_velocity.transpose() * lambda_p;
-        const Eigen::Vector3d previous_part = d.d_previous_position.transpose() * lambda_p;
-        for (int c = 0; c < 8; ++c)
-          previous_adjoint->segment<3>(3 * nodes[c]) += w[c] * previous_part;
-      }
-    }
-    // Far from the ground without drag the point exerts no force: nothing else to add.
-    if (!ground_force && !drag) return;
-    const PointForce drag_force = AirDragForce(p.drag_linear, p.drag_quadratic, area, vp);
-    velocity_part -= drag_force.damping.transpose() * lambda_p;
-    // -(dr/dv)^T lambda = (df/dv)^T lambda_p, spread back to the nodes.
-    for (int c = 0; c < 8; ++c)
-      surface_velocity_adjoint->segment<3>(3 * nodes[c]) -= w[c] * velocity_part;
-    if (surface != nullptr) {
-      // The point's block of the step matrix, as Assemble builds it (exact tangent).
-      Eigen::Matrix3d jacobian = drag_force.StepJacobian(dv_du);
-      if (ground_force) {
-        jacobian += GroundContactForce(contact_, area, xp, vp, lagged_normal_force_[pt])
-                        .StepJacobian(dv_du);
-      }
-      const Eigen::Vector3d product = jacobian.transpose() * lambda_p;
-      for (int c = 0; c < 8; ++c)
-        surface->jacobian_adjoint.segment<3>(3 * nodes[c]) += w[c] * product;
-    }
-  };
-  std::vector<SurfaceShare> surface_shares(point_chunks_.size() + 1);
-  team_->Run([&](int member) {
-    for (int pt : point_chunks_[member]) backpropagate_point(pt, &surface_shares[member]);
+  in.drag = p.drag_linear > 0.0 || p.drag_quadratic > 0.0;
+  std::vector<SurfaceShare> shares(sim.point_chunks_.size() + 1);
+  sim.team_->Run([&](int member) {
+    for (int pt : sim.point_chunks_[member]) AddSurfacePoint(pt, in, &shares[member]);
   });
-  for (int pt : shared_points_) backpropagate_point(pt, &surface_shares.back());
+  for (int pt : sim.shared_points_) AddSurfacePoint(pt, in, &shares.back());
   double d_stiffness = 0.0;
-  for (const SurfaceShare& share : surface_shares) {
+  for (const SurfaceShare& share : shares) {
     gradient->ground_normal += share.ground_normal;
     gradient->ground_offset += share.ground_offset;
     d_stiffness += share.stiffness;
@@ -236,14 +235,101 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
   gradient->contact_stiffness += d_stiffness;
   // The default k = DefaultContactStiffness(E, L) is linear in E.
   if (p.ground && p.contact_stiffness <= 0.0)
-    gradient->youngs_modulus += d_stiffness * kDefaultContactStiffnessFactor / length_;
+    gradient->youngs_modulus += d_stiffness * kDefaultContactStiffnessFactor / sim.length_;
+}
 
-  for (int i = 0; i < n; ++i) {
-    if (!fixed_[i]) continue;
+void Simulator::ResidualAdjointPass::AddSurfacePoint(int pt, const SurfaceInputs& in,
+                                                     SurfaceShare* share) const {
+  const HexMesh& mesh = sim.mesh_;
+  const SurfaceEmbedding& embedding = sim.force_embedding_;
+  const Eigen::Vector3d lambda_p = embedding.Interpolate(mesh, lambda, pt);
+  if (lambda_p.isZero(0.0)) return;
+  const Eigen::Vector3d vp = embedding.Interpolate(mesh, in.v, pt);
+  const double area = sim.surface_areas_[pt];
+  // Drag f = -(A/4) (c1 + c2 |v|) v; its derivatives exist at c = 0 too (for screening).
+  const double projected = 0.25 * area;
+  const double speed = vp.norm();
+  share->drag_linear -= projected * vp.dot(lambda_p);
+  share->drag_quadratic -= projected * speed * vp.dot(lambda_p);
+  const auto& nodes = mesh.element_nodes[embedding.element[pt]];
+  const auto& w = embedding.weights[pt];
+  Eigen::Vector3d velocity_part = Eigen::Vector3d::Zero();  // (df/dv)^T lambda_p
+  bool ground_force = false;
+  Eigen::Vector3d xp = Eigen::Vector3d::Zero();
+  if (p.ground) {
+    xp = embedding.rest_positions[pt] + embedding.Interpolate(mesh, in.u, pt);
+    const Eigen::Vector3d xp_previous =
+        embedding.rest_positions[pt] + embedding.Interpolate(mesh, u_previous, pt);
+    ground_force = !GroundContactDerivativesVanish(sim.contact_, xp, xp_previous);
+    if (ground_force) {
+      const GroundForceDerivatives d =
+          GroundContactForceDerivatives(sim.contact_, area, xp, vp, xp_previous);
+      share->ground_normal += d.d_normal.transpose() * lambda_p;
+      share->ground_offset += d.d_offset.dot(lambda_p);
+      share->stiffness += d.d_stiffness.dot(lambda_p);
+      share->contact_damping += d.d_damping.dot(lambda_p);
+      share->friction_coefficient += d.d_friction.dot(lambda_p);
+      velocity_part += d.d_velocity.transpose() * lambda_p;
+      const Eigen::Vector3d previous_part = d.d_previous_position.transpose() * lambda_p;
+      for (int c = 0; c < 8; ++c)
+        previous_adjoint->segment<3>(3 * nodes[c]) += w[c] * previous_part;
+    }
+  }
+  // Far from the ground without drag the point exerts no force: nothing else to add.
+  if (!ground_force && !in.drag) return;
+  const PointForce drag_force = AirDragForce(p.drag_linear, p.drag_quadratic, area, vp);
+  velocity_part -= drag_force.damping.transpose() * lambda_p;
+  // -(dr/dv)^T lambda = (df/dv)^T lambda_p, spread back to the nodes.
+  for (int c = 0; c < 8; ++c) in.velocity_adjoint->segment<3>(3 * nodes[c]) -= w[c] * velocity_part;
+  if (surface != nullptr) {
+    // The point's block of the step matrix, as Assemble builds it (exact tangent).
+    Eigen::Matrix3d jacobian = drag_force.StepJacobian(in.dv_du);
+    if (ground_force) {
+      jacobian += GroundContactForce(sim.contact_, area, xp, vp, sim.lagged_normal_force_[pt])
+                      .StepJacobian(in.dv_du);
+    }
+    const Eigen::Vector3d product = jacobian.transpose() * lambda_p;
+    for (int c = 0; c < 8; ++c)
+      surface->jacobian_adjoint.segment<3>(3 * nodes[c]) += w[c] * product;
+  }
+}
+
+// A clamped node has no equation and no state of its own to receive an adjoint.
+void Simulator::ResidualAdjointPass::ClearFixedNodes() const {
+  for (int i = 0; i < sim.mesh_.NumNodes(); ++i) {
+    if (!sim.fixed_[i]) continue;
     velocity_adjoint->segment<3>(3 * i).setZero();
     previous_adjoint->segment<3>(3 * i).setZero();
     if (surface != nullptr) surface->velocity_adjoint.segment<3>(3 * i).setZero();
   }
+}
+
+void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd& v,
+                                const Eigen::VectorXd& a, const Eigen::VectorXd& u_previous,
+                                const Eigen::VectorXd& lambda, Eigen::VectorXd* velocity_adjoint,
+                                Eigen::VectorXd* previous_adjoint, ParameterGradient* gradient,
+                                bool rotations_current, SurfaceAdjoint* surface) {
+  BuildShearStiffness();
+  const int n = mesh_.NumNodes();
+  velocity_adjoint->setZero(3 * n);
+  previous_adjoint->setZero(3 * n);
+  const ResidualAdjointPass pass{.sim = *this,
+                                 .p = parameters_,
+                                 .h = mesh_.CellSize(),
+                                 .u = u,
+                                 .v = v,
+                                 .a = a,
+                                 .u_previous = u_previous,
+                                 .lambda = lambda,
+                                 .rotations_current = rotations_current,
+                                 .velocity_adjoint = velocity_adjoint,
+                                 .previous_adjoint = previous_adjoint,
+                                 .gradient = gradient,
+                                 .surface = surface};
+  pass.AddElements();
+  pass.AddNodes();
+  pass.AddSurfacePoints();
+  pass.ClearFixedNodes();
 }
 
 Status Simulator::BackpropagateStep(const SimulationState& previous, const SimulationState& next,

@@ -281,27 +281,46 @@ Status RunOnObjectives(const ObjectiveFactory& make_objective, int num_tasks, in
   return error;
 }
 
-// The parameters at x, or why the difference stencil cannot use them.
-Result<fem::PhysicalParameters> StencilPoint(const ParameterSpace& space,
-                                             const fem::PhysicalParameters& parameters,
-                                             const std::vector<double>& x) {
-  fem::PhysicalParameters at = space.ToParameters(x.data(), parameters);
-  if (Status valid = at.Validate(); !valid.ok()) {
-    return Status::FailedPrecondition(
-        "identifiability: invalid parameters at a difference step (lower "
-        "IdentifiabilityOptions.step): " +
-        valid.message());
-  }
-  return at;
-}
+// The difference stencil around the optimum: the optimiser's variables there (x0) and the step.
+struct Stencil {
+  Stencil(const ParameterSpace& space, const fem::PhysicalParameters& parameters,
+          const IdentifiabilityOptions& options)
+      : space(space),
+        parameters(parameters),
+        p(space.NumVariables()),
+        x0(space.ToVariables(parameters)),
+        s(options.step) {}
 
-Status Diverged(const ParameterSpace& space, int variable, const char* sign, double s) {
-  return Status::FailedPrecondition(
-      variable < 0
-          ? std::string("identifiability: the simulation diverges at the optimum")
-          : "identifiability: the simulation diverges at " + space.variable_names()[variable] +
-                sign + std::to_string(s) + " (lower IdentifiabilityOptions.step)");
-}
+  // The parameters at x = x0 + offset e_variable (x0 itself when variable < 0), with x, or why
+  // the stencil cannot use them.
+  Result<fem::PhysicalParameters> Point(int variable, double offset, std::vector<double>* x) const {
+    *x = x0;
+    if (variable >= 0) (*x)[variable] += offset;
+    fem::PhysicalParameters at = space.ToParameters(x->data(), parameters);
+    if (Status valid = at.Validate(); !valid.ok()) {
+      return Status::FailedPrecondition(
+          "identifiability: invalid parameters at a difference step (lower "
+          "IdentifiabilityOptions.step): " +
+          valid.message());
+    }
+    return at;
+  }
+
+  // The simulation diverged at the point `sign` s along `variable` (at x0 when variable < 0).
+  Status Diverged(int variable, const char* sign) const {
+    return Status::FailedPrecondition(
+        variable < 0
+            ? std::string("identifiability: the simulation diverges at the optimum")
+            : "identifiability: the simulation diverges at " + space.variable_names()[variable] +
+                  sign + std::to_string(s) + " (lower IdentifiabilityOptions.step)");
+  }
+
+  const ParameterSpace& space;
+  const fem::PhysicalParameters& parameters;
+  const int p;  // variables
+  const std::vector<double> x0;
+  const double s;
+};
 
 int PointsInFittedFrames(const TrajectoryObjective& objective) {
   int n = 0;
@@ -318,31 +337,27 @@ int Threads(const IdentifiabilityOptions& options) {
 
 // H e_j ~ (g(x* + s e_j) - g(x* - s e_j)) / (2 s): 1 + 2p forward+adjoint runs.
 Result<Curvature> CurvatureByGradientDifferences(const ObjectiveFactory& make_objective,
-                                                 const ParameterSpace& space,
-                                                 const fem::PhysicalParameters& parameters,
+                                                 const Stencil& stencil,
                                                  const IdentifiabilityOptions& options) {
-  const int p = space.NumVariables();
-  const std::vector<double> x0 = space.ToVariables(parameters);
-  const double s = options.step;
+  const int p = stencil.p;
+  const double s = stencil.s;
   // Task 0: the centre; task 1 + 2 j (+ 1): x0 -+ s e_j.
   const int num_tasks = 1 + 2 * p;
   std::vector<Evaluation> results(num_tasks);
   Curvature out;
   SOFTID_RETURN_IF_ERROR(RunOnObjectives(
       make_objective, num_tasks, Threads(options), [&](TrajectoryObjective& objective, int task) {
-        std::vector<double> x = x0;
-        if (task > 0) x[(task - 1) / 2] += (task % 2 == 1 ? -s : s);
+        const int variable = task > 0 ? (task - 1) / 2 : -1;
+        std::vector<double> x;
         SOFTID_ASSIGN_OR_RETURN(const fem::PhysicalParameters at,
-                                StencilPoint(space, parameters, x));
+                                stencil.Point(variable, task % 2 == 1 ? -s : s, &x));
         SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation,
                                 objective.Evaluate(at, /*with_gradient=*/true));
-        if (evaluation.diverged) {
-          return Diverged(space, task == 0 ? -1 : (task - 1) / 2, task % 2 == 1 ? " - " : " + ", s);
-        }
+        if (evaluation.diverged) return stencil.Diverged(variable, task % 2 == 1 ? " - " : " + ");
         Evaluation& result = results[task];
         result.cost = evaluation.cost;
         result.gradient.resize(p);
-        space.ChainGradient(evaluation.gradient, x.data(), result.gradient.data());
+        stencil.space.ChainGradient(evaluation.gradient, x.data(), result.gradient.data());
         if (task == 0) out.num_points = PointsInFittedFrames(objective);
         return Status::Ok();
       }));
@@ -362,24 +377,20 @@ Result<Curvature> CurvatureByGradientDifferences(const ObjectiveFactory& make_ob
 // TrajectoryObjective::EvaluateResiduals (C = |r|^2 / 2): 1 + p forward runs, no adjoint. Exact
 // to first order at a fit whose residuals are at the noise (the second-order term averages out).
 Result<Curvature> CurvatureByGaussNewton(const ObjectiveFactory& make_objective,
-                                         const ParameterSpace& space,
-                                         const fem::PhysicalParameters& parameters,
+                                         const Stencil& stencil,
                                          const IdentifiabilityOptions& options) {
-  const int p = space.NumVariables();
-  const std::vector<double> x0 = space.ToVariables(parameters);
-  const double s = options.step;
+  const int p = stencil.p;
+  const double s = stencil.s;
   const int num_tasks = 1 + p;  // the centre, then x0 + s e_j
   std::vector<Eigen::VectorXd> residuals(num_tasks);
   Curvature out;
   SOFTID_RETURN_IF_ERROR(RunOnObjectives(
       make_objective, num_tasks, Threads(options), [&](TrajectoryObjective& objective, int task) {
-        std::vector<double> x = x0;
-        if (task > 0) x[task - 1] += s;
-        SOFTID_ASSIGN_OR_RETURN(const fem::PhysicalParameters at,
-                                StencilPoint(space, parameters, x));
+        std::vector<double> x;
+        SOFTID_ASSIGN_OR_RETURN(const fem::PhysicalParameters at, stencil.Point(task - 1, s, &x));
         SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation,
                                 objective.EvaluateResiduals(at, &residuals[task]));
-        if (evaluation.diverged) return Diverged(space, task - 1, " + ", s);
+        if (evaluation.diverged) return stencil.Diverged(task - 1, " + ");
         if (task == 0) {
           out.cost = evaluation.cost;
           out.num_points = PointsInFittedFrames(objective);
@@ -394,82 +405,38 @@ Result<Curvature> CurvatureByGaussNewton(const ObjectiveFactory& make_objective,
   return out;
 }
 
-}  // namespace
-
-Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& make_objective,
-                                                     const ParameterSpace& space,
-                                                     const fem::PhysicalParameters& parameters,
-                                                     const IdentifiabilityOptions& options) {
-  const auto begin = std::chrono::steady_clock::now();
-  SOFTID_RETURN_IF_ERROR(options.Validate());
-  const int p = space.NumVariables();
-  const std::vector<double> x0 = space.ToVariables(parameters);
-  SOFTID_ASSIGN_OR_RETURN(
-      const Curvature curvature,
-      options.curvature == CurvatureMethod::kGaussNewton
-          ? CurvatureByGaussNewton(make_objective, space, parameters, options)
-          : CurvatureByGradientDifferences(make_objective, space, parameters, options));
-  const int num_points = curvature.num_points;
-
-  IdentifiabilityReport report;
-  report.evaluations = curvature.evaluations;
-  report.curvature = options.curvature;
-  report.cost = curvature.cost;
-  report.gradient = curvature.gradient;
-  report.hessian_asymmetry = curvature.asymmetry;
-  const Eigen::MatrixXd& h = curvature.hessian;
-  report.hessian = h;
-  report.hessian_positive_definite =
-      p > 0 && h.llt().info() == Eigen::Success && (h.diagonal().array() > 0.0).all();
-
-  // Noise scale: sigma^2 = 2 C_min N / (N - p), floored (see the header).
+// Noise scale: sigma^2 = 2 C_min N / (N - p), floored (see the header), into the report. Returns
+// the factor of H^-1 in the covariance.
+double SetNoiseScale(const IdentifiabilityOptions& options, int num_points, int p,
+                     IdentifiabilityReport* report) {
   const double n_eff =
       options.num_effective_samples > 0.0 ? options.num_effective_samples : double(num_points);
-  report.num_effective_samples = n_eff;
+  report->num_effective_samples = n_eff;
   const double dof = n_eff > p ? n_eff - p : std::max(n_eff, 1.0);
-  const double sigma2 = std::max(2.0 * std::max(report.cost, 0.0) * std::max(n_eff, 1.0) / dof,
+  const double sigma2 = std::max(2.0 * std::max(report->cost, 0.0) * std::max(n_eff, 1.0) / dof,
                                  options.min_residual_sigma * options.min_residual_sigma);
-  report.residual_sigma = std::sqrt(sigma2);
-  const double variance_scale = sigma2 / std::max(n_eff, 1.0);  // Cov = variance_scale * H^-1
+  report->residual_sigma = std::sqrt(sigma2);
+  return sigma2 / std::max(n_eff, 1.0);  // Cov = variance_scale * H^-1
+}
 
-  report.variables.resize(p);
-  for (int i = 0; i < p; ++i) {
-    VariableIdentifiability& v = report.variables[i];
-    v.name = space.variable_names()[i];
-    v.parameter = ParameterOf(v.name);
-    v.variable = x0[i];
-  }
-  const HessianCovariance laplace = CovarianceFromHessian(h, variance_scale);
-  const std::vector<int>& kept = laplace.kept;
-  const int k = static_cast<int>(kept.size());
-  for (int i = 0; i < p; ++i) {
-    if (std::find(kept.begin(), kept.end(), i) == kept.end())
-      report.variables[i].flags.push_back(IdentifiabilityFlag::kNoSensitivity);
-  }
-  report.covariance = laplace.covariance;
-  report.correlation = laplace.correlation;
-  report.scaled_eigenvalues = laplace.scaled_eigenvalues;
-  report.scaled_eigenvectors = laplace.scaled_eigenvectors;
-  const Eigen::VectorXd& lambda = laplace.scaled_eigenvalues;
-  const Eigen::MatrixXd& vectors = laplace.scaled_eigenvectors;
-  Eigen::VectorXd d_inv_sqrt(k);
-  for (int a = 0; a < k; ++a) d_inv_sqrt[a] = 1.0 / std::sqrt(h(kept[a], kept[a]));
-
-  // Per-variable uncertainties in physical units (d value / d x by central differences of the
-  // transform: exact enough, and the same code for every parameterisation).
-  for (int i = 0; i < p; ++i) {
-    VariableIdentifiability& v = report.variables[i];
-    const PhysicalValue value = ValueOf(space, parameters, x0, i);
+// Per-variable uncertainties in physical units (d value / d x by central differences of the
+// transform: exact enough, and the same code for every parameterisation).
+void SetUncertainties(const Stencil& stencil, const IdentifiabilityOptions& options,
+                      IdentifiabilityReport* report) {
+  const std::vector<double>& x0 = stencil.x0;
+  for (int i = 0; i < stencil.p; ++i) {
+    VariableIdentifiability& v = report->variables[i];
+    const PhysicalValue value = ValueOf(stencil.space, stencil.parameters, x0, i);
     v.value = value.value;
     v.unit = value.unit;
     std::vector<double> x = x0;
     const double dx = 1e-6;
     x[i] = x0[i] + dx;
-    const double plus = ValueOf(space, parameters, x, i).value;
+    const double plus = ValueOf(stencil.space, stencil.parameters, x, i).value;
     x[i] = x0[i] - dx;
-    const double minus = ValueOf(space, parameters, x, i).value;
+    const double minus = ValueOf(stencil.space, stencil.parameters, x, i).value;
     const double slope = std::abs(plus - minus) / (2.0 * dx);
-    v.variable_uncertainty = std::sqrt(report.covariance(i, i));
+    v.variable_uncertainty = std::sqrt(report->covariance(i, i));
     v.standard_uncertainty =
         std::isfinite(v.variable_uncertainty) ? slope * v.variable_uncertainty : kInfinity;
     v.relative_uncertainty = value.scale > 0.0 ? v.standard_uncertainty / value.scale : -1.0;
@@ -478,20 +445,39 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
       v.flags.push_back(IdentifiabilityFlag::kLargeUncertainty);
     }
   }
+}
+
+void AddFlag(VariableIdentifiability& v, IdentifiabilityFlag flag) {
+  if (std::find(v.flags.begin(), v.flags.end(), flag) == v.flags.end()) v.flags.push_back(flag);
+}
+
+// Pairs of kept variables correlated beyond options.max_correlation.
+void FlagCorrelatedPairs(const std::vector<int>& kept, const IdentifiabilityOptions& options,
+                         IdentifiabilityReport* report) {
+  const int k = static_cast<int>(kept.size());
   for (int a = 0; a < k; ++a) {
     for (int b = a + 1; b < k; ++b) {
       const int i = kept[a], j = kept[b];
       // (NaN, for a variable without a finite uncertainty, is not a correlation.)
-      if (!(std::abs(report.correlation(i, j)) > options.max_correlation)) continue;
-      report.correlated_pairs.emplace_back(report.variables[i].name, report.variables[j].name);
-      for (int m : {i, j}) {
-        auto& flags = report.variables[m].flags;
-        if (std::find(flags.begin(), flags.end(), IdentifiabilityFlag::kCorrelatedPair) ==
-            flags.end())
-          flags.push_back(IdentifiabilityFlag::kCorrelatedPair);
-      }
+      if (!(std::abs(report->correlation(i, j)) > options.max_correlation)) continue;
+      report->correlated_pairs.emplace_back(report->variables[i].name, report->variables[j].name);
+      for (int m : {i, j}) AddFlag(report->variables[m], IdentifiabilityFlag::kCorrelatedPair);
     }
   }
+}
+
+// Valleys: combinations of the kept variables whose scaled eigenvalue is below
+// options.min_scaled_eigenvalue, which the data fix only together.
+void AddDegenerateCombinations(const HessianCovariance& laplace, const Eigen::MatrixXd& h,
+                               const IdentifiabilityOptions& options,
+                               IdentifiabilityReport* report) {
+  const std::vector<int>& kept = laplace.kept;
+  const int k = static_cast<int>(kept.size());
+  const int p = static_cast<int>(report->variables.size());
+  const Eigen::VectorXd& lambda = laplace.scaled_eigenvalues;
+  const Eigen::MatrixXd& vectors = laplace.scaled_eigenvectors;
+  Eigen::VectorXd d_inv_sqrt(k);
+  for (int a = 0; a < k; ++a) d_inv_sqrt[a] = 1.0 / std::sqrt(h(kept[a], kept[a]));
   for (int e = 0; e < k && k > 1; ++e) {
     if (!(lambda[e] < options.min_scaled_eigenvalue)) continue;
     DegenerateCombination combination;
@@ -505,14 +491,60 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
                           (laplace.singular[e] && laplace.unbounded[kept[a]] &&
                            std::abs(vectors(a, e)) >= kUnboundedLoading);
       if (!member) continue;
-      VariableIdentifiability& v = report.variables[kept[a]];
+      VariableIdentifiability& v = report->variables[kept[a]];
       combination.loadings.emplace_back(v.name, vectors(a, e));
-      if (std::find(v.flags.begin(), v.flags.end(), IdentifiabilityFlag::kDegenerateCombination) ==
-          v.flags.end())
-        v.flags.push_back(IdentifiabilityFlag::kDegenerateCombination);
+      AddFlag(v, IdentifiabilityFlag::kDegenerateCombination);
     }
-    report.degenerate_combinations.push_back(std::move(combination));
+    report->degenerate_combinations.push_back(std::move(combination));
   }
+}
+
+}  // namespace
+
+Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& make_objective,
+                                                     const ParameterSpace& space,
+                                                     const fem::PhysicalParameters& parameters,
+                                                     const IdentifiabilityOptions& options) {
+  const auto begin = std::chrono::steady_clock::now();
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  const Stencil stencil(space, parameters, options);
+  const int p = stencil.p;
+  SOFTID_ASSIGN_OR_RETURN(const Curvature curvature,
+                          options.curvature == CurvatureMethod::kGaussNewton
+                              ? CurvatureByGaussNewton(make_objective, stencil, options)
+                              : CurvatureByGradientDifferences(make_objective, stencil, options));
+
+  IdentifiabilityReport report;
+  report.evaluations = curvature.evaluations;
+  report.curvature = options.curvature;
+  report.cost = curvature.cost;
+  report.gradient = curvature.gradient;
+  report.hessian_asymmetry = curvature.asymmetry;
+  const Eigen::MatrixXd& h = curvature.hessian;
+  report.hessian = h;
+  report.hessian_positive_definite =
+      p > 0 && h.llt().info() == Eigen::Success && (h.diagonal().array() > 0.0).all();
+  const double variance_scale = SetNoiseScale(options, curvature.num_points, p, &report);
+
+  report.variables.resize(p);
+  for (int i = 0; i < p; ++i) {
+    VariableIdentifiability& v = report.variables[i];
+    v.name = space.variable_names()[i];
+    v.parameter = ParameterOf(v.name);
+    v.variable = stencil.x0[i];
+  }
+  const HessianCovariance laplace = CovarianceFromHessian(h, variance_scale);
+  for (int i = 0; i < p; ++i) {
+    if (std::find(laplace.kept.begin(), laplace.kept.end(), i) == laplace.kept.end())
+      report.variables[i].flags.push_back(IdentifiabilityFlag::kNoSensitivity);
+  }
+  report.covariance = laplace.covariance;
+  report.correlation = laplace.correlation;
+  report.scaled_eigenvalues = laplace.scaled_eigenvalues;
+  report.scaled_eigenvectors = laplace.scaled_eigenvectors;
+  SetUncertainties(stencil, options, &report);
+  FlagCorrelatedPairs(laplace.kept, options, &report);
+  AddDegenerateCombinations(laplace, h, options, &report);
   report.seconds = SecondsSince(begin);
   return report;
 }

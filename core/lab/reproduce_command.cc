@@ -197,99 +197,144 @@ void Verdict(const Benchmark& b, const inverse::IdentifiabilityReport& report, R
   out->identifiability_verdict = verdict;
 }
 
-// Fits every start of one row and summarises them.
-Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFlags& flags,
-                          int starts, int threads, double duration,
-                          const std::filesystem::path& work, const std::filesystem::path& out) {
-  const auto begin = Clock::now();
-  RowSummary summary;
-  summary.row = &row;
-  SOFTID_ASSIGN_OR_RETURN(scenes::Scene scene, scenes::MakeBuiltinScene(b.scene));
-  if (duration > 0.0) scene.duration = duration;
-  const fem::PhysicalParameters truth = scene.parameters;
-  SOFTID_ASSIGN_OR_RETURN(std::filesystem::path dir, EnsureCapture(b, row, duration, work, scene));
-  SOFTID_ASSIGN_OR_RETURN(capture::Capture capture,
-                          capture::ReadCapture(dir, {.decode_frames = false}));
-  const int max_iterations = flags.max_iterations > 0 ? flags.max_iterations : b.max_iterations;
-  const int refine_iterations =
-      flags.refine_iterations >= 0 ? flags.refine_iterations : b.refine_iterations;
+// One row's run: its inputs, and what its stages find and fill in, in the order they do.
+struct RowRun {
+  RowRun(const Benchmark& b, const Row& row, const ReproduceFlags& flags, int starts, int threads,
+         double duration, const std::filesystem::path& out)
+      : b(b),
+        row(row),
+        flags(flags),
+        starts(starts),
+        threads(threads),
+        duration(duration),
+        out(out) {}
 
+  const Benchmark& b;
+  const Row& row;
+  const ReproduceFlags& flags;
+  const int starts;  // drawn from the seed
+  const int threads;
+  const double duration;
+  const std::filesystem::path& out;
+  const Clock::time_point begin = Clock::now();
+  scenes::Scene scene;
+  fem::PhysicalParameters truth;
+  std::filesystem::path dir;  // the capture's
+  capture::Capture capture;
+  std::vector<nlohmann::json> initial;  // every start drawn
+  std::vector<int> run;                 // the starts to run, indices into `initial`
+  std::filesystem::path config_dir;     // each run start's job config
+  int max_iterations = 0, refine_iterations = 0;
+  int cores_per_start = 1;
+  inverse::FitResult combined;
+  std::vector<inverse::JobConfig> configs;  // per run start
+  nlohmann::json start_scores = nlohmann::json::array();
+  std::vector<std::vector<double>> errors;  // per quantity, of the converged starts
+  RowSummary summary;
+
+  int num_run() const { return static_cast<int>(run.size()); }
+};
+
+// The row's scene and its capture, synthesised unless an identical one is there.
+Status LoadRowCapture(RowRun& r, const std::filesystem::path& work) {
+  SOFTID_ASSIGN_OR_RETURN(r.scene, scenes::MakeBuiltinScene(r.b.scene));
+  if (r.duration > 0.0) r.scene.duration = r.duration;
+  r.truth = r.scene.parameters;
+  SOFTID_ASSIGN_OR_RETURN(r.dir, EnsureCapture(r.b, r.row, r.duration, work, r.scene));
+  SOFTID_ASSIGN_OR_RETURN(r.capture, capture::ReadCapture(r.dir, {.decode_frames = false}));
+  return Status::Ok();
+}
+
+// The starts: drawn, chosen, and where their job configs go (each one reruns alone with
+// `softid-lab fit CAPTURE --config FILE`).
+Status PlanStarts(RowRun& r) {
+  const ReproduceFlags& flags = r.flags;
+  r.max_iterations = flags.max_iterations > 0 ? flags.max_iterations : r.b.max_iterations;
+  r.refine_iterations =
+      flags.refine_iterations >= 0 ? flags.refine_iterations : r.b.refine_iterations;
   // The same starts for every row of a benchmark (one seed), so rows differ only in their data.
   std::mt19937_64 rng(flags.seed);
-  std::vector<nlohmann::json> initial;
-  for (int s = 0; s < starts; ++s) initial.push_back(reproduce::DrawStart(b, truth, rng));
-
-  // The starts to run (indices into `initial`), and where their job configs go: each one reruns
-  // alone with `softid-lab fit CAPTURE --config FILE`.
-  std::vector<int> run;
+  for (int s = 0; s < r.starts; ++s) r.initial.push_back(reproduce::DrawStart(r.b, r.truth, rng));
   if (flags.only_starts.empty()) {
-    for (int s = 0; s < starts; ++s) run.push_back(s);
+    for (int s = 0; s < r.starts; ++s) r.run.push_back(s);
   } else {
-    for (int number : flags.only_starts) run.push_back(number - 1);
+    for (int number : flags.only_starts) r.run.push_back(number - 1);
   }
-  const std::filesystem::path config_dir = out / fmt::format("{}-{}-starts", b.name, row.id);
+  r.config_dir = r.out / fmt::format("{}-{}-starts", r.b.name, r.row.id);
   std::error_code ec;
-  std::filesystem::create_directories(config_dir, ec);
-  if (ec) return Status::Internal(fmt::format("{}: {}", config_dir.string(), ec.message()));
+  std::filesystem::create_directories(r.config_dir, ec);
+  if (ec) return Status::Internal(fmt::format("{}: {}", r.config_dir.string(), ec.message()));
+  // The cores the parallel starts leave idle go to each start's simulation.
+  r.cores_per_start =
+      std::max(1, static_cast<int>(std::thread::hardware_concurrency()) / std::max(1, r.threads));
+  return Status::Ok();
+}
 
-  inverse::FitResult combined;
-  combined.fitted = b.fit;
-  const int num_run = static_cast<int>(run.size());
+// Fits run start k into combined.starts[k] (under `mutex`, which also guards `have_base`) and logs
+// its errors; fails when its job config cannot be made or written.
+Status FitStart(RowRun& r, int k, std::mutex& mutex, bool* have_base) {
+  const Benchmark& b = r.b;
+  const int s = r.run[k];
+  Result<inverse::JobConfig> config =
+      reproduce::MakeStartConfig(b, r.row, r.truth, r.initial[s], r.capture.mass_kg.has_value(),
+                                 r.max_iterations, r.refine_iterations, r.cores_per_start);
+  Status written = config.ok()
+                       ? WriteJsonFile(r.config_dir / fmt::format("start-{:02d}.json", s + 1),
+                                       inverse::ToJson(*config))
+                       : config.status();
+  if (!written.ok()) return written;
+  r.configs[k] = *config;
+  Result<inverse::FitResult> fit = inverse::Fit(r.capture, *config);
+  std::lock_guard lock(mutex);
+  inverse::StartResult& start = r.combined.starts[k];
+  if (fit.ok()) {
+    start = fit->starts[0];
+    if (!*have_base) r.combined.base = fit->base;
+    *have_base = true;
+  } else {
+    start.failed = true;
+    start.termination = fit.status().message();
+    Result<fem::PhysicalParameters> p =
+        inverse::ApplyToParameters(*config, fem::PhysicalParameters{});
+    if (p.ok()) start.initial = start.final = *p;
+  }
+  start.index = s;
+  std::string errors;
+  for (const Quantity& q : b.quantities) {
+    errors += fmt::format(
+        " {} {:.3g}{}", q.label,
+        reproduce::MetricDisplayScale(q.metric) * reproduce::ScoreError(q, start.final, r.truth),
+        reproduce::MetricUnit(q.metric));
+  }
+  spdlog::info("{} {} start {}/{}: {}{}; cost {:.3e} m^2, {} iterations, {:.0f} s", b.name,
+               r.row.id, s + 1, r.starts, start.failed ? "FAILED " : "", errors, start.final_cost,
+               start.iterations, start.seconds);
+  return Status::Ok();
+}
+
+// Fits the run starts, `threads` at a time, into `combined`, whose best is the cheapest.
+Status FitStarts(RowRun& r) {
+  const int num_run = r.num_run();
+  inverse::FitResult& combined = r.combined;
+  combined.fitted = r.b.fit;
   combined.starts.resize(num_run);
-  std::vector<inverse::JobConfig> configs(num_run);
+  r.configs.resize(num_run);
   bool have_base = false;
   std::atomic<int> next{0};
   std::mutex mutex;
   Status error;
-  // The cores the parallel starts leave idle go to each start's simulation.
-  const int cores_per_start =
-      std::max(1, static_cast<int>(std::thread::hardware_concurrency()) / std::max(1, threads));
   auto worker = [&]() {
     for (int k = next++; k < num_run; k = next++) {
-      const int s = run[k];
-      Result<inverse::JobConfig> config =
-          reproduce::MakeStartConfig(b, row, truth, initial[s], capture.mass_kg.has_value(),
-                                     max_iterations, refine_iterations, cores_per_start);
-      Status written = config.ok()
-                           ? WriteJsonFile(config_dir / fmt::format("start-{:02d}.json", s + 1),
-                                           inverse::ToJson(*config))
-                           : config.status();
-      if (!written.ok()) {
+      if (Status fitted = FitStart(r, k, mutex, &have_base); !fitted.ok()) {
         std::lock_guard lock(mutex);
-        error = written;
+        error = fitted;
         return;
       }
-      configs[k] = *config;
-      Result<inverse::FitResult> fit = inverse::Fit(capture, *config);
-      std::lock_guard lock(mutex);
-      inverse::StartResult& start = combined.starts[k];
-      if (fit.ok()) {
-        start = fit->starts[0];
-        if (!have_base) combined.base = fit->base;
-        have_base = true;
-      } else {
-        start.failed = true;
-        start.termination = fit.status().message();
-        Result<fem::PhysicalParameters> p =
-            inverse::ApplyToParameters(*config, fem::PhysicalParameters{});
-        if (p.ok()) start.initial = start.final = *p;
-      }
-      start.index = s;
-      std::string errors;
-      for (const Quantity& q : b.quantities) {
-        errors += fmt::format(
-            " {} {:.3g}{}", q.label,
-            reproduce::MetricDisplayScale(q.metric) * reproduce::ScoreError(q, start.final, truth),
-            reproduce::MetricUnit(q.metric));
-      }
-      spdlog::info("{} {} start {}/{}: {}{}; cost {:.3e} m^2, {} iterations, {:.0f} s", b.name,
-                   row.id, s + 1, starts, start.failed ? "FAILED " : "", errors, start.final_cost,
-                   start.iterations, start.seconds);
     }
   };
   {
     std::vector<std::jthread> pool;
-    for (int t = 1; t < std::min(threads, num_run); ++t) pool.emplace_back(worker);
+    for (int t = 1; t < std::min(r.threads, num_run); ++t) pool.emplace_back(worker);
     worker();
   }
   SOFTID_RETURN_IF_ERROR(error);
@@ -299,20 +344,24 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
     if (combined.best < 0 || start.final_cost < combined.starts[combined.best].final_cost)
       combined.best = s;
   }
-  combined.total_seconds = SecondsSince(begin);
+  combined.total_seconds = SecondsSince(r.begin);
+  return Status::Ok();
+}
 
-  // Scores: per start and per quantity; convergence over the judged quantities.
-  summary.starts = num_run;
-  nlohmann::json start_scores = nlohmann::json::array();
-  std::vector<std::vector<double>> errors(b.quantities.size());
-  for (int k = 0; k < num_run; ++k) {
-    const inverse::StartResult& start = combined.starts[k];
+// Scores per start and per quantity; convergence over the judged quantities.
+void ScoreStarts(RowRun& r) {
+  const std::vector<Quantity>& quantities = r.b.quantities;
+  RowSummary& summary = r.summary;
+  summary.starts = r.num_run();
+  r.errors.resize(quantities.size());
+  for (int k = 0; k < r.num_run(); ++k) {
+    const inverse::StartResult& start = r.combined.starts[k];
     bool converged = !start.failed;
     nlohmann::json scores = nlohmann::json::object();
-    std::vector<double> e(b.quantities.size());
-    for (size_t q = 0; q < b.quantities.size(); ++q) {
-      const Quantity& quantity = b.quantities[q];
-      e[q] = reproduce::ScoreError(quantity, start.final, truth);
+    std::vector<double> e(quantities.size());
+    for (size_t q = 0; q < quantities.size(); ++q) {
+      const Quantity& quantity = quantities[q];
+      e[q] = reproduce::ScoreError(quantity, start.final, r.truth);
       scores[quantity.name] = std::isfinite(e[q]) ? nlohmann::json(e[q]) : nlohmann::json(nullptr);
       if (quantity.judged && !(e[q] < reproduce::ConvergenceLimit(quantity.metric)))
         converged = false;
@@ -320,67 +369,79 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
     summary.failed += start.failed;
     summary.converged += converged;
     if (converged) {
-      for (size_t q = 0; q < e.size(); ++q) errors[q].push_back(e[q]);
+      for (size_t q = 0; q < e.size(); ++q) r.errors[q].push_back(e[q]);
     }
-    start_scores.push_back({{"index", start.index}, {"converged", converged}, {"errors", scores}});
+    r.start_scores.push_back(
+        {{"index", start.index}, {"converged", converged}, {"errors", scores}});
   }
-  summary.pass = summary.converged == num_run;
-  if (b.start_seconds_target > 0.0) {
-    // The slowest start and its work: a job's wall time is that of its starts run in parallel.
-    const inverse::StartResult* slowest = nullptr;
-    for (const inverse::StartResult& start : combined.starts) {
-      if (slowest == nullptr || start.seconds > slowest->seconds) slowest = &start;
-    }
-    if (slowest != nullptr) {
-      summary.start_seconds = slowest->seconds;
-      const bool met = slowest->seconds <= b.start_seconds_target;
-      summary.pass = summary.pass && met;
-      summary.verdict_lines.push_back(fmt::format(
-          "wall time per start {:.0f} s ({:.1f} min; target {:.0f} s: {}) on {} core(s): {} "
-          "iterations, {} evaluations, {} steps, {:.1f} ms per step (forward {:.0f} s, adjoint "
-          "{:.0f} s)",
-          slowest->seconds, slowest->seconds / 60.0, b.start_seconds_target,
-          met ? "met" : "NOT met", cores_per_start, slowest->iterations, slowest->evaluations,
-          slowest->steps, 1e3 * slowest->seconds / std::max<long long>(1, slowest->steps),
-          slowest->forward_seconds, slowest->backward_seconds));
-    }
+  summary.pass = summary.converged == r.num_run();
+}
+
+// With a time target: the slowest start and its work (a job's wall time is that of its starts
+// run in parallel).
+void JudgeStartTime(RowRun& r) {
+  const double target = r.b.start_seconds_target;
+  if (!(target > 0.0)) return;
+  const inverse::StartResult* slowest = nullptr;
+  for (const inverse::StartResult& start : r.combined.starts) {
+    if (slowest == nullptr || start.seconds > slowest->seconds) slowest = &start;
   }
-  for (size_t q = 0; q < b.quantities.size(); ++q) {
+  if (slowest == nullptr) return;
+  RowSummary& summary = r.summary;
+  summary.start_seconds = slowest->seconds;
+  const bool met = slowest->seconds <= target;
+  summary.pass = summary.pass && met;
+  summary.verdict_lines.push_back(fmt::format(
+      "wall time per start {:.0f} s ({:.1f} min; target {:.0f} s: {}) on {} core(s): {} "
+      "iterations, {} evaluations, {} steps, {:.1f} ms per step (forward {:.0f} s, adjoint "
+      "{:.0f} s)",
+      slowest->seconds, slowest->seconds / 60.0, target, met ? "met" : "NOT met", r.cores_per_start,
+      slowest->iterations, slowest->evaluations, slowest->steps,
+      1e3 * slowest->seconds / std::max<long long>(1, slowest->steps), slowest->forward_seconds,
+      slowest->backward_seconds));
+}
+
+// Per quantity the mean and worst error of the converged starts against its target.
+void SummariseQuantities(RowRun& r) {
+  for (size_t q = 0; q < r.b.quantities.size(); ++q) {
     QuantitySummary qs;
-    qs.quantity = &b.quantities[q];
-    if (!errors[q].empty()) {
+    qs.quantity = &r.b.quantities[q];
+    if (!r.errors[q].empty()) {
       double sum = 0.0, worst = 0.0;
-      for (double e : errors[q]) sum += e, worst = std::max(worst, e);
-      qs.mean_error = sum / static_cast<double>(errors[q].size());
+      for (double e : r.errors[q]) sum += e, worst = std::max(worst, e);
+      qs.mean_error = sum / static_cast<double>(r.errors[q].size());
       qs.max_error = worst;
     }
     qs.met = qs.mean_error <= qs.quantity->target;
-    if (qs.quantity->judged && !qs.met) summary.pass = false;
-    summary.quantities.push_back(qs);
+    if (qs.quantity->judged && !qs.met) r.summary.pass = false;
+    r.summary.quantities.push_back(qs);
   }
+}
 
-  nlohmann::json result = combined.best >= 0 ? inverse::ToJson(combined) : nlohmann::json::object();
-  if (!b.identifiability_focus.empty() && combined.best >= 0) {
-    inverse::IdentifiabilityOptions options;
-    options.threads = threads;
-    const auto analysis_start = Clock::now();
-    Result<inverse::IdentifiabilityReport> report =
-        inverse::AnalyzeIdentifiability(capture, configs[combined.best], combined, options);
-    if (report.ok()) {
-      result["identifiability"] = inverse::ToJson(*report);
-      Verdict(b, *report, &summary);
-      spdlog::info("{} {}: identifiability analysis in {:.0f} s", b.name, row.id,
-                   SecondsSince(analysis_start));
-    } else {
-      summary.verdict_lines.push_back("identifiability analysis failed: " +
+// The identifiability of the focus variables at the best start, into `result` and the verdict.
+void AnalyseRowIdentifiability(RowRun& r, nlohmann::json* result) {
+  const inverse::FitResult& combined = r.combined;
+  if (r.b.identifiability_focus.empty() || combined.best < 0) return;
+  inverse::IdentifiabilityOptions options;
+  options.threads = r.threads;
+  const auto analysis_start = Clock::now();
+  Result<inverse::IdentifiabilityReport> report =
+      inverse::AnalyzeIdentifiability(r.capture, r.configs[combined.best], combined, options);
+  if (report.ok()) {
+    (*result)["identifiability"] = inverse::ToJson(*report);
+    Verdict(r.b, *report, &r.summary);
+    spdlog::info("{} {}: identifiability analysis in {:.0f} s", r.b.name, r.row.id,
+                 SecondsSince(analysis_start));
+  } else {
+    r.summary.verdict_lines.push_back("identifiability analysis failed: " +
                                       report.status().message());
-      summary.identifiability_verdict = {{"error", report.status().message()}};
-    }
+    r.summary.identifiability_verdict = {{"error", report.status().message()}};
   }
-  summary.seconds = SecondsSince(begin);
+}
 
+nlohmann::json QuantitiesJson(const std::vector<QuantitySummary>& summaries) {
   nlohmann::json quantities = nlohmann::json::array();
-  for (const QuantitySummary& qs : summary.quantities) {
+  for (const QuantitySummary& qs : summaries) {
     quantities.push_back(
         {{"name", qs.quantity->name},
          {"label", qs.quantity->label},
@@ -394,29 +455,37 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
           std::isfinite(qs.max_error) ? nlohmann::json(qs.max_error) : nlohmann::json(nullptr)},
          {"met", qs.met}});
   }
+  return quantities;
+}
+
+// The row's part of its result JSON: its setup, scores and verdict.
+nlohmann::json RowJson(const RowRun& r) {
+  const Benchmark& b = r.b;
+  const Row& row = r.row;
+  const RowSummary& summary = r.summary;
   nlohmann::json row_json = {
       {"benchmark", b.name},
       {"row", row.id},
       {"label", row.label},
-      {"capture", dir.string()},
+      {"capture", r.dir.string()},
       {"cameras", row.cameras},
       {"width", row.width},
       {"height", row.height},
       {"gradient", inverse::ToString(row.gradient)},
       {"cells", b.cells},
       {"substeps", b.substeps},
-      {"duration", scene.duration},
-      {"starts", num_run},
-      {"start_configs", config_dir.string()},
+      {"duration", r.scene.duration},
+      {"starts", r.num_run()},
+      {"start_configs", r.config_dir.string()},
       {"converged", summary.converged},
       {"failed", summary.failed},
-      {"convergence_rate", static_cast<double>(summary.converged) / std::max(1, num_run)},
-      {"quantities", quantities},
-      {"start_scores", start_scores},
+      {"convergence_rate", static_cast<double>(summary.converged) / std::max(1, r.num_run())},
+      {"quantities", QuantitiesJson(summary.quantities)},
+      {"start_scores", r.start_scores},
       {"pass", summary.pass},
       {"seconds", summary.seconds},
       {"fps", b.fps},
-      {"truth", fem::ToJson(truth)},
+      {"truth", fem::ToJson(r.truth)},
   };
   if (b.start_seconds_target > 0.0) {
     row_json["start_seconds"] = summary.start_seconds;
@@ -429,10 +498,29 @@ Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFla
   }
   if (!summary.identifiability_verdict.is_null())
     row_json["identifiability_verdict"] = summary.identifiability_verdict;
-  result["reproduce"] = row_json;
-  summary.result_file = (out / fmt::format("{}-{}.json", b.name, row.id)).string();
-  SOFTID_RETURN_IF_ERROR(WriteJsonFile(summary.result_file, result));
-  return summary;
+  return row_json;
+}
+
+// Fits every start of one row, scores them against the truth and writes the row's result JSON.
+Result<RowSummary> RunRow(const Benchmark& b, const Row& row, const ReproduceFlags& flags,
+                          int starts, int threads, double duration,
+                          const std::filesystem::path& work, const std::filesystem::path& out) {
+  RowRun r(b, row, flags, starts, threads, duration, out);
+  r.summary.row = &row;
+  SOFTID_RETURN_IF_ERROR(LoadRowCapture(r, work));
+  SOFTID_RETURN_IF_ERROR(PlanStarts(r));
+  SOFTID_RETURN_IF_ERROR(FitStarts(r));
+  ScoreStarts(r);
+  JudgeStartTime(r);
+  SummariseQuantities(r);
+  nlohmann::json result =
+      r.combined.best >= 0 ? inverse::ToJson(r.combined) : nlohmann::json::object();
+  AnalyseRowIdentifiability(r, &result);
+  r.summary.seconds = SecondsSince(r.begin);
+  result["reproduce"] = RowJson(r);
+  r.summary.result_file = (out / fmt::format("{}-{}.json", b.name, row.id)).string();
+  SOFTID_RETURN_IF_ERROR(WriteJsonFile(r.summary.result_file, result));
+  return std::move(r.summary);
 }
 
 void PrintRows(const Benchmark& b, const std::vector<RowSummary>& rows) {

@@ -101,6 +101,16 @@ class ServerProcessTest : public ::testing::Test {
     return server;
   }
 
+  // kill -9, then a new server on the same data directory, as after a crash (null when the new
+  // one does not serve).
+  std::unique_ptr<ServerProcess> KillAndRestart(std::unique_ptr<ServerProcess> server,
+                                                const ServerProcess::Flags& flags) {
+    server->Signal(SIGKILL);
+    EXPECT_EQ(server->Wait(std::chrono::seconds(10)), 128 + SIGKILL);
+    server.reset();
+    return Start(flags);
+  }
+
   // SIGTERM, then the exit status must be 0 within a few seconds.
   void StopCleanly(ServerProcess& server) {
     server.Signal(SIGTERM);
@@ -206,21 +216,18 @@ inverse::testing::SmallCapture* ServerProcessTest::capture_ = nullptr;
 // kill -9 while a job runs: the restarted server requeues it, the job then completes, and its
 // history still holds every event of the lost attempt, in order, with nothing renumbered.
 TEST_F(ServerProcessTest, KillNineWhileRunningThenRestartCompletesTheJob) {
-  std::vector<v1::JobEvent> before;
+  std::unique_ptr<ServerProcess> server = Start({.workers = 1});
+  ASSERT_NE(server, nullptr);
   std::string job_id;
   {
-    std::unique_ptr<ServerProcess> server = Start({.workers = 1});
-    ASSERT_NE(server, nullptr);
     ReconstructionClient client = server->Client();
     job_id = CreateOk(client, Upload(client), FitConfig(/*max_iterations=*/3)).id();
-    before = WatchUntilFirstIteration(*server, job_id);
-    ASSERT_FALSE(before.empty());
-    ASSERT_EQ(before.back().kind(), v1::JobEvent::ITERATION);
-    server->Signal(SIGKILL);
-    EXPECT_EQ(server->Wait(std::chrono::seconds(10)), 128 + SIGKILL);
   }
+  const std::vector<v1::JobEvent> before = WatchUntilFirstIteration(*server, job_id);
+  ASSERT_FALSE(before.empty());
+  ASSERT_EQ(before.back().kind(), v1::JobEvent::ITERATION);
 
-  std::unique_ptr<ServerProcess> server = Start({.workers = 1});
+  server = KillAndRestart(std::move(server), {.workers = 1});
   ASSERT_NE(server, nullptr);
   ReconstructionClient client = server->Client();
   const std::vector<v1::JobEvent> history = WatchToEnd(client, job_id);
@@ -259,23 +266,21 @@ TEST_F(ServerProcessTest, KillNineWhileRunningThenRestartCompletesTheJob) {
 TEST_F(ServerProcessTest, KillNineAfterAFinishedStartResumesFromTheCheckpoint) {
   const nlohmann::json config = nlohmann::json::parse(
       StartsConfig(capture_->truth.youngs_modulus, /*starts=*/3, /*max_iterations=*/4));
+  std::unique_ptr<ServerProcess> server = Start({.workers = 1});
+  ASSERT_NE(server, nullptr);
   std::string job_id, capture_id;
   {
-    std::unique_ptr<ServerProcess> server = Start({.workers = 1});
-    ASSERT_NE(server, nullptr);
     ReconstructionClient client = server->Client();
     capture_id = Upload(client);
     job_id = CreateOk(client, capture_id, config.dump()).id();
-    // The second start's first iteration: the first start has finished and been saved.
-    const std::vector<v1::JobEvent> before = WatchUntil(*server, job_id, [](const v1::JobEvent& e) {
-      return e.kind() == v1::JobEvent::ITERATION && e.start() == 1;
-    });
-    ASSERT_EQ(before.back().start(), 1);
-    server->Signal(SIGKILL);
-    EXPECT_EQ(server->Wait(std::chrono::seconds(10)), 128 + SIGKILL);
   }
+  // The second start's first iteration: the first start has finished and been saved.
+  const std::vector<v1::JobEvent> before = WatchUntil(*server, job_id, [](const v1::JobEvent& e) {
+    return e.kind() == v1::JobEvent::ITERATION && e.start() == 1;
+  });
+  ASSERT_EQ(before.back().start(), 1);
 
-  std::unique_ptr<ServerProcess> server = Start({.workers = 1});
+  server = KillAndRestart(std::move(server), {.workers = 1});
   ASSERT_NE(server, nullptr);
   ReconstructionClient client = server->Client();
   const std::vector<v1::JobEvent> history = WatchToEnd(client, job_id);
