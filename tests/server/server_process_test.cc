@@ -357,24 +357,6 @@ TEST_F(ServerProcessTest, FannedOutStartsRunOnEveryWorkerAndMatchTheOneWorkerRes
   StopCleanly(*server);
 }
 
-// Timing aside: what a result says.
-nlohmann::json WithoutTiming(nlohmann::json json) {
-  if (json.is_object()) {
-    for (auto it = json.begin(); it != json.end();) {
-      const std::string& key = it.key();
-      if (key == "timing" || key == "seconds" || key.ends_with("_seconds")) {
-        it = json.erase(it);
-      } else {
-        *it = WithoutTiming(*it);
-        ++it;
-      }
-    }
-  } else if (json.is_array()) {
-    for (nlohmann::json& item : json) item = WithoutTiming(item);
-  }
-  return json;
-}
-
 // --fan-out-starts with "diagnose": true: the diagnosis' refits run as tasks on both workers, and
 // the diagnosis is the one a server without fan-out makes for the same job. The base model is
 // told a wrong sideways launch, so the motion misfits and candidates are refitted.
@@ -420,7 +402,8 @@ TEST_F(ServerProcessTest, FannedOutDiagnosisRefitsRunOnEveryWorkerAndMatchTheOne
   ASSERT_TRUE(client.GetResult(job, &result).ok());
   const nlohmann::json alone = nlohmann::json::parse(result.result_json());
   EXPECT_EQ(ReadFile(log_file()).find("job " + job + " refit task"), std::string::npos);
-  EXPECT_EQ(WithoutTiming(fanned["diagnosis"]), WithoutTiming(alone["diagnosis"]));
+  EXPECT_EQ(inverse::testing::WithoutTiming(fanned["diagnosis"]),
+            inverse::testing::WithoutTiming(alone["diagnosis"]));
   EXPECT_EQ(fanned["parameters"], alone["parameters"]);
   StopCleanly(*server);
 }

@@ -10,6 +10,7 @@
 #include "core/inverse/fit.h"
 #include "core/scenes/diagnosis_scenes.h"
 #include "core/scenes/synthesize.h"
+#include "tests/core/inverse/inverse_test_util.h"
 
 namespace softid::diagnosis {
 namespace {
@@ -99,24 +100,6 @@ TEST(Diagnose, FindsConcealedFrictionOnARamp) {
   EXPECT_TRUE(json["final_fit"]["parameters"].contains("friction_coefficient"));
 }
 
-// Timing aside: what a diagnosis report says.
-nlohmann::json WithoutTiming(nlohmann::json json) {
-  if (json.is_object()) {
-    for (auto it = json.begin(); it != json.end();) {
-      const std::string& key = it.key();
-      if (key == "timing" || key == "seconds" || key.ends_with("_seconds")) {
-        it = json.erase(it);
-      } else {
-        *it = WithoutTiming(*it);
-        ++it;
-      }
-    }
-  } else if (json.is_array()) {
-    for (nlohmann::json& item : json) item = WithoutTiming(item);
-  }
-  return json;
-}
-
 // The refits run in batches through options.run_fits; a runner that runs each batch's fits in
 // reverse order (as workers elsewhere may) gives the report the diagnosis makes alone.
 TEST(Diagnose, RefitsRunInBatchesAnywhereWithTheSameReport) {
@@ -141,7 +124,8 @@ TEST(Diagnose, RefitsRunInBatchesAnywhereWithTheSameReport) {
   ASSERT_FALSE(batch_sizes.empty());
   EXPECT_GE(batch_sizes.front(), 2u) << "the candidates' refits form one batch";
   EXPECT_EQ(batched->decision, "friction");
-  EXPECT_EQ(WithoutTiming(ToJson(*batched)), WithoutTiming(ToJson(*alone)));
+  EXPECT_EQ(inverse::testing::WithoutTiming(ToJson(*batched)),
+            inverse::testing::WithoutTiming(ToJson(*alone)));
 
   // A runner that loses a result is an error of every refit, never a crash.
   options.run_fits = [](const std::vector<inverse::JobConfig>&) {

@@ -7,6 +7,7 @@
 
 #include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <string>
 
 #include "core/capture/capture.h"
@@ -96,6 +97,25 @@ inline JobConfig YoungsModulusConfig(const fem::PhysicalParameters& truth, int s
   config.starts = starts;
   config.max_iterations = max_iterations;
   return config;
+}
+
+// A result's or report's JSON without its timing ("timing", "seconds", "*_seconds"): what two
+// runs of the same computation must agree on.
+inline nlohmann::json WithoutTiming(nlohmann::json json) {
+  if (json.is_object()) {
+    for (auto it = json.begin(); it != json.end();) {
+      const std::string& key = it.key();
+      if (key == "timing" || key == "seconds" || key.ends_with("_seconds")) {
+        it = json.erase(it);
+      } else {
+        *it = WithoutTiming(*it);
+        ++it;
+      }
+    }
+  } else if (json.is_array()) {
+    for (nlohmann::json& item : json) item = WithoutTiming(item);
+  }
+  return json;
 }
 
 }  // namespace softid::inverse::testing
