@@ -210,7 +210,8 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   // The config was validated at CreateJob; parsing again guards against a store edited by hand.
   Result<inverse::JobConfig> config = inverse::JobConfigFromJson(job.config);
   if (!config.ok()) return Fail(job, context, "config: " + config.status().message());
-  if (config->threads == 0 && context.cores_per_job > 0) config->threads = context.cores_per_job;
+  if (config->solver.threads == 0 && context.cores_per_job > 0)
+    config->solver.threads = context.cores_per_job;
   Result<store::Capture> stored = context.jobs->GetCapture(job.capture_id);
   if (!stored.ok()) return Fail(job, context, stored.status().message());
 

@@ -38,8 +38,8 @@ Result<TaskInputs> LoadTaskInputs(const store::StartTask& task, const JobRunnerC
   Result<inverse::JobConfig> config = inverse::JobConfigFromJson(in.job.config);
   if (!config.ok()) return config.status().WithContext("config");
   in.config = std::move(config).value();
-  if (in.config.threads == 0 && context.cores_per_job > 0)
-    in.config.threads = context.cores_per_job;
+  if (in.config.solver.threads == 0 && context.cores_per_job > 0)
+    in.config.solver.threads = context.cores_per_job;
   SOFTID_ASSIGN_OR_RETURN(in.stored, context.jobs->GetCapture(in.job.capture_id));
   if (!task.batch.empty()) return in;  // a refit: its config is the task's input
   SOFTID_ASSIGN_OR_RETURN(std::optional<nlohmann::json> saved,

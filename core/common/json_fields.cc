@@ -1,6 +1,8 @@
 #include "core/common/json_fields.h"
 
 #include <cmath>
+#include <cstdint>
+#include <limits>
 
 namespace softid::json {
 
@@ -54,6 +56,29 @@ Result<int> ToInteger(const nlohmann::json& value, const std::string& field) {
   const auto x = value.get<long long>();
   if (x < -2147483647LL || x > 2147483647LL) return Invalid(field, value, "is out of range");
   return static_cast<int>(x);
+}
+
+Result<int> ToIntegerAtLeast(const nlohmann::json& value, const std::string& field, int min,
+                             const std::string& requirement) {
+  if (!value.is_number_integer()) return Invalid(field, value, requirement);
+  constexpr std::int64_t kMax = std::numeric_limits<int>::max();
+  if (value.is_number_unsigned() && value.get<std::uint64_t>() > static_cast<std::uint64_t>(kMax)) {
+    return Invalid(field, value, requirement);
+  }
+  const auto x = value.get<std::int64_t>();
+  if (x < min || x > kMax) return Invalid(field, value, requirement);
+  return static_cast<int>(x);
+}
+
+Result<int> ToIntegerAtLeast(const nlohmann::json& value, const std::string& field, int min) {
+  return ToIntegerAtLeast(value, field, min, "must be an integer >= " + std::to_string(min));
+}
+
+Result<double> ToPositiveNumber(const nlohmann::json& value, const std::string& field) {
+  if (!value.is_number() || !std::isfinite(value.get<double>()) || !(value.get<double>() > 0.0)) {
+    return Invalid(field, value, "must be a finite number > 0");
+  }
+  return value.get<double>();
 }
 
 nlohmann::json FromVector3(const Eigen::Vector3d& v) {

@@ -18,6 +18,14 @@ Result<double> ToFiniteNumber(const nlohmann::json& value, const std::string& fi
 Result<Eigen::Vector3d> ToVector3(const nlohmann::json& value, const std::string& field);
 Result<std::string> ToString(const nlohmann::json& value, const std::string& field);
 Result<int> ToInteger(const nlohmann::json& value, const std::string& field);
+// An integer in [min, INT_MAX]; anything else (other types too) fails with `requirement`, so the
+// message always states what is expected.
+Result<int> ToIntegerAtLeast(const nlohmann::json& value, const std::string& field, int min,
+                             const std::string& requirement);
+// The same with the requirement "must be an integer >= <min>".
+Result<int> ToIntegerAtLeast(const nlohmann::json& value, const std::string& field, int min);
+// A finite number > 0, or "must be a finite number > 0".
+Result<double> ToPositiveNumber(const nlohmann::json& value, const std::string& field);
 
 // An InvalidArgument "<field> = <value>: <requirement>".
 Status Invalid(const std::string& field, const nlohmann::json& value,

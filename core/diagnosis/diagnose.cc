@@ -67,12 +67,12 @@ inverse::JobConfig RefitConfig(const inverse::JobConfig& base,
     value.value = inverse::ParameterValueJson(start, name);
     out.initial[name] = value;
   }
-  out.starts = 1;
+  out.solver.starts = 1;
   // A refit is local: it starts at the base optimum, inside the basin the base fit found over
   // every frame. Refitting a prefix first would let the frames before the extension shows (a
   // block's landing before it slides) pull the shared parameters away (ramp friction 0.3 came
   // back as 0.19).
-  out.continuation = false;
+  out.solver.continuation = false;
   return out;
 }
 
@@ -159,7 +159,7 @@ Profile ProfileExtension(inverse::TrajectoryObjective& objective, Extension exte
 inverse::IdentifiabilityOptions IdentifiabilityOptionsFor(const inverse::JobConfig& config,
                                                           double n_eff) {
   inverse::IdentifiabilityOptions options;
-  options.threads = config.threads;
+  options.threads = config.solver.threads;
   options.num_effective_samples = n_eff;
   return options;
 }
@@ -242,15 +242,15 @@ struct DiagnosisRun {
         std::make_shared<const std::vector<inverse::ObservedFrame>>(context.observations.frames);
     try {
       context.objective = std::make_unique<inverse::TrajectoryObjective>(
-          context.mesh, capture.fixed_region, p0, inverse::SimulationOptionsFor(config),
-          inverse::CostOptionsFor(config), frames, capture.fps, config.substeps);
+          context.mesh, capture.fixed_region, p0, inverse::SimulationOptionsFor(config.solver),
+          inverse::CostOptionsFor(config.solver), frames, capture.fps, config.solver.substeps);
     } catch (const std::invalid_argument& e) {
       return Status::InvalidArgument(e.what());
     }
     context.objective->SetCancelFlag(options.fit.cancel);
     context.rest_bounds = context.mesh.Bounds();
     const double h = context.objective->simulator().hex_mesh().CellSize();
-    context.truncation = config.cost.truncation_cells * h;
+    context.truncation = config.solver.cost.truncation_cells * h;
     context.patches =
         MakePatches(context.objective->simulator().rest_surface(), options.patches, -p0.gravity);
     for (const auto& f : context.observations.frames) {

@@ -117,10 +117,10 @@ Result<FitReport> WriteFitReport(const capture::Capture& capture,
   std::unique_ptr<inverse::TrajectoryObjective> objective;
   try {
     objective = std::make_unique<inverse::TrajectoryObjective>(
-        mesh, capture.fixed_region, p, inverse::SimulationOptionsFor(config),
-        inverse::CostOptionsFor(config),
+        mesh, capture.fixed_region, p, inverse::SimulationOptionsFor(config.solver),
+        inverse::CostOptionsFor(config.solver),
         std::make_shared<const std::vector<inverse::ObservedFrame>>(observations.frames),
-        capture.fps, config.substeps);
+        capture.fps, config.solver.substeps);
   } catch (const std::invalid_argument& e) {
     return Status::InvalidArgument(e.what());
   }
@@ -130,7 +130,7 @@ Result<FitReport> WriteFitReport(const capture::Capture& capture,
   const Eigen::Vector3d up = -p.gravity.normalized();
   const ResidualMap map =
       BuildResidualMap(observations, matches, MakePatches(sim.rest_surface(), kPatches, up),
-                       config.cost.truncation_cells * sim.hex_mesh().CellSize());
+                       config.solver.cost.truncation_cells * sim.hex_mesh().CellSize());
   SOFTID_ASSIGN_OR_RETURN(const NoiseFloor floor, EstimateNoiseFloor(map, options.noise_floor));
   report.noise_floor_m = floor.sigma;
 

@@ -46,7 +46,7 @@ Result<Eigen::VectorXd> GradientAt(const FitSetting& setting, const capture::Cap
   std::unique_ptr<TrajectoryObjective> objective;
   try {
     objective = std::make_unique<TrajectoryObjective>(setting.mesh, capture.fixed_region, optimum,
-                                                      simulation, CostOptionsFor(config),
+                                                      simulation, CostOptionsFor(config.solver),
                                                       setting.frames, capture.fps, substeps);
   } catch (const std::invalid_argument& e) {
     return Status::InvalidArgument(e.what());
@@ -135,10 +135,11 @@ Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& 
         fmt::format("report: Hessian of {} variables for a fit of {}", report.hessian.rows(), n));
   }
   const fem::PhysicalParameters& optimum = fit.Best().final;
-  fem::SimulationOptions simulation = SimulationOptionsFor(config);
+  fem::SimulationOptions simulation = SimulationOptionsFor(config.solver);
   // The two estimates run side by side when there are two cores, one simulation thread each.
-  const int cores =
-      config.threads > 0 ? config.threads : static_cast<int>(std::thread::hardware_concurrency());
+  const int cores = config.solver.threads > 0
+                        ? config.solver.threads
+                        : static_cast<int>(std::thread::hardware_concurrency());
   simulation.threads = std::max(1, cores / 2);
   DiscretisationError out;
 
@@ -158,20 +159,20 @@ Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& 
 
   // The grid 1.5 x finer.
   DiscretisationShift& grid = out.grid;
-  grid.chosen = config.cell_size > 0.0 ? 0 : config.cells;
+  grid.chosen = config.solver.cell_size_m > 0.0 ? 0 : config.solver.cells;
   fem::SimulationOptions finer_grid = simulation;
-  if (config.cell_size > 0.0) {
-    finer_grid.cell_size = config.cell_size / kGridRatio;
+  if (config.solver.cell_size_m > 0.0) {
+    finer_grid.cell_size = config.solver.cell_size_m / kGridRatio;
     grid.ratio = kGridRatio;
   } else {
-    grid.compared = static_cast<int>(std::lround(config.cells * kGridRatio));
+    grid.compared = static_cast<int>(std::lround(config.solver.cells * kGridRatio));
     finer_grid.cells_along_longest_side = grid.compared;
-    grid.ratio = static_cast<double>(grid.compared) / config.cells;
+    grid.ratio = static_cast<double>(grid.compared) / config.solver.cells;
   }
   // Twice the time steps.
   DiscretisationShift& time = out.time_step;
-  time.chosen = config.substeps;
-  time.compared = 2 * config.substeps;
+  time.chosen = config.solver.substeps;
+  time.compared = 2 * config.solver.substeps;
   time.ratio = 2.0;
   {
     std::jthread time_worker;
@@ -180,7 +181,7 @@ Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& 
     } else {
       estimate(&time, simulation, time.compared);
     }
-    estimate(&grid, finer_grid, config.substeps);
+    estimate(&grid, finer_grid, config.solver.substeps);
   }
 
   const std::vector<double> x = space.ToVariables(optimum);

@@ -45,13 +45,13 @@ class CeresObjective : public ceres::FirstOrderFunction {
   int NumParameters() const override { return space_->NumVariables(); }
 
   bool Evaluate(const double* x, double* cost, double* gradient) const override {
-    const bool adjoint = config_->gradient == GradientMethod::kAdjoint;
+    const bool adjoint = config_->solver.gradient == GradientMethod::kAdjoint;
     std::optional<double> value = EvaluateAt(x, gradient != nullptr && adjoint, gradient);
     if (!value) return false;
     *cost = *value;
     if (gradient != nullptr && !adjoint) {
       // Forward differences in the optimiser's variables (the Table 1 comparison row).
-      const double step = config_->finite_difference_step;
+      const double step = config_->solver.finite_difference_step;
       std::vector<double> shifted(x, x + NumParameters());
       for (int i = 0; i < NumParameters(); ++i) {
         shifted[i] = x[i] + step;
@@ -101,7 +101,7 @@ class ProgressBoard {
  public:
   ProgressBoard(const FitOptions& options, const JobConfig& config, int num_starts, int threads)
       : options_(options),
-        max_iterations_(config.max_iterations + config.refine_iterations),
+        max_iterations_(config.solver.max_iterations + config.solver.refine_iterations),
         num_starts_(num_starts),
         threads_(threads),
         begin_(Clock::now()) {}
@@ -216,11 +216,11 @@ std::vector<fem::PhysicalParameters> DrawStarts(const JobConfig& config,
                                                 const fem::PhysicalParameters& base) {
   bool any_range = false;
   for (const auto& [name, initial] : config.initial) any_range |= initial.range.has_value();
-  const int count = any_range ? config.starts : 1;
+  const int count = any_range ? config.solver.starts : 1;
   std::vector<fem::PhysicalParameters> starts;
   for (int s = 0; s < count; ++s) {
-    std::seed_seq seq{static_cast<unsigned>(config.seed), static_cast<unsigned>(config.seed >> 32),
-                      static_cast<unsigned>(s)};
+    std::seed_seq seq{static_cast<unsigned>(config.solver.seed),
+                      static_cast<unsigned>(config.solver.seed >> 32), static_cast<unsigned>(s)};
     std::mt19937_64 rng(seq);
     std::uniform_real_distribution<double> unit(0.0, 1.0);
     fem::PhysicalParameters p = base;
@@ -271,7 +271,7 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
   result->index = index;
   result->initial = start;
   const double h = objective.simulator().hex_mesh().CellSize();
-  const double phi_max = config.cost.truncation_cells * h;
+  const double phi_max = config.solver.cost.truncation_cells * h;
   const double scale = phi_max * phi_max;
   std::vector<double> x = space.ToVariables(start);
   result->initial = space.ToParameters(x.data(), base);
@@ -282,7 +282,7 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
   // stage, whose solver reports the failure).
   std::vector<int> stages = {all_frames};
   std::optional<double> full_initial_cost;
-  if (config.continuation) {
+  if (config.solver.continuation) {
     objective.SetActiveFrames(all_frames);
     Result<ObjectiveEvaluation> at_start = objective.Evaluate(result->initial, false);
     if (at_start.ok() && !at_start->diverged) {
@@ -294,7 +294,7 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
 
   ceres::GradientProblemSolver::Summary summary;
   int used_iterations = 0;
-  const int stage_budget = static_cast<int>(kStageBudgetFraction * config.max_iterations);
+  const int stage_budget = static_cast<int>(kStageBudgetFraction * config.solver.max_iterations);
   for (size_t stage = 0; stage < stages.size(); ++stage) {
     const bool last = stage + 1 == stages.size();
     if (!last && used_iterations >= stage_budget) continue;
@@ -309,12 +309,13 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
     solver.line_search_direction_type = ceres::LBFGS;
     solver.line_search_type = ceres::WOLFE;
     solver.use_approximate_eigenvalue_bfgs_scaling = kScaleLbfgsByCurvature;
-    solver.max_num_iterations = last ? std::max(1, config.max_iterations - used_iterations)
+    solver.max_num_iterations = last ? std::max(1, config.solver.max_iterations - used_iterations)
                                      : stage_budget - used_iterations;
-    solver.function_tolerance = last ? config.function_tolerance
-                                     : std::max(config.function_tolerance, kStageFunctionTolerance);
-    solver.gradient_tolerance = config.gradient_tolerance;
-    solver.parameter_tolerance = config.parameter_tolerance;
+    solver.function_tolerance =
+        last ? config.solver.function_tolerance
+             : std::max(config.solver.function_tolerance, kStageFunctionTolerance);
+    solver.gradient_tolerance = config.solver.gradient_tolerance;
+    solver.parameter_tolerance = config.solver.parameter_tolerance;
     solver.logging_type = ceres::SILENT;
     solver.update_state_every_iteration = true;
     solver.callbacks.push_back(&reporter);
@@ -333,12 +334,12 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
   result->failed = summary.iterations.empty() || !std::isfinite(summary.initial_cost) ||
                    summary.termination_type == ceres::FAILURE;
   const bool cancelled = options.cancel != nullptr && options.cancel->load();
-  if (config.refine_iterations > 0 && !result->failed && !cancelled) {
+  if (config.solver.refine_iterations > 0 && !result->failed && !cancelled) {
     RefinementOptions refine;
-    refine.max_iterations = config.refine_iterations;
-    refine.function_tolerance = config.function_tolerance;
-    refine.gradient_tolerance = config.gradient_tolerance;
-    refine.parameter_tolerance = config.parameter_tolerance;
+    refine.max_iterations = config.solver.refine_iterations;
+    refine.function_tolerance = config.solver.function_tolerance;
+    refine.gradient_tolerance = config.solver.gradient_tolerance;
+    refine.parameter_tolerance = config.solver.parameter_tolerance;
     refine.cancel = options.cancel;
     const int stage_count = static_cast<int>(stages.size());
     refine.on_iteration = [&](int iteration, double cost, double gradient_norm) {
@@ -435,25 +436,26 @@ int LastNominalFrame(const std::vector<ObservedFrame>& frames, double fps) {
   return static_cast<int>(std::ceil(frames.back().time * fps - 1e-9));
 }
 
-// The grid of the fit: config.cells, or chosen by refinement (grid_selection.h) against the depth
-// noise of frame 0 (rest_frame_noise.h) when "auto". Sets simulation's grid and result's record.
+// The grid of the fit: config.solver.cells, or chosen by refinement (grid_selection.h) against the
+// depth noise of frame 0 (rest_frame_noise.h) when "auto". Sets simulation's grid and result's
+// record.
 Status ChooseGrid(const capture::Capture& capture, const geometry::TriangleMesh& mesh,
                   const JobConfig& config, const fem::PhysicalParameters& start, int last_frame,
                   const std::atomic<bool>* cancel, fem::SimulationOptions* simulation,
                   FitResult* result) {
   const double length = mesh.Bounds().sizes().maxCoeff();
-  if (config.cell_size > 0.0) {
-    result->cell_size_m = config.cell_size;
+  if (config.solver.cell_size_m > 0.0) {
+    result->cell_size_m = config.solver.cell_size_m;
     return Status::Ok();
   }
-  result->cells = config.cells;
-  if (config.cells == kAutoCells) {
+  result->cells = config.solver.cells;
+  if (config.solver.cells == kAutoCells) {
     // Without points in frame 0 the noise is unknown; the depth quantum is the floor.
     Result<RestFrameNoise> noise = EstimateRestFrameNoise(capture, mesh);
     const double sigma = noise.ok() ? noise->sigma_m : DepthQuantisationSigma(capture);
     GridSelectionOptions grid_options;
     grid_options.cancel = cancel;
-    if (config.substeps != kAutoSubsteps) grid_options.substeps = config.substeps;
+    if (config.solver.substeps != kAutoSubsteps) grid_options.substeps = config.solver.substeps;
     SOFTID_ASSIGN_OR_RETURN(GridSelection selection,
                             SelectGrid(mesh, capture.fixed_region, start, *simulation, capture.fps,
                                        last_frame, std::max(sigma, 1e-9), grid_options));
@@ -474,8 +476,8 @@ Status ChooseDiscretisation(const capture::Capture& capture, const geometry::Tri
   const int last_frame = LastNominalFrame(frames, capture.fps);
   SOFTID_RETURN_IF_ERROR(
       ChooseGrid(capture, mesh, config, central, last_frame, cancel, simulation, result));
-  result->substeps = config.substeps;
-  if (config.substeps != kAutoSubsteps) return Status::Ok();
+  result->substeps = config.solver.substeps;
+  if (config.solver.substeps != kAutoSubsteps) return Status::Ok();
   SubstepSelectionOptions selection_options;
   selection_options.cancel = cancel;
   SOFTID_ASSIGN_OR_RETURN(SubstepSelection selection,
@@ -490,11 +492,12 @@ Status ChooseDiscretisation(const capture::Capture& capture, const geometry::Tri
 // config's (another number of starts, grid or time step).
 Status TakeDiscretisation(const FitCheckpoint& checkpoint, const JobConfig& config, int num_starts,
                           fem::SimulationOptions* simulation, FitResult* result) {
-  const bool same_grid = config.cell_size > 0.0
-                             ? checkpoint.cell_size_m == config.cell_size
-                             : config.cells == kAutoCells || checkpoint.cells == config.cells;
+  const bool same_grid =
+      config.solver.cell_size_m > 0.0
+          ? checkpoint.cell_size_m == config.solver.cell_size_m
+          : config.solver.cells == kAutoCells || checkpoint.cells == config.solver.cells;
   const bool same_time_step =
-      config.substeps == kAutoSubsteps || checkpoint.substeps == config.substeps;
+      config.solver.substeps == kAutoSubsteps || checkpoint.substeps == config.solver.substeps;
   if (checkpoint.num_starts != num_starts || !same_grid || !same_time_step) {
     return Status::InvalidArgument(
         "resume_from: the checkpoint (" + std::to_string(checkpoint.num_starts) + " starts, " +
@@ -512,7 +515,7 @@ Status TakeDiscretisation(const FitCheckpoint& checkpoint, const JobConfig& conf
   result->grid_selection = checkpoint.grid_selection;
   result->substeps = checkpoint.substeps;
   result->substep_selection = checkpoint.substep_selection;
-  if (config.cell_size <= 0.0) simulation->cells_along_longest_side = checkpoint.cells;
+  if (config.solver.cell_size_m <= 0.0) simulation->cells_along_longest_side = checkpoint.cells;
   return Status::Ok();
 }
 
@@ -551,8 +554,9 @@ FitCheckpoint CheckpointOf(const FitResult& result, int num_starts) {
 }  // namespace
 
 JobConfig WithFitDiscretisation(JobConfig config, const FitResult& fit) {
-  if (config.cells == kAutoCells && fit.cells > 0) config.cells = fit.cells;
-  if (config.substeps == kAutoSubsteps && fit.substeps > 0) config.substeps = fit.substeps;
+  if (config.solver.cells == kAutoCells && fit.cells > 0) config.solver.cells = fit.cells;
+  if (config.solver.substeps == kAutoSubsteps && fit.substeps > 0)
+    config.solver.substeps = fit.substeps;
   return config;
 }
 
@@ -624,11 +628,11 @@ Result<FitSetup> SetUpFit(const capture::Capture& capture, const JobConfig& conf
   const double length = setup.mesh.Bounds().sizes().maxCoeff();
   SOFTID_ASSIGN_OR_RETURN(setup.space, ParameterSpace::Create(config.fit, setup.base, length));
   setup.starts = DrawStarts(config, setup.base);
-  setup.cores =
-      std::max(1, config.threads > 0 ? config.threads
-                                     : static_cast<int>(std::thread::hardware_concurrency()));
+  setup.cores = std::max(1, config.solver.threads > 0
+                                ? config.solver.threads
+                                : static_cast<int>(std::thread::hardware_concurrency()));
   setup.threads = std::clamp(setup.cores, 1, static_cast<int>(setup.starts.size()));
-  setup.simulation = SimulationOptionsFor(config);
+  setup.simulation = SimulationOptionsFor(config.solver);
   // Cores the concurrent starts leave idle go to their simulations: a single start on 2 cores
   // steps ~1.6x faster on both (softid-lab bench --threads). The count depends on the whole fit
   // only, never on which starts a call runs, so that every part of a fit computes the same.
@@ -662,7 +666,7 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   result.fitted = config.fit;
   result.base = setup.base;
   result.starts.resize(starts.size());
-  const cost::SurfaceCostOptions cost_options = CostOptionsFor(config);
+  const cost::SurfaceCostOptions cost_options = CostOptionsFor(config.solver);
   if (options.resume_from != nullptr) {
     SOFTID_RETURN_IF_ERROR(TakeDiscretisation(
         *options.resume_from, config, static_cast<int>(starts.size()), &simulation, &result));

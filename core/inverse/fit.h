@@ -1,8 +1,8 @@
 // Fitting physical parameters to a capture: several starts of Ceres' line-search minimiser
 // (L-BFGS, Wolfe line search) over the ParameterSpace variables, each minimising a
 // TrajectoryObjective, run in parallel; the best start is the result and every start is kept.
-// With JobConfig::refine_iterations > 0 each start then continues with Levenberg-Marquardt on the
-// cost's least-squares form (least_squares_refinement.h).
+// With SolverOptions::refine_iterations > 0 each start then continues with Levenberg-Marquardt on
+// the cost's least-squares form (least_squares_refinement.h).
 //
 // The result's JSON (`ToJson(FitResult)`) is the public result.json schema, also returned by the
 // service:
@@ -55,8 +55,8 @@ struct FitProgress {
   fem::PhysicalParameters parameters;  // current values
   double elapsed_seconds = 0.0;        // since the fit began
   double remaining_seconds = 0.0;      // estimate for the whole fit
-  // Continuation over the horizon (JobConfig::continuation): the stage running (0-based) and the
-  // last capture frame it fits; `cost` is over the stage's frames. One stage without it.
+  // Continuation over the horizon (SolverOptions::continuation): the stage running (0-based) and
+  // the last capture frame it fits; `cost` is over the stage's frames. One stage without it.
   int stage = 0;
   int num_stages = 1;
   int horizon_frame = 0;
@@ -94,7 +94,7 @@ struct HorizonStageResult {
   std::string termination;                      // Ceres' message
 };
 
-// A start's Levenberg-Marquardt refinement (JobConfig::refine_iterations).
+// A start's Levenberg-Marquardt refinement (SolverOptions::refine_iterations).
 struct RefinementResult {
   int iterations = 0;
   double initial_cost = 0.0, final_cost = 0.0;  // over every fitted frame [m^2]
@@ -123,7 +123,7 @@ struct StartResult {
   // refinement's), which compare with initial_cost and final_cost.
   std::vector<double> CostHistoryOverEveryFrame() const;
   std::vector<HorizonStageResult> stages;      // the last one fits every frame
-  std::optional<RefinementResult> refinement;  // when JobConfig::refine_iterations > 0
+  std::optional<RefinementResult> refinement;  // when SolverOptions::refine_iterations > 0
   int evaluations = 0, failed_evaluations = 0;
   double seconds = 0.0, forward_seconds = 0.0, backward_seconds = 0.0;
   long long steps = 0;  // simulation steps run, over all evaluations

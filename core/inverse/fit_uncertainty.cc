@@ -85,7 +85,7 @@ Result<FitUncertainty> EstimateFitUncertainty(const capture::Capture& capture,
   // Forward runs only: the analysis comes with every result, so its cost counts (a third of
   // it by central differences of the adjoint gradient; docs/benchmarks.md).
   options.curvature = CurvatureMethod::kGaussNewton;
-  options.threads = config.threads;
+  options.threads = config.solver.threads;
   options.min_residual_sigma = DepthQuantisationSigma(capture);
   FitUncertainty out;
   SOFTID_ASSIGN_OR_RETURN(out.report, AnalyzeIdentifiability(capture, config, fit, options));

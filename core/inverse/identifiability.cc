@@ -566,15 +566,16 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const capture::Capture& cap
   const fem::PhysicalParameters& optimum = fit.Best().final;
   // The fit's grid and time step (config may say "auto"; the fit resolved them).
   const JobConfig resolved_config = WithFitDiscretisation(config, fit);
-  const fem::SimulationOptions simulation = SimulationOptionsFor(resolved_config);
-  const cost::SurfaceCostOptions cost_options = CostOptionsFor(resolved_config);
-  const int substeps = resolved_config.substeps;
-  if (substeps < 1 || (resolved_config.cells == kAutoCells && resolved_config.cell_size <= 0.0)) {
+  const fem::SimulationOptions simulation = SimulationOptionsFor(resolved_config.solver);
+  const cost::SurfaceCostOptions cost_options = CostOptionsFor(resolved_config.solver);
+  const int substeps = resolved_config.solver.substeps;
+  if (substeps < 1 ||
+      (resolved_config.solver.cells == kAutoCells && resolved_config.solver.cell_size_m <= 0.0)) {
     return Status::InvalidArgument(
         "fit: the fit result does not say which grid and time step it used");
   }
   IdentifiabilityOptions resolved = options;
-  if (resolved.threads == 0) resolved.threads = config.threads;
+  if (resolved.threads == 0) resolved.threads = config.solver.threads;
   return AnalyzeIdentifiability(
       [&]() {
         return std::make_unique<TrajectoryObjective>(mesh, capture.fixed_region, optimum,

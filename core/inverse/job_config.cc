@@ -4,8 +4,6 @@
 #include <array>
 #include <cmath>
 #include <fstream>
-#include <initializer_list>
-#include <limits>
 #include <sstream>
 #include <system_error>
 
@@ -20,32 +18,16 @@ using Json = nlohmann::json;
 constexpr std::string_view kGroundAlias = "ground";
 constexpr std::string_view kGroundPlane = "ground_plane";
 
-// The keys of the top-level object.
-constexpr auto kJobConfigKeys = std::to_array<std::string_view>({
-    "fit",
-    "initial",
-    "fixed",
-    "cells",
-    "cell_size",
-    "substeps",
-    "rho_infinity",
-    "frames",
-    "heldout_every",
-    "starts",
-    "threads",
-    "seed",
-    "max_iterations",
-    "function_tolerance",
-    "gradient_tolerance",
-    "parameter_tolerance",
-    "gradient",
-    "finite_difference_step",
-    "continuation",
-    "refine_iterations",
-    "cost",
-    "diagnose",
-    "uncertainty",
-});
+// The top-level keys of the job's specification (kSolverOptionKeys are the others).
+constexpr auto kSpecificationKeys = std::to_array<std::string_view>(
+    {"fit", "initial", "fixed", "frames", "heldout_every", "diagnose", "uncertainty"});
+
+bool IsJobConfigKey(std::string_view key) {
+  return std::find(kSpecificationKeys.begin(), kSpecificationKeys.end(), key) !=
+             kSpecificationKeys.end() ||
+         std::find(kSolverOptionKeys.begin(), kSolverOptionKeys.end(), key) !=
+             kSolverOptionKeys.end();
+}
 
 std::string Join(const std::vector<std::string>& names) {
   std::string out;
@@ -81,32 +63,6 @@ Status CheckKeys(const Json& object, const std::string& object_name, const Names
     }
   }
   return Status::Ok();
-}
-
-// An integer in [min, INT_MAX]; anything else (other types too) fails with `requirement`, so the
-// message always states what is expected.
-Result<int> ReadInt(const Json& value, const std::string& field, int min,
-                    const std::string& requirement) {
-  if (!value.is_number_integer()) return json::Invalid(field, value, requirement);
-  constexpr std::int64_t kMax = std::numeric_limits<int>::max();
-  if (value.is_number_unsigned() && value.get<std::uint64_t>() > static_cast<std::uint64_t>(kMax)) {
-    return json::Invalid(field, value, requirement);
-  }
-  const auto x = value.get<std::int64_t>();
-  if (x < min || x > kMax) return json::Invalid(field, value, requirement);
-  return static_cast<int>(x);
-}
-
-Result<int> ReadIntAtLeast(const Json& value, const std::string& field, int min) {
-  return ReadInt(value, field, min, "must be an integer >= " + std::to_string(min));
-}
-
-// A finite number > 0.
-Result<double> ReadPositive(const Json& value, const std::string& field) {
-  if (!value.is_number() || !std::isfinite(value.get<double>()) || !(value.get<double>() > 0.0)) {
-    return json::Invalid(field, value, "must be a finite number > 0");
-  }
-  return value.get<double>();
 }
 
 // Replaces the leading field path `key` of a fem error ("ground.normal = ...") by `field`
@@ -265,13 +221,15 @@ Result<FrameRange> ParseFrames(const Json& value) {
       CheckKeys(value, "frames", std::array<std::string_view, 2>{"first", "last"}));
   FrameRange frames;
   if (value.contains("first")) {
-    SOFTID_ASSIGN_OR_RETURN(frames.first, ReadIntAtLeast(value["first"], "frames.first", 0));
+    SOFTID_ASSIGN_OR_RETURN(frames.first,
+                            json::ToIntegerAtLeast(value["first"], "frames.first", 0));
   }
   if (value.contains("last")) {
     const std::string requirement =
         "must be -1 (the capture's last frame) or an integer >= " + std::string("frames.first (") +
         std::to_string(frames.first) + ")";
-    SOFTID_ASSIGN_OR_RETURN(frames.last, ReadInt(value["last"], "frames.last", -1, requirement));
+    SOFTID_ASSIGN_OR_RETURN(frames.last,
+                            json::ToIntegerAtLeast(value["last"], "frames.last", -1, requirement));
     if (frames.last != -1 && frames.last < frames.first) {
       return json::Invalid("frames.last", value["last"], requirement);
     }
@@ -279,47 +237,63 @@ Result<FrameRange> ParseFrames(const Json& value) {
   return frames;
 }
 
-Result<CostSettings> ParseCost(const Json& value) {
-  if (!value.is_object()) {
-    return json::Invalid(
-        "cost", value,
-        "must be an object {\"band_cells\": n, \"truncation_cells\": x, \"rest_sdf\": s}");
-  }
-  SOFTID_RETURN_IF_ERROR(
-      CheckKeys(value, "cost",
-                std::array<std::string_view, 3>{"band_cells", "truncation_cells", "rest_sdf"}));
-  CostSettings settings;
-  if (value.contains("band_cells")) {
-    SOFTID_ASSIGN_OR_RETURN(settings.band_cells,
-                            ReadIntAtLeast(value["band_cells"], "cost.band_cells", 1));
-  }
-  if (value.contains("truncation_cells")) {
-    SOFTID_ASSIGN_OR_RETURN(settings.truncation_cells,
-                            ReadPositive(value["truncation_cells"], "cost.truncation_cells"));
-  }
-  if (value.contains("rest_sdf")) {
-    const Json& rest_sdf = value["rest_sdf"];
-    bool known = false;
-    for (cost::RestSdf mode :
-         {cost::RestSdf::kSurfaceFitted, cost::RestSdf::kExact, cost::RestSdf::kSampled}) {
-      if (rest_sdf.is_string() && rest_sdf.get<std::string>() == cost::ToString(mode)) {
-        settings.rest_sdf = mode;
-        known = true;
-      }
-    }
-    if (!known) {
-      return json::Invalid("cost.rest_sdf", rest_sdf,
-                           "must be \"surface_fitted\", \"exact\" or \"sampled\"");
-    }
-  }
-  return settings;
+Result<bool> ParseBool(const Json& value, const std::string& field) {
+  if (!value.is_boolean()) return json::Invalid(field, value, "must be true or false");
+  return value.get<bool>();
 }
 
-Result<GradientMethod> ParseGradient(const Json& value) {
-  for (GradientMethod method : {GradientMethod::kAdjoint, GradientMethod::kFiniteDifference}) {
-    if (value.is_string() && value.get<std::string>() == ToString(method)) return method;
+// Reads the specification keys of `j` into `config` (the solver keys are SolverOptionsFromJson's).
+Status ParseSpecification(const Json& j, JobConfig* config) {
+  // "initial" and "fixed" refer to "fit", so it is read first whatever the key order.
+  if (j.contains("fit")) {
+    SOFTID_ASSIGN_OR_RETURN(config->fit, ParseFit(j["fit"]));
   }
-  return json::Invalid("gradient", value, "must be \"adjoint\" or \"finite_difference\"");
+  if (j.contains("initial")) {
+    SOFTID_ASSIGN_OR_RETURN(config->initial, ParseInitial(j["initial"], config->fit));
+  }
+  if (j.contains("fixed")) {
+    SOFTID_ASSIGN_OR_RETURN(config->fixed, ParseFixed(j["fixed"], config->fit));
+  }
+  if (j.contains("frames")) {
+    SOFTID_ASSIGN_OR_RETURN(config->frames, ParseFrames(j["frames"]));
+  }
+  if (j.contains("heldout_every")) {
+    constexpr const char* kRequirement =
+        "must be 0 (none) or an integer >= 2 (1 would hold out every frame)";
+    SOFTID_ASSIGN_OR_RETURN(
+        config->heldout_every,
+        json::ToIntegerAtLeast(j["heldout_every"], "heldout_every", 0, kRequirement));
+    if (config->heldout_every == 1)
+      return json::Invalid("heldout_every", j["heldout_every"], kRequirement);
+  }
+  if (j.contains("diagnose")) {
+    SOFTID_ASSIGN_OR_RETURN(config->diagnose, ParseBool(j["diagnose"], "diagnose"));
+  }
+  if (j.contains("uncertainty")) {
+    SOFTID_ASSIGN_OR_RETURN(config->uncertainty, ParseBool(j["uncertainty"], "uncertainty"));
+  }
+  return Status::Ok();
+}
+
+// The specification keys of ToJson.
+Json SpecificationJson(const JobConfig& config) {
+  Json initial = Json::object();
+  for (const auto& [name, start] : config.initial) {
+    if (start.value) {
+      initial[name] = *start.value;
+    } else if (start.range) {
+      initial[name] = {{"min", start.range->min}, {"max", start.range->max}};
+    }
+  }
+  return {
+      {"fit", config.fit},
+      {"initial", initial},
+      {"fixed", config.fixed},
+      {"frames", {{"first", config.frames.first}, {"last", config.frames.last}}},
+      {"heldout_every", config.heldout_every},
+      {"diagnose", config.diagnose},
+      {"uncertainty", config.uncertainty},
+  };
 }
 
 }  // namespace
@@ -349,14 +323,6 @@ ParameterShape ShapeOf(std::string_view fittable_name) {
   return parameter->shape;
 }
 
-const char* ToString(GradientMethod method) {
-  switch (method) {
-    case GradientMethod::kAdjoint: return "adjoint";
-    case GradientMethod::kFiniteDifference: return "finite_difference";
-  }
-  return "invalid";  // a value cast from an out-of-range integer; Validate rejects it
-}
-
 bool JobConfig::IsFitted(std::string_view fittable_name) const {
   return std::find(fit.begin(), fit.end(), fittable_name) != fit.end();
 }
@@ -367,8 +333,9 @@ bool JobConfig::IsHeldOut(int frame) const {
 }
 
 Status JobConfig::Validate() const {
-  // Checks JSON cannot express (canonical names, one of value/range) come first; the rest runs
-  // the parser on ToJson, so code-built and JSON configs obey exactly the same rules.
+  // Checks JSON cannot express (canonical names, one of value/range) come first; the parameter
+  // values (JSON by nature) then go through the parser's own rules, and the solver options are
+  // checked on their typed fields.
   for (size_t i = 0; i < fit.size(); ++i) {
     if (fit[i] == kGroundAlias) {
       return json::Invalid("fit[" + std::to_string(i) + "]", fit[i],
@@ -389,123 +356,19 @@ Status JobConfig::Validate() const {
     return Status::InvalidArgument(
         "fixed.ground_plane: must be keyed \"ground\" (the alias is resolved only in JSON)");
   }
-  return JobConfigFromJson(ToJson(*this)).status();
+  JobConfig parsed;
+  SOFTID_RETURN_IF_ERROR(ParseSpecification(SpecificationJson(*this), &parsed));
+  return solver.Validate();
 }
 
 Result<JobConfig> JobConfigFromJson(const Json& j) {
   if (!j.is_object()) return json::Invalid("job config", j, "must be a JSON object");
   for (const auto& item : j.items()) {
-    if (std::find(kJobConfigKeys.begin(), kJobConfigKeys.end(), item.key()) ==
-        kJobConfigKeys.end()) {
-      return UnknownKey("job config", item.key());
-    }
+    if (!IsJobConfigKey(item.key())) return UnknownKey("job config", item.key());
   }
   JobConfig config;
-  // "initial" and "fixed" refer to "fit", so it is read first whatever the key order.
-  if (j.contains("fit")) {
-    SOFTID_ASSIGN_OR_RETURN(config.fit, ParseFit(j["fit"]));
-  }
-  if (j.contains("initial")) {
-    SOFTID_ASSIGN_OR_RETURN(config.initial, ParseInitial(j["initial"], config.fit));
-  }
-  if (j.contains("fixed")) {
-    SOFTID_ASSIGN_OR_RETURN(config.fixed, ParseFixed(j["fixed"], config.fit));
-  }
-
-  if (j.contains("cells")) {
-    if (j["cells"] == Json("auto")) {
-      config.cells = kAutoCells;
-    } else {
-      SOFTID_ASSIGN_OR_RETURN(
-          config.cells, ReadInt(j["cells"], "cells", 2, "must be \"auto\" or an integer >= 2"));
-    }
-  }
-  if (j.contains("cell_size")) {
-    SOFTID_ASSIGN_OR_RETURN(config.cell_size, ReadPositive(j["cell_size"], "cell_size"));
-  }
-  if (j.contains("substeps")) {
-    if (j["substeps"] == Json("auto")) {
-      config.substeps = kAutoSubsteps;
-    } else {
-      SOFTID_ASSIGN_OR_RETURN(config.substeps, ReadInt(j["substeps"], "substeps", 1,
-                                                       "must be \"auto\" or an integer >= 1"));
-    }
-  }
-  if (j.contains("rho_infinity")) {
-    const Json& value = j["rho_infinity"];
-    if (!value.is_number() || !(value.get<double>() >= 0.0 && value.get<double>() <= 1.0))
-      return json::Invalid("rho_infinity", value, "must be a number in [0, 1]");
-    config.rho_infinity = value.get<double>();
-  }
-  if (j.contains("frames")) {
-    SOFTID_ASSIGN_OR_RETURN(config.frames, ParseFrames(j["frames"]));
-  }
-  if (j.contains("heldout_every")) {
-    SOFTID_ASSIGN_OR_RETURN(
-        config.heldout_every,
-        ReadInt(j["heldout_every"], "heldout_every", 0,
-                "must be 0 (none) or an integer >= 2 (1 would hold out every frame)"));
-    if (config.heldout_every == 1) {
-      return json::Invalid("heldout_every", j["heldout_every"],
-                           "must be 0 (none) or an integer >= 2 (1 would hold out every frame)");
-    }
-  }
-
-  if (j.contains("starts")) {
-    SOFTID_ASSIGN_OR_RETURN(config.starts, ReadIntAtLeast(j["starts"], "starts", 1));
-  }
-  if (j.contains("threads")) {
-    SOFTID_ASSIGN_OR_RETURN(config.threads, ReadIntAtLeast(j["threads"], "threads", 0));
-  }
-  if (j.contains("seed")) {
-    const Json& seed = j["seed"];
-    if (!seed.is_number_unsigned() &&
-        !(seed.is_number_integer() && seed.get<std::int64_t>() >= 0)) {
-      return json::Invalid("seed", seed, "must be an integer >= 0");
-    }
-    config.seed = seed.get<std::uint64_t>();
-  }
-
-  if (j.contains("max_iterations")) {
-    SOFTID_ASSIGN_OR_RETURN(config.max_iterations,
-                            ReadIntAtLeast(j["max_iterations"], "max_iterations", 1));
-  }
-  for (auto [key, target] : {std::pair{"function_tolerance", &config.function_tolerance},
-                             std::pair{"gradient_tolerance", &config.gradient_tolerance},
-                             std::pair{"parameter_tolerance", &config.parameter_tolerance},
-                             std::pair{"finite_difference_step", &config.finite_difference_step}}) {
-    if (j.contains(key)) {
-      SOFTID_ASSIGN_OR_RETURN(*target, ReadPositive(j[key], key));
-    }
-  }
-  if (j.contains("refine_iterations")) {
-    SOFTID_ASSIGN_OR_RETURN(config.refine_iterations,
-                            ReadIntAtLeast(j["refine_iterations"], "refine_iterations", 0));
-  }
-  if (j.contains("gradient")) {
-    SOFTID_ASSIGN_OR_RETURN(config.gradient, ParseGradient(j["gradient"]));
-  }
-  if (j.contains("cost")) {
-    SOFTID_ASSIGN_OR_RETURN(config.cost, ParseCost(j["cost"]));
-  }
-  if (j.contains("continuation")) {
-    if (!j["continuation"].is_boolean()) {
-      return json::Invalid("continuation", j["continuation"], "must be true or false");
-    }
-    config.continuation = j["continuation"].get<bool>();
-  }
-  if (j.contains("diagnose")) {
-    if (!j["diagnose"].is_boolean()) {
-      return json::Invalid("diagnose", j["diagnose"], "must be true or false");
-    }
-    config.diagnose = j["diagnose"].get<bool>();
-  }
-  if (j.contains("uncertainty")) {
-    if (!j["uncertainty"].is_boolean()) {
-      return json::Invalid("uncertainty", j["uncertainty"], "must be true or false");
-    }
-    config.uncertainty = j["uncertainty"].get<bool>();
-  }
+  SOFTID_RETURN_IF_ERROR(ParseSpecification(j, &config));
+  SOFTID_ASSIGN_OR_RETURN(config.solver, SolverOptionsFromJson(j));
   return config;
 }
 
@@ -545,43 +408,8 @@ Result<JobConfig> ReadJobConfig(const std::filesystem::path& file) {
 }
 
 Json ToJson(const JobConfig& config) {
-  Json initial = Json::object();
-  for (const auto& [name, start] : config.initial) {
-    if (start.value) {
-      initial[name] = *start.value;
-    } else if (start.range) {
-      initial[name] = {{"min", start.range->min}, {"max", start.range->max}};
-    }
-  }
-  Json j = {
-      {"fit", config.fit},
-      {"initial", initial},
-      {"fixed", config.fixed},
-      {"cells", config.cells == kAutoCells ? Json("auto") : Json(config.cells)},
-      {"substeps", config.substeps == kAutoSubsteps ? Json("auto") : Json(config.substeps)},
-      {"frames", {{"first", config.frames.first}, {"last", config.frames.last}}},
-      {"heldout_every", config.heldout_every},
-      {"starts", config.starts},
-      {"threads", config.threads},
-      {"seed", config.seed},
-      {"max_iterations", config.max_iterations},
-      {"function_tolerance", config.function_tolerance},
-      {"gradient_tolerance", config.gradient_tolerance},
-      {"parameter_tolerance", config.parameter_tolerance},
-      {"gradient", ToString(config.gradient)},
-      {"finite_difference_step", config.finite_difference_step},
-      {"continuation", config.continuation},
-      {"refine_iterations", config.refine_iterations},
-      {"cost",
-       {{"band_cells", config.cost.band_cells},
-        {"truncation_cells", config.cost.truncation_cells},
-        {"rest_sdf", cost::ToString(config.cost.rest_sdf)}}},
-      {"diagnose", config.diagnose},
-      {"uncertainty", config.uncertainty},
-  };
-  // 0 means "absent" (use cells); written only when set so the round trip keeps it absent.
-  if (config.cell_size != 0.0) j["cell_size"] = config.cell_size;
-  if (config.rho_infinity != JobConfig::kNewmark) j["rho_infinity"] = config.rho_infinity;
+  Json j = SpecificationJson(config);
+  WriteJson(config.solver, &j);
   return j;
 }
 

@@ -1,6 +1,8 @@
-// The job configuration: which material parameters an identification job fits, where the fit
-// starts, what stays fixed, and the numerical settings of the simulation, the cost and the
-// optimiser.
+// The job configuration: the job's specification (which material parameters an identification
+// job fits, where the fit starts, what stays fixed, which frames, and the reports asked for) and,
+// in JobConfig::solver, how the fit is computed (SolverOptions: the simulation's grid and time
+// step, the starts, the optimiser and the cost; solver_options.h). Parsed and typed once at the
+// edge (JobConfigFromJson); everything downstream takes the typed struct.
 //
 // The JSON form is a public contract that capture stations and the gRPC service send; every key is
 // optional (defaults below), unknown keys are rejected by name:
@@ -50,16 +52,11 @@
 #include <vector>
 
 #include "core/common/status.h"
-#include "core/cost/sparse_surface_cost.h"
 #include "core/fem/parameter_registry.h"
 #include "core/fem/physical_parameters.h"
+#include "core/inverse/solver_options.h"
 
 namespace softid::inverse {
-
-// JobConfig::substeps value meaning "choose by step doubling" ("auto" in JSON).
-inline constexpr int kAutoSubsteps = 0;
-// JobConfig::cells value meaning "choose by refinement" ("auto" in JSON).
-inline constexpr int kAutoCells = 0;
 
 // The parameters a job can fit are those of fem::ParameterRegistry(), under their `name`; the
 // PhysicalParameters key "ground" is an alias of "ground_plane".
@@ -100,33 +97,6 @@ struct FrameRange {
   friend bool operator==(const FrameRange&, const FrameRange&) = default;
 };
 
-// How the optimiser obtains the gradient of the cost.
-enum class GradientMethod {
-  kAdjoint,           // exact, one backward pass through the simulation per evaluation
-  kFiniteDifference,  // forward differences, one extra simulation per parameter; a cross-check
-};
-// "adjoint" | "finite_difference" (the JSON names).
-const char* ToString(GradientMethod method);
-
-// Settings of the depth cost (core/cost). Lengths are in grid cells h so that they follow the
-// resolution of the simulation.
-struct CostSettings {
-  // Half-width of the narrow band around the simulated surface in which the cost's distance
-  // field is computed [cells]; wider bands cost time, narrower ones lose points that are far off.
-  int band_cells = 3;  // >= 1
-  // Distances of observed points to the simulated surface are truncated at this many cells, so
-  // outliers (background, sensor noise, missing geometry) cost a bounded amount instead of
-  // dragging the fit [cells].
-  double truncation_cells = 2.0;  // > 0
-  // How the cost evaluates the rest signed distance (sparse_surface_cost.h): "surface_fitted"
-  // (default) interpolates nodal values refitted so that observations of the true motion cost
-  // ~0 (the sampled distances leave a floor that biases fits: surface_fitted_sdf.h); "exact"
-  // queries the distance to the rest surface itself (no floor, one closest-point query per
-  // point); "sampled" interpolates the nodal distances (the paper's).
-  cost::RestSdf rest_sdf = cost::RestSdf::kSurfaceFitted;
-  friend bool operator==(const CostSettings&, const CostSettings&) = default;
-};
-
 struct JobConfig {
   // Parameters to optimise: unique canonical fittable names (the alias "ground" is resolved to
   // "ground_plane" when parsing JSON), at least one.
@@ -139,64 +109,15 @@ struct JobConfig {
   // key names a fitted parameter. Parameters neither fitted nor fixed keep the base values.
   nlohmann::json fixed = nlohmann::json::object();
 
-  // Grid resolution: cells along the longest side of the rest mesh's bounds, unless cell_size > 0,
-  // or kAutoCells ("auto" in JSON, the default): chosen per capture by refinement at the starting
-  // parameters until a finer grid moves the simulated surface by less than half the depth noise
-  // (grid_selection.h), because the grid's discretisation error becomes a parameter error.
-  int cells = kAutoCells;  // [-], >= 2 or kAutoCells
-
-  double cell_size = 0.0;  // h [m]; > 0 overrides `cells`, 0 = absent (not written to JSON)
-  // Simulation steps per camera frame: dt = 1 / (fps * substeps), or kAutoSubsteps ("auto" in
-  // JSON, the default): chosen per capture by step doubling at the starting parameters (see
-  // time_step_selection.h), because a too coarse step biases the fit (torus-drop against a
-  // capture made at 16 substeps: 2 substeps at 60 fps put Young's modulus 33 % off, 4 substeps
-  // 2.4-3.8 %).
-  int substeps = kAutoSubsteps;  // [-], >= 1 or kAutoSubsteps
-  // Time integration: generalized-alpha with this high-frequency spectral radius
-  // (fem::SimulationOptions::UseGeneralizedAlpha), or kNewmark (absent from JSON): the default
-  // Newmark parameters. Must match how the motion is best resolved, not how a capture was made.
-  static constexpr double kNewmark = -1.0;
-  double rho_infinity = kNewmark;  // [-], in [0, 1] or kNewmark
-  FrameRange frames;               // all frames by default
   // Every k-th fitted frame (frames.first + k - 1, frames.first + 2k - 1, ...) is held out of the
   // fit and only reported, to validate the result on data it did not see. 0 = none; 1 is
   // rejected because it would hold out every frame.
   int heldout_every = 0;  // [-], 0 or >= 2
+  FrameRange frames;      // all frames by default
 
-  // Independent optimisations from random starts (drawn from the initial ranges); the best result
-  // wins. Contact-rich fits have local minima, so one start is rarely enough.
-  int starts = 4;  // [-], >= 1
-  // Cores the fit may use; 0 = std::thread::hardware_concurrency(). Starts run in parallel on
-  // min(threads, starts) of them, and the cores they leave idle go to each start's simulation
-  // (fem::SimulationOptions::threads): one start on 2 cores steps ~1.6x faster.
-  int threads = 0;  // [-], >= 0
-  // Seed of the random starts: the same seed and config give the same starts.
-  std::uint64_t seed = 1;  // >= 0
+  // How the fit is computed: grid, time step, starts, optimiser, cost (solver_options.h).
+  SolverOptions solver;
 
-  // Stopping criteria of the optimiser, with the meanings of Ceres' Solver::Options.
-  int max_iterations = 50;            // [-], >= 1
-  double function_tolerance = 1e-6;   // |cost change| / cost [-], > 0
-  double gradient_tolerance = 1e-10;  // max-norm of the projected gradient [-], > 0
-  double parameter_tolerance = 1e-8;  // |step| / (|x| + tolerance) [-], > 0
-  GradientMethod gradient = GradientMethod::kAdjoint;
-  // Step of finite differences, relative, in the optimiser's (log) parameters: 1e-4 changes a
-  // positive parameter by 0.01 %, above simulation noise yet small against its curvature.
-  double finite_difference_step = 1e-4;  // [-], > 0
-  // Continuation over the horizon: each start first fits the frames up to shortly after the
-  // simulation departs from the recording, then a prefix twice as long, and so on up to every
-  // frame (fit.h). A bounce or a vibration seen over the whole sequence gives the cost a local
-  // minimum wherever a wrong stiffness brings a later rebound back in phase (torus-drop: E at
-  // 1.4x, 2.5x and 3.2x of the truth from starts in [0.1x, 10x]); the first impact alone
-  // does not. false = every frame from the first iteration on.
-  bool continuation = true;
-  // After its L-BFGS stages, each start is refined by at most this many Levenberg-Marquardt
-  // iterations on the least-squares form of the cost over every frame
-  // (least_squares_refinement.h), which follows the curved valleys of coupled parameters that
-  // L-BFGS creeps along. Each iteration costs 2 n + 1 forward runs for n optimiser variables.
-  // 0 = no refinement.
-  int refine_iterations = 0;  // [-], >= 0
-
-  CostSettings cost;
   // Run the diagnosis of left-out physics after the fit and return its report with the result.
   // Honoured by the callers (softid-lab fit/diagnose, the service), which call
   // diagnosis::Diagnose; inverse::Fit itself ignores it.

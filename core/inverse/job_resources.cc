@@ -42,18 +42,20 @@ std::string Hours(double seconds) {
 }
 
 std::string MemoryCulprit(const JobConfig& config) {
-  if (config.cell_size > 0.0) return fmt::format("cell_size = {}", config.cell_size);
-  if (config.substeps != kAutoSubsteps && config.substeps > 64) {
-    return fmt::format("substeps = {}", config.substeps);
+  if (config.solver.cell_size_m > 0.0)
+    return fmt::format("cell_size = {}", config.solver.cell_size_m);
+  if (config.solver.substeps != kAutoSubsteps && config.solver.substeps > 64) {
+    return fmt::format("substeps = {}", config.solver.substeps);
   }
-  if (config.cells == kAutoCells) return std::string("cells = \"auto\"");
-  return fmt::format("cells = {}", config.cells);
+  if (config.solver.cells == kAutoCells) return std::string("cells = \"auto\"");
+  return fmt::format("cells = {}", config.solver.cells);
 }
 
 // The key that most plausibly made the job long: many iterations or starts, else the grid.
 std::string TimeCulprit(const JobConfig& config) {
-  if (config.max_iterations > 200) return fmt::format("max_iterations = {}", config.max_iterations);
-  if (config.starts > 16) return fmt::format("starts = {}", config.starts);
+  if (config.solver.max_iterations > 200)
+    return fmt::format("max_iterations = {}", config.solver.max_iterations);
+  if (config.solver.starts > 16) return fmt::format("starts = {}", config.solver.starts);
   return MemoryCulprit(config);
 }
 
@@ -113,20 +115,21 @@ Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
 
   JobResourceEstimate estimate;
   const Eigen::Vector3d size = extent.mesh_bounds.sizes();
-  const int cells = config.cell_size <= 0.0 && config.cells == kAutoCells
+  const int cells = config.solver.cell_size_m <= 0.0 && config.solver.cells == kAutoCells
                         ? FinestAffordableCandidate(size)
-                        : config.cells;
-  estimate.cell_size_m =
-      config.cell_size > 0.0 ? config.cell_size : size.maxCoeff() / std::max(1, cells);
+                        : config.solver.cells;
+  estimate.cell_size_m = config.solver.cell_size_m > 0.0 ? config.solver.cell_size_m
+                                                         : size.maxCoeff() / std::max(1, cells);
   const double nodes = BoxNodes(size, estimate.cell_size_m);
-  const int substeps =
-      config.substeps == kAutoSubsteps ? SubstepSelectionOptions{}.max_substeps : config.substeps;
+  const int substeps = config.solver.substeps == kAutoSubsteps
+                           ? SubstepSelectionOptions{}.max_substeps
+                           : config.solver.substeps;
   const double fitted_periods = extent.frame_periods.empty()
                                     ? static_cast<double>(fitted_last)
                                     : std::ceil(extent.frame_periods.at(fitted_last));
   const double steps = fitted_periods * substeps;
-  const int cores = config.threads > 0 ? config.threads : limits.cores;
-  estimate.concurrent_starts = std::max(1, std::min(config.starts, cores));
+  const int cores = config.solver.threads > 0 ? config.solver.threads : limits.cores;
+  estimate.concurrent_starts = std::max(1, std::min(config.solver.starts, cores));
   const double per_start = nodes * (kBytesPerNode + kBytesPerNodeStep * (steps + 1.0));
   // Observed points are bounded where they are loaded (kMaxObservedPoints): a frame's count
   // depends on its content, which a header does not tell.
@@ -136,9 +139,10 @@ Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
 
   const double step_cpu_seconds =
       kCpuSecondsPerNodeStep * nodes * std::pow(nodes / kReferenceNodes, kNodeExponent);
-  const double evaluations_per_start = kEvaluationsPerIteration * (config.max_iterations + 1.0);
+  const double evaluations_per_start =
+      kEvaluationsPerIteration * (config.solver.max_iterations + 1.0);
   const double start_rounds =
-      std::ceil(static_cast<double>(config.starts) / estimate.concurrent_starts);
+      std::ceil(static_cast<double>(config.solver.starts) / estimate.concurrent_starts);
   // Each concurrent start gets cores / concurrent_starts cores (at least one).
   const double cores_per_start =
       std::max(1.0, static_cast<double>(cores) / estimate.concurrent_starts);
@@ -158,8 +162,8 @@ Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
         "{}: the job could run for about {} (grid of {:.3g} nodes, {:.3g} steps per run, {} "
         "start(s) of up to {} iterations{}); at most {} is accepted: use fewer iterations, "
         "starts, cells, substeps or frames",
-        TimeCulprit(config), Hours(estimate.wall_seconds), nodes, steps, config.starts,
-        config.max_iterations, config.diagnose ? ", with a diagnosis" : "",
+        TimeCulprit(config), Hours(estimate.wall_seconds), nodes, steps, config.solver.starts,
+        config.solver.max_iterations, config.diagnose ? ", with a diagnosis" : "",
         Hours(limits.max_wall_seconds)));
   }
   return estimate;

@@ -5,24 +5,24 @@
 
 namespace softid::inverse {
 
-fem::SimulationOptions SimulationOptionsFor(const JobConfig& config) {
+fem::SimulationOptions SimulationOptionsFor(const SolverOptions& solver) {
   fem::SimulationOptions simulation;
-  simulation.cells_along_longest_side = config.cells;
-  simulation.cell_size = config.cell_size;
-  if (config.rho_infinity != JobConfig::kNewmark)
-    simulation.UseGeneralizedAlpha(config.rho_infinity);
+  simulation.cells_along_longest_side = solver.cells;
+  simulation.cell_size = solver.cell_size_m;
+  if (solver.rho_infinity != SolverOptions::kNewmark)
+    simulation.UseGeneralizedAlpha(solver.rho_infinity);
   // The band must fit in the padding, and the cost must be truncated where the grid cuts it off.
   simulation.padding_cells = std::max(
-      {simulation.padding_cells, static_cast<int>(std::ceil(config.cost.truncation_cells)) + 1,
-       config.cost.band_cells});
+      {simulation.padding_cells, static_cast<int>(std::ceil(solver.cost.truncation_cells)) + 1,
+       solver.cost.band_cells});
   return simulation;
 }
 
-cost::SurfaceCostOptions CostOptionsFor(const JobConfig& config) {
+cost::SurfaceCostOptions CostOptionsFor(const SolverOptions& solver) {
   cost::SurfaceCostOptions options;
-  options.band_cells = config.cost.band_cells;
-  options.truncation_cells = config.cost.truncation_cells;
-  options.rest_sdf = config.cost.rest_sdf;
+  options.band_cells = solver.cost.band_cells;
+  options.truncation_cells = solver.cost.truncation_cells;
+  options.rest_sdf = solver.cost.rest_sdf;
   return options;
 }
 

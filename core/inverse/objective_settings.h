@@ -1,4 +1,4 @@
-// The simulation and cost settings a job config implies. Everything that builds a
+// The simulation and cost settings a job's solver options imply. Everything that builds a
 // TrajectoryObjective for a job (the fit, the identifiability analysis, the diagnosis) takes them
 // from here, so that all of them see the same cost function.
 #pragma once
@@ -15,13 +15,14 @@
 
 namespace softid::inverse {
 
-// Grid resolution from config.cells / config.cell_size, with a grid padding wide enough for the
-// cost's band and truncation (SurfaceCostOptions::band_cells); everything else at its default.
-// time_step is set by TrajectoryObjective from the capture's fps and config.substeps.
-fem::SimulationOptions SimulationOptionsFor(const JobConfig& config);
+// Grid resolution from solver.cells / solver.cell_size_m, the integrator from
+// solver.rho_infinity, with a grid padding wide enough for the cost's band and truncation
+// (SurfaceCostOptions::band_cells); everything else at its default. time_step is set by
+// TrajectoryObjective from the capture's fps and solver.substeps.
+fem::SimulationOptions SimulationOptionsFor(const SolverOptions& solver);
 
-// config.cost as the cost's options.
-cost::SurfaceCostOptions CostOptionsFor(const JobConfig& config);
+// solver.cost as the cost's options.
+cost::SurfaceCostOptions CostOptionsFor(const SolverOptions& solver);
 
 // The capture frames config.frames selects, with config.heldout_every's frames marked held out,
 // shared read-only by objectives (the fit's starts, the analyses after it). Errors as

@@ -78,7 +78,7 @@ int RunFit(const FitFlags& flags) {
   const inverse::JobConfig& config = inputs.config;
   spdlog::info("fit: {} ({} frames, {} camera(s)); fitting {}; {} start(s), {} iterations max",
                flags.capture, inputs.capture.NumFrames(), inputs.capture.NumCameras(),
-               fmt::join(config.fit, ", "), config.starts, config.max_iterations);
+               fmt::join(config.fit, ", "), config.solver.starts, config.solver.max_iterations);
 
   inverse::FitOptions options;
   options.on_progress = [&](const inverse::FitProgress& p) {

@@ -146,12 +146,12 @@ inverse::JobConfig BaseConfig(const std::string& scene, const ProveFlags& flags)
     config.initial["stiffness_damping"] = beta;
     config.fixed = {{"poisson_ratio", 0.3}};
   }
-  config.cells = flags.fit_cells;
-  config.substeps = flags.fit_substeps;
+  config.solver.cells = flags.fit_cells;
+  config.solver.substeps = flags.fit_substeps;
   config.heldout_every = 4;
-  config.starts = 1;
-  config.threads = 1;
-  config.max_iterations = flags.max_iterations;
+  config.solver.starts = 1;
+  config.solver.threads = 1;
+  config.solver.max_iterations = flags.max_iterations;
   return config;
 }
 

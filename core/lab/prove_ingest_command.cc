@@ -83,7 +83,7 @@ Result<double> FitYoungsModulus(const fs::path& capture_dir, const fem::Physical
   config.fixed = fem::ToJson(truth);
   for (const char* name : {"youngs_modulus", "density", "initial_pose"}) config.fixed.erase(name);
   if (capture.floor) config.fixed.erase("ground");  // the capture's floor is the ground
-  config.starts = 1;
+  config.solver.starts = 1;
   SOFTID_ASSIGN_OR_RETURN(const inverse::FitResult result, inverse::Fit(capture, config));
   return result.Best().final.youngs_modulus;
 }

@@ -90,7 +90,7 @@ struct Benchmark {
   double duration = 0.0;        // [s]; 0 = the scene's own
   double quick_duration = 0.0;  // [s] with --quick; 0 = as duration
   int max_iterations = 50;
-  // Levenberg-Marquardt iterations after L-BFGS per start (JobConfig::refine_iterations): the
+  // Levenberg-Marquardt iterations after L-BFGS per start (SolverOptions::refine_iterations): the
   // coupled multi-parameter fits need them to leave the valleys L-BFGS creeps along.
   int refine_iterations = 0;
   capture::DepthNoiseOptions noise;
@@ -100,7 +100,7 @@ struct Benchmark {
   // Run the identifiability analysis at the best start and print its verdict for these variables.
   std::vector<std::string> identifiability_focus;
   // Wall-time target of one start [s] (0: none): the row then also reports the slowest start's
-  // wall time against it. Starts that run alone get every core (JobConfig::threads).
+  // wall time against it. Starts that run alone get every core (SolverOptions::threads).
   double start_seconds_target = 0.0;
 };
 

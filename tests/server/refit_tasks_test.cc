@@ -46,7 +46,7 @@ std::vector<store::ManifestEntry> PutCapture(const fs::path& dir, const store::B
 inverse::JobConfig RefitConfig(const fem::PhysicalParameters& truth, double e0) {
   inverse::JobConfig config = inverse::testing::YoungsModulusConfig(truth, 1, 4);
   config.initial["youngs_modulus"] = inverse::InitialValue{e0, std::nullopt};
-  config.threads = 1;
+  config.solver.threads = 1;
   return config;
 }
 

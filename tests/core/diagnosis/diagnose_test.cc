@@ -56,11 +56,11 @@ struct RampCapture {
     beta.value = 0.005;
     config.initial = {{"youngs_modulus", e}, {"stiffness_damping", beta}};
     config.fixed = {{"poisson_ratio", 0.3}, {"ground", fem::ToJson(*truth.ground)}};
-    config.cells = 8;
-    config.substeps = 2;
-    config.starts = 1;
-    config.threads = 1;
-    config.max_iterations = 15;
+    config.solver.cells = 8;
+    config.solver.substeps = 2;
+    config.solver.starts = 1;
+    config.solver.threads = 1;
+    config.solver.max_iterations = 15;
     return config;
   }
 };
@@ -158,8 +158,8 @@ TEST(Diagnose, AnExtensionThatOnlyFinishesAPoorBaseFitIsNotPhysics) {
   config.heldout_every = 4;  // the given base fit must hold out what the diagnosis holds out
   inverse::JobConfig poor = config;
   poor.initial["youngs_modulus"].value = 0.03 * ramp.truth.youngs_modulus;
-  poor.max_iterations = 1;
-  poor.continuation = false;
+  poor.solver.max_iterations = 1;
+  poor.solver.continuation = false;
   Result<inverse::FitResult> base = inverse::Fit(ramp.capture, poor);
   ASSERT_TRUE(base.ok()) << base.status().ToString();
   Result<DiagnosisReport> report = Diagnose(ramp.capture, config, SmallOptions(), &*base);
@@ -215,11 +215,11 @@ inverse::JobConfig LightThrowConfig(const scenes::ConcealedScene& scene) {
                   {"stiffness_damping", 0.01},
                   {"poisson_ratio", 0.3},
                   {"ground", fem::ToJson(*scene.scene.parameters.ground)}};
-  config.cells = 8;
-  config.substeps = 1;
-  config.starts = 1;
-  config.threads = 1;
-  config.max_iterations = 20;
+  config.solver.cells = 8;
+  config.solver.substeps = 1;
+  config.solver.starts = 1;
+  config.solver.threads = 1;
+  config.solver.max_iterations = 20;
   return config;
 }
 

@@ -45,9 +45,9 @@ struct TorusCapture {
   inverse::JobConfig Config() const {
     inverse::JobConfig config;
     config.fit = {"youngs_modulus"};
-    config.cells = 10;
-    config.substeps = 2;
-    config.threads = 1;
+    config.solver.cells = 10;
+    config.solver.substeps = 2;
+    config.solver.threads = 1;
     return config;
   }
 };
@@ -65,8 +65,8 @@ inverse::FitResult EndedAt(const fem::PhysicalParameters& p, const inverse::JobC
   fit.base = p;
   fit.starts = {start};
   fit.best = 0;
-  fit.cells = config.cells;
-  fit.substeps = config.substeps;
+  fit.cells = config.solver.cells;
+  fit.substeps = config.solver.substeps;
   return fit;
 }
 

@@ -20,12 +20,12 @@ JobConfig BounceConfig(const fem::PhysicalParameters& truth, int cells, int subs
   config.fixed = fem::ToJson(truth);
   config.fixed.erase("youngs_modulus");
   config.fixed.erase("density");  // from the capture's mass
-  config.cells = cells;
-  config.substeps = substeps;
-  config.starts = 1;
-  config.threads = 2;
-  config.max_iterations = 30;
-  config.function_tolerance = 1e-10;
+  config.solver.cells = cells;
+  config.solver.substeps = substeps;
+  config.solver.starts = 1;
+  config.solver.threads = 2;
+  config.solver.max_iterations = 30;
+  config.solver.function_tolerance = 1e-10;
   return config;
 }
 

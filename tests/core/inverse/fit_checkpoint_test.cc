@@ -77,7 +77,7 @@ TEST_F(FitCheckpointTest, ResumedFitComputesWhatTheUninterruptedOneDid) {
 
 TEST_F(FitCheckpointTest, StartsRunOneByOneMatchTheWholeFit) {
   JobConfig config = ThreeStartConfig(small_->truth);
-  config.substeps = kAutoSubsteps;  // chosen once, by PrepareFit, then from its checkpoint
+  config.solver.substeps = kAutoSubsteps;  // chosen once, by PrepareFit, then from its checkpoint
   Result<FitCheckpoint> prepared = PrepareFit(small_->capture, config);
   ASSERT_TRUE(prepared.ok()) << prepared.status().ToString();
   ASSERT_TRUE(prepared->substep_selection.has_value());

@@ -21,7 +21,7 @@ JobConfig OneStartConfig(const fem::PhysicalParameters& truth, double scale) {
   JobConfig config = YoungsModulusConfig(truth);
   config.initial["youngs_modulus"] =
       InitialValue{.value = scale * truth.youngs_modulus, .range = std::nullopt};
-  config.starts = 1;
+  config.solver.starts = 1;
   return config;
 }
 
@@ -79,14 +79,14 @@ TEST(Fit, ContinuationOverTheHorizonLeavesTheLocalMinimumOfTheRebound) {
   const double truth = small.truth.youngs_modulus;
   JobConfig config = OneStartConfig(small.truth, 1.7);
 
-  config.continuation = false;
+  config.solver.continuation = false;
   Result<FitResult> whole = Fit(small.capture, config);
   ASSERT_TRUE(whole.ok()) << whole.status().ToString();
   // The premise: fitting every frame from here stops in the local minimum.
   EXPECT_GT(whole->Best().final.youngs_modulus, 2.0 * truth);
   EXPECT_EQ(whole->Best().stages.size(), 1u);
 
-  config.continuation = true;
+  config.solver.continuation = true;
   Result<FitResult> staged = Fit(small.capture, config);
   ASSERT_TRUE(staged.ok()) << staged.status().ToString();
   const StartResult& start = staged->Best();
@@ -116,9 +116,9 @@ TEST(Fit, RefinementFinishesWhatLbfgsLeftAndIsReported) {
   ASSERT_TRUE(small.ok) << small.error;
   const double truth = small.truth.youngs_modulus;
   JobConfig config = OneStartConfig(small.truth, 1.3);
-  config.continuation = false;
-  config.max_iterations = 1;
-  config.refine_iterations = 10;
+  config.solver.continuation = false;
+  config.solver.max_iterations = 1;
+  config.solver.refine_iterations = 10;
   int last_reported = 0, max_reported = 0;
   FitOptions options;
   options.on_progress = [&](const FitProgress& p) {
@@ -145,7 +145,7 @@ TEST(Fit, RefinementFinishesWhatLbfgsLeftAndIsReported) {
   EXPECT_EQ(json["cost"]["final"].get<double>(), refinement.final_cost);
 
   // Without refinement the start says so with null.
-  config.refine_iterations = 0;
+  config.solver.refine_iterations = 0;
   Result<FitResult> plain = Fit(small.capture, config);
   ASSERT_TRUE(plain.ok()) << plain.status().ToString();
   EXPECT_FALSE(plain->Best().refinement.has_value());
@@ -179,9 +179,9 @@ TEST(Fit, AutoSubstepsChoosesAndReportsTheTimeStep) {
   testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.25);
   ASSERT_TRUE(small.ok) << small.error;
   JobConfig config = YoungsModulusConfig(small.truth);
-  config.substeps = kAutoSubsteps;
-  config.starts = 1;
-  config.max_iterations = 2;
+  config.solver.substeps = kAutoSubsteps;
+  config.solver.starts = 1;
+  config.solver.max_iterations = 2;
   Result<FitResult> result = Fit(small.capture, config);
   ASSERT_TRUE(result.ok()) << result.status().ToString();
   ASSERT_TRUE(result->substep_selection.has_value());
@@ -197,7 +197,7 @@ TEST(Fit, AutoSubstepsChoosesAndReportsTheTimeStep) {
   EXPECT_EQ(json["time_step"]["selection"]["trials"].size(), selection.trials.size());
 
   // An explicit choice is used as given, with no selection.
-  config.substeps = 3;
+  config.solver.substeps = 3;
   result = Fit(small.capture, config);
   ASSERT_TRUE(result.ok()) << result.status().ToString();
   EXPECT_EQ(result->substeps, 3);
@@ -209,9 +209,9 @@ TEST(Fit, AutoCellsChoosesAndReportsTheGrid) {
   testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.25);
   ASSERT_TRUE(small.ok) << small.error;
   JobConfig config = YoungsModulusConfig(small.truth);
-  config.cells = kAutoCells;
-  config.starts = 1;
-  config.max_iterations = 2;
+  config.solver.cells = kAutoCells;
+  config.solver.starts = 1;
+  config.solver.max_iterations = 2;
   Result<FitResult> result = Fit(small.capture, config);
   ASSERT_TRUE(result.ok()) << result.status().ToString();
   ASSERT_TRUE(result->grid_selection.has_value());
@@ -232,10 +232,10 @@ TEST(Fit, AutoCellsChoosesAndReportsTheGrid) {
   EXPECT_EQ(json["grid"]["cells"], result->cells);
   EXPECT_EQ(json["grid"]["selection"]["trials"].size(), selection.trials.size());
   // Analyses after the fit use the fit's grid, not "auto".
-  EXPECT_EQ(WithFitDiscretisation(config, *result).cells, result->cells);
+  EXPECT_EQ(WithFitDiscretisation(config, *result).solver.cells, result->cells);
 
   // An explicit grid is used as given, with no selection.
-  config.cells = 6;
+  config.solver.cells = 6;
   result = Fit(small.capture, config);
   ASSERT_TRUE(result.ok()) << result.status().ToString();
   EXPECT_EQ(result->cells, 6);
@@ -309,8 +309,8 @@ TEST(Fit, FramesAtTheirTimeStampsWithJitterAndDrops) {
   ASSERT_TRUE(timed.ok) << timed.error;
   ASSERT_TRUE(untimed.ok) << untimed.error;
   JobConfig config = YoungsModulusConfig(timed.truth);
-  config.substeps = 5;  // steps of 1/300 s: odd 120-fps frames fall between two steps
-  config.starts = 1;
+  config.solver.substeps = 5;  // steps of 1/300 s: odd 120-fps frames fall between two steps
+  config.solver.starts = 1;
   Result<FitResult> with_times = Fit(timed.capture, config);
   Result<FitResult> without_times = Fit(untimed.capture, config);
   ASSERT_TRUE(with_times.ok()) << with_times.status().ToString();
@@ -344,8 +344,8 @@ TEST(Fit, InitialPoseCorrectsAMisplacedRestMesh) {
   JobConfig with_pose = e_only;
   with_pose.fit.push_back("initial_pose");
   with_pose.fixed.erase("initial_pose");
-  with_pose.max_iterations = 60;
-  with_pose.refine_iterations = 30;
+  with_pose.solver.max_iterations = 60;
+  with_pose.solver.refine_iterations = 30;
   Result<FitResult> biased = Fit(small.capture, e_only);
   Result<FitResult> corrected = Fit(small.capture, with_pose);
   ASSERT_TRUE(biased.ok()) << biased.status().ToString();

@@ -29,9 +29,9 @@ FitResult FitAtTruth(const SmallCapture& capture, const std::vector<std::string>
 
 JobConfig SmallConfig(const std::vector<std::string>& fitted) {
   JobConfig config;
-  config.cells = 8;
-  config.substeps = 2;
-  config.threads = 2;
+  config.solver.cells = 8;
+  config.solver.substeps = 2;
+  config.solver.threads = 2;
   config.fit = fitted;
   return config;
 }

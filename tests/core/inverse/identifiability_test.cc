@@ -39,8 +39,8 @@ Result<IdentifiabilityReport> AnalyzeAtTruth(const SmallCapture& capture,
                                              const std::vector<std::string>& fitted,
                                              const IdentifiabilityOptions& options) {
   JobConfig config;
-  config.cells = 8;
-  config.substeps = 2;
+  config.solver.cells = 8;
+  config.solver.substeps = 2;
   config.fit = fitted;
   const double length = capture.mesh.Bounds().sizes().maxCoeff();
   Result<ParameterSpace> space = ParameterSpace::Create(fitted, capture.truth, length);
@@ -48,8 +48,9 @@ Result<IdentifiabilityReport> AnalyzeAtTruth(const SmallCapture& capture,
   return AnalyzeIdentifiability(
       [&]() {
         return std::make_unique<TrajectoryObjective>(
-            capture.mesh, capture.capture.fixed_region, capture.truth, SimulationOptionsFor(config),
-            CostOptionsFor(config), capture.frames, capture.capture.fps, config.substeps);
+            capture.mesh, capture.capture.fixed_region, capture.truth,
+            SimulationOptionsFor(config.solver), CostOptionsFor(config.solver), capture.frames,
+            capture.capture.fps, config.solver.substeps);
       },
       *space, capture.truth, options);
 }
@@ -216,9 +217,9 @@ TEST(Identifiability, FreeFallCorrelatesGravityWithMassDamping) {
   const SmallCapture capture = MakeSmallCapture("torus-drop", /*duration=*/0.1);
   ASSERT_TRUE(capture.ok) << capture.error;
   JobConfig config;
-  config.cells = 8;
-  config.substeps = 2;
-  config.threads = 2;
+  config.solver.cells = 8;
+  config.solver.substeps = 2;
+  config.solver.threads = 2;
   config.fit = {"gravity", "mass_damping"};
   FitResult fit;
   fit.fitted = config.fit;

@@ -92,10 +92,10 @@ inline JobConfig YoungsModulusConfig(const fem::PhysicalParameters& truth, int s
   config.fixed = fem::ToJson(truth);
   config.fixed.erase("youngs_modulus");
   config.fixed.erase("density");  // from the capture's mass
-  config.cells = 8;
-  config.substeps = 2;
-  config.starts = starts;
-  config.max_iterations = max_iterations;
+  config.solver.cells = 8;
+  config.solver.substeps = 2;
+  config.solver.starts = starts;
+  config.solver.max_iterations = max_iterations;
   return config;
 }
 

@@ -124,28 +124,28 @@ TEST(JobConfig, DefaultsFromEmptyObject) {
   EXPECT_EQ(config->fit, std::vector<std::string>{"youngs_modulus"});
   EXPECT_TRUE(config->initial.empty());
   EXPECT_EQ(config->fixed, json::object());
-  EXPECT_EQ(config->cells, kAutoCells);
-  EXPECT_EQ(config->cell_size, 0.0);
-  EXPECT_EQ(config->substeps, kAutoSubsteps);
-  EXPECT_EQ(config->rho_infinity, JobConfig::kNewmark);
-  EXPECT_EQ(SimulationOptionsFor(*config).generalized_alpha_f, 0.0);
+  EXPECT_EQ(config->solver.cells, kAutoCells);
+  EXPECT_EQ(config->solver.cell_size_m, 0.0);
+  EXPECT_EQ(config->solver.substeps, kAutoSubsteps);
+  EXPECT_EQ(config->solver.rho_infinity, SolverOptions::kNewmark);
+  EXPECT_EQ(SimulationOptionsFor(config->solver).generalized_alpha_f, 0.0);
   EXPECT_EQ(config->frames.first, 0);
   EXPECT_EQ(config->frames.last, -1);
   EXPECT_EQ(config->heldout_every, 0);
-  EXPECT_EQ(config->starts, 4);
-  EXPECT_EQ(config->threads, 0);
-  EXPECT_EQ(config->seed, 1u);
-  EXPECT_EQ(config->max_iterations, 50);
-  EXPECT_EQ(config->function_tolerance, 1e-6);
-  EXPECT_EQ(config->gradient_tolerance, 1e-10);
-  EXPECT_EQ(config->parameter_tolerance, 1e-8);
-  EXPECT_EQ(config->gradient, GradientMethod::kAdjoint);
-  EXPECT_EQ(config->finite_difference_step, 1e-4);
-  EXPECT_TRUE(config->continuation);
-  EXPECT_EQ(config->refine_iterations, 0);
-  EXPECT_EQ(config->cost.band_cells, 3);
-  EXPECT_EQ(config->cost.truncation_cells, 2.0);
-  EXPECT_EQ(config->cost.rest_sdf, cost::RestSdf::kSurfaceFitted);
+  EXPECT_EQ(config->solver.starts, 4);
+  EXPECT_EQ(config->solver.threads, 0);
+  EXPECT_EQ(config->solver.seed, 1u);
+  EXPECT_EQ(config->solver.max_iterations, 50);
+  EXPECT_EQ(config->solver.function_tolerance, 1e-6);
+  EXPECT_EQ(config->solver.gradient_tolerance, 1e-10);
+  EXPECT_EQ(config->solver.parameter_tolerance, 1e-8);
+  EXPECT_EQ(config->solver.gradient, GradientMethod::kAdjoint);
+  EXPECT_EQ(config->solver.finite_difference_step, 1e-4);
+  EXPECT_TRUE(config->solver.continuation);
+  EXPECT_EQ(config->solver.refine_iterations, 0);
+  EXPECT_EQ(config->solver.cost.band_cells, 3);
+  EXPECT_EQ(config->solver.cost.truncation_cells, 2.0);
+  EXPECT_EQ(config->solver.cost.rest_sdf, cost::RestSdf::kSurfaceFitted);
   EXPECT_FALSE(config->diagnose);
   EXPECT_TRUE(config->uncertainty);  // every result says how sure it is unless told not to
   EXPECT_TRUE(config->Validate().ok());
@@ -173,30 +173,30 @@ TEST(JobConfig, FullConfigRoundTrips) {
   EXPECT_EQ(config->initial.at("gravity").value, json::parse("[0.0, 0.0, -9.7]"));
   EXPECT_EQ(config->initial.at("stiffness_field").value->at("kind"), "linear");
   EXPECT_EQ(config->fixed.at("density"), 950.0);
-  EXPECT_EQ(config->cells, 24);
-  EXPECT_EQ(config->cell_size, 0.004);
-  EXPECT_EQ(config->substeps, 3);
-  EXPECT_EQ(config->rho_infinity, 0.8);
+  EXPECT_EQ(config->solver.cells, 24);
+  EXPECT_EQ(config->solver.cell_size_m, 0.004);
+  EXPECT_EQ(config->solver.substeps, 3);
+  EXPECT_EQ(config->solver.rho_infinity, 0.8);
   // rho = 0.8: alpha_m = 1/3, alpha_f = 4/9 (Chung & Hulbert), gamma = 1/2 - alpha_m + alpha_f.
-  const fem::SimulationOptions simulation = SimulationOptionsFor(*config);
+  const fem::SimulationOptions simulation = SimulationOptionsFor(config->solver);
   EXPECT_NEAR(simulation.generalized_alpha_m, 1.0 / 3.0, 1e-15);
   EXPECT_NEAR(simulation.generalized_alpha_f, 4.0 / 9.0, 1e-15);
   EXPECT_NEAR(simulation.newmark_gamma, 0.5 - 1.0 / 3.0 + 4.0 / 9.0, 1e-15);
   EXPECT_TRUE(simulation.Validate().ok());
   EXPECT_EQ(config->frames, (FrameRange{2, 40}));
   EXPECT_EQ(config->heldout_every, 5);
-  EXPECT_EQ(config->starts, 8);
-  EXPECT_EQ(config->threads, 3);
-  EXPECT_EQ(config->seed, 12345678901u);
-  EXPECT_EQ(config->max_iterations, 80);
-  EXPECT_EQ(config->function_tolerance, 1e-7);
-  EXPECT_EQ(config->gradient_tolerance, 1e-9);
-  EXPECT_EQ(config->parameter_tolerance, 1e-6);
-  EXPECT_EQ(config->gradient, GradientMethod::kFiniteDifference);
-  EXPECT_EQ(config->finite_difference_step, 1e-3);
-  EXPECT_FALSE(config->continuation);
-  EXPECT_EQ(config->refine_iterations, 12);
-  EXPECT_EQ(config->cost, (CostSettings{4, 1.5, cost::RestSdf::kSampled}));
+  EXPECT_EQ(config->solver.starts, 8);
+  EXPECT_EQ(config->solver.threads, 3);
+  EXPECT_EQ(config->solver.seed, 12345678901u);
+  EXPECT_EQ(config->solver.max_iterations, 80);
+  EXPECT_EQ(config->solver.function_tolerance, 1e-7);
+  EXPECT_EQ(config->solver.gradient_tolerance, 1e-9);
+  EXPECT_EQ(config->solver.parameter_tolerance, 1e-6);
+  EXPECT_EQ(config->solver.gradient, GradientMethod::kFiniteDifference);
+  EXPECT_EQ(config->solver.finite_difference_step, 1e-3);
+  EXPECT_FALSE(config->solver.continuation);
+  EXPECT_EQ(config->solver.refine_iterations, 12);
+  EXPECT_EQ(config->solver.cost, (CostSettings{4, 1.5, cost::RestSdf::kSampled}));
   EXPECT_TRUE(config->diagnose);
   EXPECT_TRUE(config->Validate().ok()) << config->Validate().ToString();
 
@@ -447,16 +447,16 @@ TEST(JobConfig, ValidateCodeBuiltConfigs) {
     EXPECT_NE(status.message().find(reason), std::string::npos) << status.message();
   };
   JobConfig config;
-  config.cells = 1;
+  config.solver.cells = 1;
   expect_invalid(config, "cells = 1: ", "must be \"auto\" or an integer >= 2");
   config = JobConfig{};
   config.frames = {5, 3};
   expect_invalid(config, "frames.last = 3: ", "frames.first (5)");
   config = JobConfig{};
-  config.gradient_tolerance = -1.0;
+  config.solver.gradient_tolerance = -1.0;
   expect_invalid(config, "gradient_tolerance = -1.0: ", "must be a finite number > 0");
   config = JobConfig{};
-  config.cell_size = -0.01;
+  config.solver.cell_size_m = -0.01;
   expect_invalid(config, "cell_size = -0.01: ", "must be a finite number > 0");
   config = JobConfig{};
   config.fit = {"ground"};
@@ -553,7 +553,7 @@ TEST(ReadJobConfig, ReadsAFile) {
   const Result<JobConfig> config = ReadJobConfig(file.path());
   ASSERT_TRUE(config.ok()) << config.status().ToString();
   EXPECT_EQ(config->fit, (std::vector<std::string>{"youngs_modulus", "density"}));
-  EXPECT_EQ(config->cells, 12);
+  EXPECT_EQ(config->solver.cells, 12);
 }
 
 TEST(ReadJobConfig, MissingFileIsNotFound) {
@@ -607,7 +607,7 @@ TEST(JobConfigFromString, NamesTheSource) {
 TEST(JobConfig, SubstepsAutoIsTheDefaultAndRoundTrips) {
   const Result<JobConfig> automatic = JobConfigFromJson(json::parse(R"({"substeps": "auto"})"));
   ASSERT_TRUE(automatic.ok()) << automatic.status().ToString();
-  EXPECT_EQ(automatic->substeps, kAutoSubsteps);
+  EXPECT_EQ(automatic->solver.substeps, kAutoSubsteps);
   EXPECT_EQ(ToJson(*automatic)["substeps"], "auto");
   EXPECT_EQ(ToJson(JobConfig{})["substeps"], "auto");
   const Result<JobConfig> explicit_steps = JobConfigFromJson(json::parse(R"({"substeps": 5})"));
@@ -618,7 +618,7 @@ TEST(JobConfig, SubstepsAutoIsTheDefaultAndRoundTrips) {
 TEST(JobConfig, CellsAutoIsTheDefaultAndRoundTrips) {
   const Result<JobConfig> automatic = JobConfigFromJson(json::parse(R"({"cells": "auto"})"));
   ASSERT_TRUE(automatic.ok()) << automatic.status().ToString();
-  EXPECT_EQ(automatic->cells, kAutoCells);
+  EXPECT_EQ(automatic->solver.cells, kAutoCells);
   EXPECT_EQ(ToJson(*automatic)["cells"], "auto");
   EXPECT_EQ(ToJson(JobConfig{})["cells"], "auto");
   EXPECT_TRUE(JobConfig{}.Validate().ok());

@@ -45,15 +45,15 @@ TEST(JobResources, DefaultConfigFitsWithRoom) {
 TEST(JobResources, OversizedConfigsAreRefusedNamingTheKey) {
   const JobResourceLimits limits;
   JobConfig cells;
-  cells.cells = 300;
+  cells.solver.cells = 300;
   ExpectRefused(EstimateJobResources(cells, TorusSized(), limits), "cells = 300: the job would");
-  cells.cells = 100000;
+  cells.solver.cells = 100000;
   ExpectRefused(EstimateJobResources(cells, TorusSized(), limits), "at most 4 GiB is accepted");
   JobConfig substeps;
-  substeps.substeps = 20000;
+  substeps.solver.substeps = 20000;
   ExpectRefused(EstimateJobResources(substeps, TorusSized(), limits), "substeps = 20000");
   JobConfig cell_size;
-  cell_size.cell_size = 1e-9;
+  cell_size.solver.cell_size_m = 1e-9;
   ExpectRefused(EstimateJobResources(cell_size, TorusSized(), limits), "cell_size = 1e-09");
 }
 
@@ -68,16 +68,16 @@ TEST(JobResources, WallTimeIsEstimatedAndBounded) {
   EXPECT_LT(plain->wall_seconds, 0.25 * limits.max_wall_seconds);
 
   JobConfig iterations;
-  iterations.max_iterations = 100000;
+  iterations.solver.max_iterations = 100000;
   ExpectRefused(EstimateJobResources(iterations, TorusSized(), limits),
                 "max_iterations = 100000: the job could run for about");
   ExpectRefused(EstimateJobResources(iterations, TorusSized(), limits), "at most 24 h is accepted");
   JobConfig starts;
-  starts.starts = 5000;
+  starts.solver.starts = 5000;
   ExpectRefused(EstimateJobResources(starts, TorusSized(), limits), "starts = 5000");
 
   JobConfig longer;
-  longer.max_iterations = 2 * JobConfig{}.max_iterations;
+  longer.solver.max_iterations = 2 * JobConfig{}.solver.max_iterations;
   EXPECT_GT(EstimateJobResources(longer, TorusSized(), limits)->wall_seconds,
             1.9 * plain->wall_seconds);
   JobConfig diagnosed;
