@@ -45,32 +45,6 @@ struct LinearSolver::FactorSnapshot {
   double factor_work = 0.0;
 };
 
-namespace {
-// Work model of the ski-rental rule (RefactorPays), in "memory-bound flops": the flops of sparse
-// products, triangular solves and vector updates, which all run at about the same rate (bounded by
-// memory traffic). A factorisation's flops run as dense BLAS-3 blocks, several times faster;
-// kFactorFlopWeight converts them. Measured on the idle 2-core AMD EPYC dev host (OpenBLAS 0.3.21,
-// CHOLMOD 3.0.14 with its OpenMP regions serialised, torus-drop at 3100 cells: 12.9k unknowns,
-// nnz(A) 0.85e6, nnz(L) 3.5e6, 1.48e9 factorisation flops): Factorize 90-100 ms (~16 GFlop/s),
-// one preconditioner application 1.4 ms, one product with A 0.6 ms: a factorisation costs ~45
-// iterations, which the weight 0.28 reproduces (0.15 and 0.4 measured no better in bench). The
-// rule only needs the ratio to within a factor of ~1.5: a wrong weight shifts the balance between
-// refactorisations and extra iterations, never the result's accuracy.
-constexpr double kFactorFlopWeight = 0.28;
-// The solves run on the reduced-precision copy of L: in single precision they measured 1.7x
-// faster than CHOLMOD's double solves on the same host and problem (4.3 vs 7.5 ms under the same
-// load), with the blocks below the diagonal in half precision another ~1.4x (BM_Precondition,
-// interleaved runs: 0.75-0.9 vs 1.2 ms). With the weight 0.6 of single precision the rule
-// refactorised as before, now that iterations are cheaper too often: 0.4 ran pillow-ramp (1 s),
-// ball-bounce (0.5 s) and torus-drop's impact (0.3 s) 21 %, 12 % and 3 % faster, torus-drop over
-// 1 s 30 % slower (a factor taken at the impact then served its rest).
-constexpr double kReducedPrecisionSolveWeight = 0.4;
-// Forming the symmetric part and CHOLMOD's permuted transpose before each factorisation:
-// ~10 memory-bound flops per entry of A.
-constexpr double kFactorWorkPerMatrixEntry = 10.0;
-
-}  // namespace
-
 LinearSolver::LinearSolver() {
   ConfigureNumericRuntime();
 }
@@ -96,17 +70,13 @@ void LinearSolver::UseFactor(const std::shared_ptr<FactorSnapshot>& factor) {
   current_ = factor;
   const int threads = team_ != nullptr ? team_->size() : 1;
   if (current_->reduced.threads() != threads) current_->reduced.SetThreads(threads);
-  RestartRefactorRule();
+  refactor_rule_.Restart();
 }
 
 size_t LinearSolver::FactorBytes(const FactorSnapshot& factor) {
   return factor.reduced.bytes();
 }
 
-void LinearSolver::RestartRefactorRule() {
-  baseline_iterations_ = -1;
-  excess_work_ = 0.0;
-}
 LinearSolver::LinearSolver(LinearSolver&&) noexcept = default;
 LinearSolver& LinearSolver::operator=(LinearSolver&&) noexcept = default;
 
@@ -115,7 +85,7 @@ bool LinearSolver::HasFactor() const {
 }
 
 bool LinearSolver::RefactorPays() const {
-  return current_ != nullptr && excess_work_ > current_->factor_work;
+  return current_ != nullptr && refactor_rule_.Pays(current_->factor_work);
 }
 
 bool LinearSolver::Pattern::Matches(const Matrix& a) const {
@@ -215,7 +185,7 @@ void LinearSolver::Adopt(std::shared_ptr<FactorSnapshot> fresh, const Eigen::Mat
                        kFactorWorkPerMatrixEntry * static_cast<double>(matrix_nonzeros);
   current_ = std::move(fresh);
   ++num_factorizations_;
-  RestartRefactorRule();
+  refactor_rule_.Restart();
 }
 
 Status LinearSolver::Factorize(const Matrix& a, const Eigen::Matrix3d& rotation,
@@ -330,24 +300,49 @@ void RotateBlocks(const Eigen::Matrix3d& q, const Eigen::Ref<const Eigen::Vector
   const Eigen::Index n = x.size() / 3;
   for (Eigen::Index i = 0; i < n; ++i) y->segment<3>(3 * i).noalias() = q * x.segment<3>(3 * i);
 }
-}  // namespace
 
-void LinearSolver::ApplyPreconditioner(const Eigen::Ref<const Eigen::VectorXd>& r,
-                                       Eigen::VectorXd* z) {
-  RotateBlocks(preconditioner_rotation_.transpose(), r, &rotated_);
-  current_->reduced.Solve(rotated_.data(), rotated_.data(), team_);
-  RotateBlocks(preconditioner_rotation_, rotated_, z);
-}
+// z = P^-1 r = Q A_ref^-1 Q^T r on a factor's reduced-precision copy (see the header).
+class RotatedFactorPreconditioner final : public LinearOperator {
+ public:
+  // For the body at `rotation`; `rotated`: work storage, resized to the system's size `n`.
+  RotatedFactorPreconditioner(LinearSolver::FactorSnapshot& factor, const Eigen::Matrix3d& rotation,
+                              ThreadTeam* team, Eigen::Index n, Eigen::VectorXd* rotated)
+      : factor_(factor.reduced),
+        factor_nonzeros_(factor.factor_nonzeros),
+        q_(rotation * factor.reference_rotation.transpose()),
+        team_(team),
+        rotated_(rotated) {
+    rotated_->resize(n);
+  }
+  Eigen::Index size() const override { return rotated_->size(); }
+  void Apply(const Eigen::Ref<const Eigen::VectorXd>& r, Eigen::VectorXd* z) override {
+    RotateBlocks(q_.transpose(), r, rotated_);
+    factor_.Solve(rotated_->data(), rotated_->data(), team_);
+    RotateBlocks(q_, *rotated_, z);
+  }
+  // The two triangular solves alone (2 nnz(L) flops each, at the reduced-precision weight).
+  double SolveWork() const { return kReducedPrecisionSolveWeight * 4.0 * factor_nonzeros_; }
+  // With the two block rotations (15 flops per 3-block each).
+  double ApplyWork() const override {
+    return SolveWork() + 2.0 * 15.0 / 3.0 * static_cast<double>(size());
+  }
+
+ private:
+  ReducedPrecisionFactor& factor_;
+  double factor_nonzeros_;
+  Eigen::Matrix3d q_;
+  ThreadTeam* team_;
+  Eigen::VectorXd* rotated_;
+};
+}  // namespace
 
 void LinearSolver::Precondition(const Eigen::VectorXd& b, const Eigen::Matrix3d& rotation,
                                 Eigen::VectorXd* x) {
   SOFTID_DEMAND(HasFactor());
-  rotated_.resize(b.size());
   x->resize(b.size());
-  preconditioner_rotation_ = rotation * current_->reference_rotation.transpose();
-  ApplyPreconditioner(b, x);
-  if (pending_ != nullptr)
-    pending_->overlapped_work += kReducedPrecisionSolveWeight * 4.0 * current_->factor_nonzeros;
+  RotatedFactorPreconditioner preconditioner(*current_, rotation, team_, b.size(), &rotated_);
+  preconditioner.Apply(b, x);
+  if (pending_ != nullptr) pending_->overlapped_work += preconditioner.SolveWork();
 }
 
 namespace {
@@ -386,9 +381,6 @@ LinearSolver::Summary LinearSolver::SolveDirect(const Matrix& a, const Eigen::Ve
   return summary;
 }
 
-// Relative tolerances at and above which GMRES trusts its residual recurrence (see Solve).
-constexpr double kRecurrenceTrustedTolerance = 1e-8;
-
 LinearSolver::Summary LinearSolver::Solve(const Matrix& a, const Eigen::VectorXd& b,
                                           const Eigen::Matrix3d& rotation, const Options& options,
                                           Eigen::VectorXd* x, Operator op) {
@@ -401,108 +393,16 @@ LinearSolver::Summary LinearSolver::Solve(LinearOperator& a, const Eigen::Vector
                                           Eigen::VectorXd* x) {
   SOFTID_DEMAND(HasFactor());
   SOFTID_DEMAND(a.size() == b.size());
+  // b = 0 is no solve: it would set the refactorisation rule's baseline at 0 iterations.
+  if (b.norm() == 0.0) return SolvedByZero(x);
+  RotatedFactorPreconditioner preconditioner(*current_, rotation, team_, b.size(), &rotated_);
+  const GmresSummary gmres = gmres_.Solve(a, preconditioner, b, options, x);
+  if (pending_ != nullptr) pending_->overlapped_work += gmres.work;
+  refactor_rule_.RecordSolve(gmres.iterations, gmres.work);
   Summary summary;
-  const Eigen::Index n = b.size();
-  const int m = std::max(1, options.restart);
-  if (basis_.rows() != n || basis_.cols() != m + 1) {
-    basis_.resize(n, m + 1);
-    preconditioned_.resize(n, m);
-    hessenberg_.resize(m + 1, m);
-    givens_c_.resize(m);
-    givens_s_.resize(m);
-    g_.resize(m + 1);
-  }
-  r_.resize(n);
-  w_.resize(n);
-  rotated_.resize(n);
-  preconditioner_rotation_ = rotation * current_->reference_rotation.transpose();
-
-  const double b_norm = b.norm();
-  if (b_norm == 0.0) return SolvedByZero(x);
-  // Work of this solve (see kFactorFlopWeight): per iteration a preconditioner application (two
-  // triangular solves, 2 nnz(L) flops each, and two block rotations), a product with A, and the
-  // Gram-Schmidt and update vector operations, which grow with the basis.
-  const double nd = static_cast<double>(n);
-  const double product_work = a.ApplyWork();
-  const double iteration_work = kReducedPrecisionSolveWeight * 4.0 * current_->factor_nonzeros +
-                                2.0 * 15.0 / 3.0 * nd + product_work + 8.0 * nd;
-  double work = 0.0;
-  double residual = 0.0;
-  // A zero initial guess (Newton's first solve of a step) has the residual b: no product.
-  bool residual_is_b = x->isZero(0.0);
-  while (true) {
-    if (residual_is_b) {
-      r_ = b;
-      residual_is_b = false;
-    } else {
-      a.Apply(*x, &r_);
-      r_ = b - r_;
-      work += product_work + 3.0 * nd;
-    }
-    const double beta = r_.norm();
-    residual = beta / b_norm;
-    if (residual <= options.relative_tolerance || summary.iterations >= options.max_iterations)
-      break;
-    basis_.col(0) = r_ / beta;
-    g_.setZero();
-    g_[0] = beta;
-    int j = 0;
-    for (; j < m && summary.iterations < options.max_iterations; ++j) {
-      ++summary.iterations;
-      work += iteration_work + 4.0 * nd * (j + 1);
-      ApplyPreconditioner(basis_.col(j), &w_);
-      preconditioned_.col(j) = w_;
-      a.Apply(preconditioned_.col(j), &w_);
-      for (int i = 0; i <= j; ++i) {  // modified Gram-Schmidt
-        hessenberg_(i, j) = w_.dot(basis_.col(i));
-        w_ -= hessenberg_(i, j) * basis_.col(i);
-      }
-      const double h_next = w_.norm();
-      hessenberg_(j + 1, j) = h_next;
-      for (int i = 0; i < j; ++i) {  // previous Givens rotations
-        const double t = givens_c_[i] * hessenberg_(i, j) + givens_s_[i] * hessenberg_(i + 1, j);
-        hessenberg_(i + 1, j) =
-            -givens_s_[i] * hessenberg_(i, j) + givens_c_[i] * hessenberg_(i + 1, j);
-        hessenberg_(i, j) = t;
-      }
-      const double denom = std::hypot(hessenberg_(j, j), h_next);
-      givens_c_[j] = denom > 0.0 ? hessenberg_(j, j) / denom : 1.0;
-      givens_s_[j] = denom > 0.0 ? h_next / denom : 0.0;
-      hessenberg_(j, j) = denom;
-      hessenberg_(j + 1, j) = 0.0;
-      g_[j + 1] = -givens_s_[j] * g_[j];
-      g_[j] = givens_c_[j] * g_[j];
-      residual = std::abs(g_[j + 1]) / b_norm;
-      if (h_next > 0.0) basis_.col(j + 1) = w_ / h_next;
-      if (residual <= options.relative_tolerance || h_next == 0.0) {
-        ++j;
-        break;
-      }
-    }
-    // x += Z y with H y = g (upper triangular, j x j).
-    const Eigen::VectorXd y =
-        hessenberg_.topLeftCorner(j, j).triangularView<Eigen::Upper>().solve(g_.head(j));
-    x->noalias() += preconditioned_.leftCols(j) * y;
-    work += 2.0 * nd * j;
-    if (residual <= options.relative_tolerance) {
-      // Flexible GMRES keeps A Z = V H to round-off (Z is stored, the products are in double),
-      // so the recurrence's residual is the true one up to ~1e-14 relative: a product to check
-      // it only pays for tolerances near that (the gradient tests' 1e-12).
-      if (options.relative_tolerance >= kRecurrenceTrustedTolerance) break;
-      a.Apply(*x, &r_);  // true residual (the recurrence can drift)
-      r_ = b - r_;
-      work += product_work + 3.0 * nd;
-      residual = r_.norm() / b_norm;
-      if (residual <= 10.0 * options.relative_tolerance) break;
-    }
-  }
-  summary.relative_residual = residual;
-  summary.converged = residual <= 10.0 * options.relative_tolerance;
-  if (pending_ != nullptr) pending_->overlapped_work += work;
-  if (baseline_iterations_ < 0) baseline_iterations_ = summary.iterations;
-  if (summary.iterations > baseline_iterations_) {
-    excess_work_ += work * (summary.iterations - baseline_iterations_) / summary.iterations;
-  }
+  summary.iterations = gmres.iterations;
+  summary.relative_residual = gmres.relative_residual;
+  summary.converged = gmres.converged;
   return summary;
 }
 

@@ -3,10 +3,11 @@
 // lower triangle of a reference matrix A_ref, rotated with the body: P^-1 = Q A_ref^-1 Q^T with
 // Q = blockdiag(R R_ref^T). A tumbling body's matrix is (nearly) R A_rest R^T, so one factor serves
 // many steps; refactorising every step would cost ~0.2-0.4 s at 10k DOFs. The caller renews the
-// factor when RefactorPays(). The triangular solves run on a reduced-precision copy of the factor
-// (single-precision diagonal blocks, half-precision blocks below them where the CPU converts
-// halves: about a third of the double factor's memory traffic); GMRES keeps the preconditioned
-// basis (flexible GMRES), so solutions are as accurate as with the double factor.
+// factor when RefactorPays() (refactorisation_rule.h); GMRES itself is flexible_gmres.h. The
+// triangular solves run on a reduced-precision copy of the factor (single-precision diagonal
+// blocks, half-precision blocks below them where the CPU converts halves: about a third of the
+// double factor's memory traffic); GMRES keeps the preconditioned basis (flexible GMRES), so
+// solutions are as accurate as with the double factor.
 #pragma once
 
 #include <Eigen/Core>
@@ -15,7 +16,9 @@
 #include <vector>
 
 #include "core/common/status.h"
+#include "core/fem/flexible_gmres.h"
 #include "core/fem/linear_operator.h"
+#include "core/fem/refactorisation_rule.h"
 #include "core/fem/sparse_matrix_operator.h"
 
 namespace softid::fem {
@@ -25,11 +28,7 @@ class ThreadTeam;
 class LinearSolver {
  public:
   using Matrix = Eigen::SparseMatrix<double, Eigen::ColMajor, int>;
-  struct Options {
-    double relative_tolerance = 1e-10;  // ||A x - b|| <= tol ||b||
-    int max_iterations = 500;           // total, over restarts
-    int restart = 40;                   // Krylov basis size before a restart
-  };
+  using Options = GmresOptions;
   struct Summary {
     int iterations = 0;
     double relative_residual = -1.0;
@@ -96,11 +95,8 @@ class LinearSolver {
   // thread. 0 without a team or a factor.
   double ParallelShare() const;
   int num_factorizations() const { return num_factorizations_; }
-  // Ski-rental rule for renewing the factor: true once the GMRES work spent beyond what the fresh
-  // factor needed (iterations above the first solve after factorising) exceeds the work of one
-  // factorisation. Both are counted by a deterministic work model (CHOLMOD's flop count and the
-  // operation counts of an iteration), not timed: the same inputs always refactorise at the same
-  // solves, so a cost evaluated twice is bitwise the same (line searches, finite differences).
+  // Whether renewing the factor pays (refactorisation_rule.h): true once the GMRES work spent
+  // beyond what the fresh factor needed exceeds the work of one factorisation.
   bool RefactorPays() const;
 
   // Which operator Solve inverts: a, or its transpose (the adjoint's systems). The preconditioner
@@ -127,8 +123,6 @@ class LinearSolver {
                              Eigen::VectorXd* x, Operator op = Operator::kMatrix);
 
  private:
-  void ApplyPreconditioner(const Eigen::Ref<const Eigen::VectorXd>& r, Eigen::VectorXd* z);
-
   struct Factor;
   struct PendingFactorization;
   // out = a's symmetric part (a itself when kSymmetric), in out's storage when it fits.
@@ -147,8 +141,6 @@ class LinearSolver {
                                FactorSnapshot* fresh);
   void Adopt(std::shared_ptr<FactorSnapshot> fresh, const Eigen::Matrix3d& rotation, int attempts,
              Eigen::Index matrix_nonzeros);
-  // The refactorisation rule's counts start over for the current factor.
-  void RestartRefactorRule();
   ThreadTeam* team_ = nullptr;
   std::unique_ptr<PendingFactorization> pending_;
   // CHOLMOD's factor, analysed for the pattern below; each factorisation refills it.
@@ -162,17 +154,10 @@ class LinearSolver {
   };
   Pattern analysed_pattern_;    // of workspace_'s symbolic analysis
   Pattern transposed_pattern_;  // of transpose_position_
-  Eigen::Matrix3d preconditioner_rotation_ = Eigen::Matrix3d::Identity();
   int num_factorizations_ = 0;
-  // Work-model units (see kFactorFlopWeight in linear_solver.cc): memory-bound flops.
-  int baseline_iterations_ = -1;  // first solve after the factorisation
-  double excess_work_ = 0.0;      // GMRES work beyond the baseline since the factorisation
-  // Work storage, kept to avoid allocation per solve: Krylov basis V, preconditioned basis Z,
-  // Hessenberg matrix H, Givens rotations and the rotated residual g.
-  Eigen::MatrixXd basis_, preconditioned_;
-  Eigen::MatrixXd hessenberg_;
-  Eigen::VectorXd givens_c_, givens_s_, g_;
-  Eigen::VectorXd r_, w_, rotated_;
+  RefactorisationRule refactor_rule_;  // for the current factor
+  FlexibleGmres gmres_;
+  Eigen::VectorXd rotated_;  // the preconditioner's work storage
   // Products with a matrix passed to Solve, on team_.
   SparseMatrixOperator matrix_operator_;
 };
