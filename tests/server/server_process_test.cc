@@ -739,15 +739,27 @@ std::pair<std::string, int> RunServerCommand(const std::string& args) {
   return {out, WIFEXITED(status) ? WEXITSTATUS(status) : -1};
 }
 
+// The secret `softid-server tokens create <store> --station <station>` prints for a new token,
+// or "" (with a failure) if it printed none. `store`: "--data DIR" or "--store URL".
+std::string CreateTokenIn(const std::string& store, const std::string& station,
+                          bool admin = false) {
+  const auto [out, status] = RunServerCommand("tokens create " + store + " --station " + station +
+                                              (admin ? " --admin" : ""));
+  const std::string secret = out.substr(0, out.find('\n'));
+  EXPECT_EQ(status, 0) << station;
+  EXPECT_EQ(secret.rfind("softid_", 0), 0u) << station << ": " << out;
+  return secret;
+}
+std::string CreateToken(const fs::path& data, const std::string& station, bool admin = false) {
+  return CreateTokenIn("--data " + data.string(), station, admin);
+}
+
 // The operator's token commands on a running server's data directory: a created token works at
 // once, list shows it (never its secret), and a revoked one is refused on the next call.
 TEST_F(ServerProcessTest, TokensCreatedAndRevokedFromTheCommandLine) {
   fs::create_directories(data_dir());
-  const auto [secret_line, created] =
-      RunServerCommand("tokens create --data " + data_dir().string() + " --station lab-7");
-  ASSERT_EQ(created, 0);
-  const std::string secret = secret_line.substr(0, secret_line.find('\n'));
-  ASSERT_EQ(secret.rfind("softid_", 0), 0u) << secret_line;
+  const std::string secret = CreateToken(data_dir(), "lab-7");
+  ASSERT_FALSE(secret.empty());
   EXPECT_EQ(
       RunServerCommand("tokens create --data " + data_dir().string() + " --station 'a b'").second,
       2);
@@ -791,17 +803,6 @@ grpc::Status ListAllJobs(ReconstructionClient& client, int page_size, std::vecto
     if (page.next_page_token().empty()) return grpc::Status::OK;
     request.set_page_token(page.next_page_token());
   }
-}
-
-// The secret `softid-server tokens create` prints for a new token of `station`, or "" (with a
-// failure) if it printed none.
-std::string CreateToken(const fs::path& data, const std::string& station, bool admin = false) {
-  const auto [out, status] = RunServerCommand("tokens create --data " + data.string() +
-                                              " --station " + station + (admin ? " --admin" : ""));
-  const std::string secret = out.substr(0, out.find('\n'));
-  EXPECT_EQ(status, 0) << station;
-  EXPECT_EQ(secret.rfind("softid_", 0), 0u) << station << ": " << out;
-  return secret;
 }
 
 // Sixteen stations, each with its own API token, upload a capture and submit jobs all at once.
@@ -1217,11 +1218,8 @@ TEST_F(PostgresServerProcessTest, ApiAndWorkerProcessesShareTheStoreAndTheData) 
 }
 
 TEST_F(PostgresServerProcessTest, RunsAJobWithItsStoreInPostgres) {
-  const auto [secret_line, created] =
-      RunServerCommand("tokens create --store '" + url_ + "' --station lab-pg");
-  ASSERT_EQ(created, 0) << secret_line;
-  const std::string secret = secret_line.substr(0, secret_line.find('\n'));
-  ASSERT_EQ(secret.rfind("softid_", 0), 0u) << secret_line;
+  const std::string secret = CreateTokenIn("--store '" + url_ + "'", "lab-pg");
+  ASSERT_FALSE(secret.empty());
 
   ServerProcess::Flags flags;
   flags.extra = {"--store", url_, "--auth", "token"};
