@@ -236,6 +236,7 @@ class Simulator {
                        ParameterGradient* gradient, bool rotations_current = false,
                        SurfaceAdjoint* surface = nullptr);
   struct ResidualAdjointPass;  // ResidualAdjoint's stages (simulator_adjoint.cc)
+  struct AdjointStep;          // BackpropagateStep's stages (simulator_adjoint.cc)
   // Per element the shear part of the stiffness, ElementStiffness(weights, h, 0, 1), without the
   // stiffness field's scale: d K / d poisson_ratio needs it. Built on the first backward pass.
   void BuildShearStiffness();

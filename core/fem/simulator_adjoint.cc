@@ -332,58 +332,71 @@ void Simulator::ResidualAdjoint(const Eigen::VectorXd& u, const Eigen::VectorXd&
   pass.ClearFixedNodes();
 }
 
-Status Simulator::BackpropagateStep(const SimulationState& previous, const SimulationState& next,
-                                    StateAdjoint* adjoint, ParameterGradient* gradient) {
-  const int n = mesh_.NumNodes();
-  SOFTID_DEMAND(adjoint->u.size() == 3 * n && adjoint->v.size() == 3 * n &&
-                adjoint->a.size() == 3 * n);
-  const double dt = options_.time_step;
-  const double beta = options_.newmark_beta;
-  const double gamma = options_.newmark_gamma;
-  const double da_du = 1.0 / (beta * dt * dt);
-  const double dv_du = gamma / (beta * dt);
+// One step of the backward pass: the adjoint of the step's end state (u', V(u'), A(u')) through
+// the step's residual, back to its start state, with the parameters' share into the gradient.
+struct Simulator::AdjointStep {
+  AdjointStep(Simulator& sim, const SimulationState& previous, const SimulationState& next,
+              StateAdjoint* adjoint, ParameterGradient* gradient)
+      : sim(sim),
+        previous(previous),
+        next(next),
+        adjoint(adjoint),
+        gradient(gradient),
+        dt(sim.options_.time_step),
+        beta(sim.options_.newmark_beta),
+        gamma(sim.options_.newmark_gamma),
+        da_du(1.0 / (beta * dt * dt)),
+        dv_du(gamma / (beta * dt)),
+        alpha_m(sim.options_.generalized_alpha_m),
+        alpha_f(sim.options_.generalized_alpha_f),
+        n(sim.mesh_.NumNodes()) {}
 
-  // Adjoint of u' through u', V(u') and A(u').
-  Eigen::VectorXd rhs = adjoint->u + dv_du * adjoint->v + da_du * adjoint->a;
-  for (int i = 0; i < n; ++i) {
-    if (fixed_[i]) rhs.segment<3>(3 * i).setZero();
+  // Adjoint of u' through u', V(u') and A(u'), zero at fixed nodes.
+  Eigen::VectorXd RightHandSide() const {
+    Eigen::VectorXd rhs = adjoint->u + dv_du * adjoint->v + da_du * adjoint->a;
+    for (int i = 0; i < n; ++i) {
+      if (sim.fixed_[i]) rhs.segment<3>(3 * i).setZero();
+    }
+    return rhs;
   }
 
-  // A factor the adjoint renewed during the previous (later) step takes over here, unless the
-  // forward pass solved this step with another (see factor_history_). One the forward pass left
-  // pending at its end is dropped when the forward's own factors take over: computing or waiting
-  // for it would be for nothing.
-  if (!backward_factorization_pending_ && options_.adjoint_reuses_forward_factors)
-    solver_.DiscardFactorize();
-  else
-    solver_.FinishFactorize();
-  backward_factorization_pending_ = false;
-  UseForwardFactor(previous.time);
-  // The exact Jacobian at the end of the step.
-  SetState(previous);
-  UpdateLaggedNormalForces();
-  newton_tangent_ = false;
-  const Eigen::Matrix3d rotation = AssembleStep(next.u, next.v, next.a);
-  newton_tangent_ = true;
-  // The assembled matrix is J / (1 - alpha_f) (see AssembleStep): the solve below gives
-  // (1 - alpha_f) lambda.
-  const double alpha_m = options_.generalized_alpha_m;
-  const double alpha_f = options_.generalized_alpha_f;
+  // The exact Jacobian at the end of the step, assembled; the preconditioner's factor chosen.
+  void AssembleExactJacobian() {
+    // A factor the adjoint renewed during the previous (later) step takes over here, unless the
+    // forward pass solved this step with another (see factor_history_). One the forward pass left
+    // pending at its end is dropped when the forward's own factors take over: computing or
+    // waiting for it would be for nothing.
+    if (!sim.backward_factorization_pending_ && sim.options_.adjoint_reuses_forward_factors)
+      sim.solver_.DiscardFactorize();
+    else
+      sim.solver_.FinishFactorize();
+    sim.backward_factorization_pending_ = false;
+    sim.UseForwardFactor(previous.time);
+    sim.SetState(previous);
+    sim.UpdateLaggedNormalForces();
+    sim.newton_tangent_ = false;
+    rotation = sim.AssembleStep(next.u, next.v, next.a);
+    sim.newton_tangent_ = true;
+  }
 
-  Eigen::VectorXd lambda = Eigen::VectorXd::Zero(3 * n);
-  if (!rhs.isZero(0.0)) {
-    if (adjoint_guess_.size() == lambda.size()) lambda = adjoint_guess_;
+  // lambda from J^T lambda = rhs (the assembled matrix is J / (1 - alpha_f), see AssembleStep: the
+  // solve gives (1 - alpha_f) lambda), from the previous step's lambda as the first guess.
+  Status SolveForLambda(const Eigen::VectorXd& rhs) {
+    lambda = Eigen::VectorXd::Zero(3 * n);
+    if (rhs.isZero(0.0)) return Status::Ok();
+    if (sim.adjoint_guess_.size() == lambda.size()) lambda = sim.adjoint_guess_;
     LinearSolver::Options linear;
-    linear.relative_tolerance = options_.adjoint_linear_tolerance;
-    linear.max_iterations = options_.max_linear_iterations;
-    const LinearSolver::Matrix& jacobian = assembler_.matrix();
+    linear.relative_tolerance = sim.options_.adjoint_linear_tolerance;
+    linear.max_iterations = sim.options_.max_linear_iterations;
+    LinearSolver& solver = sim.solver_;
+    const LinearSolver::Matrix& jacobian = sim.assembler_.matrix();
     constexpr auto kTransposed = LinearSolver::Operator::kTransposed;
     LinearSolver::Summary solve =
-        solver_.Solve(jacobian, rhs, rotation, linear, &lambda, kTransposed);
+        solver.Solve(jacobian, rhs, rotation, linear, &lambda, kTransposed);
     if (!solve.converged) {
-      if (solver_.Factorize(jacobian, rotation).ok()) {
+      if (solver.Factorize(jacobian, rotation).ok()) {
         lambda.setZero();
-        solve = solver_.Solve(jacobian, rhs, rotation, linear, &lambda, kTransposed);
+        solve = solver.Solve(jacobian, rhs, rotation, linear, &lambda, kTransposed);
       }
       // GMRES can stagnate on the exact tangent (indefinite and non-symmetric where strong
       // friction sticks); a direct LU solves it.
@@ -397,59 +410,97 @@ Status Simulator::BackpropagateStep(const SimulationState& previous, const Simul
     }
     // The same ski-rental rule as the forward pass: renew the factor once the extra iterations
     // of a stale one have cost more than a factorisation.
-    if (solver_.RefactorPays() && !solver_.FactorizationPending())
-      backward_factorization_pending_ = solver_.StartFactorize(jacobian, rotation).ok();
-  }
-  adjoint_guess_ = lambda;
-  const bool generalized_alpha = UsesGeneralizedAlpha();
-  // (d r_b / d u_f)^T lambda of the body forces (elastic, damping, inertia) from the matrix
-  // J' = dr_b/du_f + dv_du dr_b/dv_f + c M + S / (1 - alpha_f) (c: Assemble's inertia
-  // coefficient, S the surface forces' blocks at the end of the step), less all but the first.
-  Eigen::VectorXd position_adjoint;
-  if (generalized_alpha) {
-    lambda /= 1.0 - alpha_f;
-    position_adjoint = assembler_.matrix().transpose() * lambda;
+    if (solver.RefactorPays() && !solver.FactorizationPending())
+      sim.backward_factorization_pending_ = solver.StartFactorize(jacobian, rotation).ok();
+    return Status::Ok();
   }
 
-  // The body forces hold at the evaluation point (u_f, v_f, a_m) of AssembleStep, the surface
-  // forces at the end of the step.
-  Eigen::VectorXd velocity_adjoint, previous_adjoint;
-  SurfaceAdjoint surface{&next.u, &next.v, {}, {}};
-  ResidualAdjoint(*step_u_, *step_v_, *step_a_, previous.u, lambda, &velocity_adjoint,
-                  &previous_adjoint, gradient, /*rotations_current=*/true,
-                  generalized_alpha ? &surface : nullptr);
+  // The residual's adjoint at the step's evaluation point, and the adjoint of the start state.
+  void PropagateToStart() {
+    const bool generalized_alpha = sim.UsesGeneralizedAlpha();
+    // (d r_b / d u_f)^T lambda of the body forces (elastic, damping, inertia) from the matrix
+    // J' = dr_b/du_f + dv_du dr_b/dv_f + c M + S / (1 - alpha_f) (c: Assemble's inertia
+    // coefficient, S the surface forces' blocks at the end of the step), less all but the first.
+    Eigen::VectorXd position_adjoint;
+    if (generalized_alpha) {
+      lambda /= 1.0 - alpha_f;
+      position_adjoint = sim.assembler_.matrix().transpose() * lambda;
+    }
+    // The body forces hold at the evaluation point (u_f, v_f, a_m) of AssembleStep, the surface
+    // forces at the end of the step.
+    Eigen::VectorXd velocity_adjoint, previous_adjoint;
+    SurfaceAdjoint surface{&next.u, &next.v, {}, {}};
+    sim.ResidualAdjoint(*sim.step_u_, *sim.step_v_, *sim.step_a_, previous.u, lambda,
+                        &velocity_adjoint, &previous_adjoint, gradient,
+                        /*rotations_current=*/true, generalized_alpha ? &surface : nullptr);
+    ThroughNewmark(velocity_adjoint, previous_adjoint, generalized_alpha ? &surface : nullptr);
+    if (generalized_alpha) ThroughEvaluationPoint(velocity_adjoint, surface, &position_adjoint);
+  }
 
   // Explicit dependence of V and A on the previous state, with the residual's share
   // (dr/dv)^T lambda = (1 - alpha_f) (dr_b/dv_f)^T lambda + (dr_s/dv)^T lambda and
   // (dr/da)^T lambda = (1 - alpha_m) M lambda subtracted.
-  Eigen::VectorXd v_bar = adjoint->v - (1.0 - alpha_f) * velocity_adjoint;
-  if (generalized_alpha) v_bar -= surface.velocity_adjoint;
-  Eigen::VectorXd a_bar = adjoint->a;
-  for (int i = 0; i < n; ++i)
-    a_bar.segment<3>(3 * i) -= (1.0 - alpha_m) * mass_[i] * lambda.segment<3>(3 * i);
-  const Eigen::VectorXd w = a_bar + (gamma * dt) * v_bar;  // adjoint flowing into A
-  adjoint->u = previous_adjoint - da_du * w;
-  adjoint->v = v_bar - (dt * da_du) * w;
-  adjoint->a = (dt * (1.0 - gamma)) * v_bar - ((0.5 - beta) / beta) * w;
-  if (generalized_alpha) {
-    // The evaluation point's own dependence on the previous state: u_f and v_f through alpha_f,
-    // a_m through alpha_m.
+  void ThroughNewmark(const Eigen::VectorXd& velocity_adjoint,
+                      const Eigen::VectorXd& previous_adjoint, const SurfaceAdjoint* surface) {
+    Eigen::VectorXd v_bar = adjoint->v - (1.0 - alpha_f) * velocity_adjoint;
+    if (surface != nullptr) v_bar -= surface->velocity_adjoint;
+    Eigen::VectorXd a_bar = adjoint->a;
+    for (int i = 0; i < n; ++i)
+      a_bar.segment<3>(3 * i) -= (1.0 - alpha_m) * sim.mass_[i] * lambda.segment<3>(3 * i);
+    const Eigen::VectorXd w = a_bar + (gamma * dt) * v_bar;  // adjoint flowing into A
+    adjoint->u = previous_adjoint - da_du * w;
+    adjoint->v = v_bar - (dt * da_du) * w;
+    adjoint->a = (dt * (1.0 - gamma)) * v_bar - ((0.5 - beta) / beta) * w;
+  }
+
+  // Generalized-alpha: the evaluation point's own dependence on the previous state, u_f and v_f
+  // through alpha_f, a_m through alpha_m.
+  void ThroughEvaluationPoint(const Eigen::VectorXd& velocity_adjoint,
+                              const SurfaceAdjoint& surface, Eigen::VectorXd* position_adjoint) {
     const double inertia = (1.0 - alpha_m) / (1.0 - alpha_f) * da_du;
-    position_adjoint -= dv_du * velocity_adjoint + surface.jacobian_adjoint / (1.0 - alpha_f);
+    *position_adjoint -= dv_du * velocity_adjoint + surface.jacobian_adjoint / (1.0 - alpha_f);
     for (int i = 0; i < n; ++i) {
-      const Eigen::Vector3d m_lambda = mass_[i] * lambda.segment<3>(3 * i);
-      position_adjoint.segment<3>(3 * i) -= inertia * m_lambda;
+      const Eigen::Vector3d m_lambda = sim.mass_[i] * lambda.segment<3>(3 * i);
+      position_adjoint->segment<3>(3 * i) -= inertia * m_lambda;
       adjoint->a.segment<3>(3 * i) -= alpha_m * m_lambda;
     }
-    adjoint->u -= alpha_f * position_adjoint;
+    adjoint->u -= alpha_f * *position_adjoint;
     adjoint->v -= alpha_f * velocity_adjoint;
   }
-  for (int i = 0; i < n; ++i) {
-    if (!fixed_[i]) continue;
-    adjoint->u.segment<3>(3 * i).setZero();
-    adjoint->v.segment<3>(3 * i).setZero();
-    adjoint->a.segment<3>(3 * i).setZero();
+
+  void ClearFixedNodes() {
+    for (int i = 0; i < n; ++i) {
+      if (!sim.fixed_[i]) continue;
+      adjoint->u.segment<3>(3 * i).setZero();
+      adjoint->v.segment<3>(3 * i).setZero();
+      adjoint->a.segment<3>(3 * i).setZero();
+    }
   }
+
+  Simulator& sim;
+  const SimulationState& previous;
+  const SimulationState& next;
+  StateAdjoint* adjoint;
+  ParameterGradient* gradient;
+  // Newmark's step and parameters, dV/du' and dA/du', generalized-alpha's weights.
+  const double dt, beta, gamma, da_du, dv_du, alpha_m, alpha_f;
+  const int n;               // nodes
+  Eigen::Matrix3d rotation;  // of the body at the step's end (AssembleStep)
+  Eigen::VectorXd lambda;    // the step residual's adjoint
+};
+
+Status Simulator::BackpropagateStep(const SimulationState& previous, const SimulationState& next,
+                                    StateAdjoint* adjoint, ParameterGradient* gradient) {
+  const int n = mesh_.NumNodes();
+  SOFTID_DEMAND(adjoint->u.size() == 3 * n && adjoint->v.size() == 3 * n &&
+                adjoint->a.size() == 3 * n);
+  AdjointStep step(*this, previous, next, adjoint, gradient);
+  const Eigen::VectorXd rhs = step.RightHandSide();
+  step.AssembleExactJacobian();
+  SOFTID_RETURN_IF_ERROR(step.SolveForLambda(rhs));
+  adjoint_guess_ = step.lambda;
+  step.PropagateToStart();
+  step.ClearFixedNodes();
   return Status::Ok();
 }
 

@@ -260,7 +260,7 @@ Result<RawSynthesisSummary> SynthesizeRawRecording(const Scene& scene,
                                                    const std::filesystem::path& directory,
                                                    const std::function<void(int, int)>& progress) {
   SOFTID_RETURN_IF_ERROR(options.Validate());
-  for (const std::string name :
+  for (const std::string& name :
        {std::string(recording::kRecordingFileName), std::string(capture::kCaptureFileName)}) {
     if (std::filesystem::exists(directory / name)) {
       return Status::FailedPrecondition("out = " + directory.string() + ": already holds " + name +
