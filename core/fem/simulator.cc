@@ -98,89 +98,104 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
   rest_frame_ = RestFrame(parameters.initial_pose, pose_centre_);
   parameters_ = rest_frame_.ToRest(parameters);
 
-  geometry::SignedDistanceOptions sdf_options;
-  sdf_options.cells_along_longest_side = options.cells_along_longest_side;
-  sdf_options.cell_size = options.cell_size;
-  sdf_options.padding_cells = options.padding_cells;
-  Result<geometry::SignedDistanceField> sdf =
-      geometry::ComputeSignedDistanceField(rest_mesh, sdf_options);
-  ThrowIfError(sdf.status());
-  sdf_ = std::move(sdf).value();
-  mesh_ = BuildHexMesh(sdf_, options.min_cell_volume_fraction);
-  {
-    Eigen::AlignedBox3d rest_box;
-    for (const Eigen::Vector3d& x : mesh_.rest_positions) rest_box.extend(x);
-    rest_extent_ = rest_box.isEmpty() ? 0.0 : rest_box.diagonal().norm();
-  }
-  SOFTID_THROW_UNLESS(mesh_.NumElements() > 0, "the mesh has no inside at this grid resolution");
-  const double h = mesh_.CellSize();
+  BuildGrid(rest_mesh);
+  EmbedSurface(rest_mesh);
+  team_ = std::make_unique<ThreadTeam>(AssemblyThreads());
+  PartitionElements();
+  AssignSurfacePointsToChunks();
   const int n = mesh_.NumNodes();
-
-  // Surface carried by the grid.
-  surface_ = geometry::SubdivideToEdgeLength(rest_mesh, options.surface_edge_fraction * h);
-  embedding_ = EmbedPoints(mesh_, surface_.vertices);
-  force_embedding_ = EmbedPoints(mesh_, surface_.vertices, /*clamp_to_element=*/true,
-                                 options.min_force_volume_fraction);
-  surface_areas_ = geometry::VertexAreas(surface_);
-
-  // Element ranges of the parallel assembly: a node touched by two ranges is shared.
-  {
-    const int available = options.threads > 0
-                              ? options.threads
-                              : static_cast<int>(std::thread::hardware_concurrency());
-    team_ = std::make_unique<ThreadTeam>(
-        std::clamp(std::min(available, mesh_.NumElements() / kMinElementsPerThread), 1,
-                   kMaxSimulationThreads));
-    const int threads = team_->size();
-    const size_t num_elements = mesh_.element_nodes.size();
-    // Ranges of equal element counts, cut across the axis where the cuts cross the fewest
-    // elements (the shared ones run on one thread): torus-drop at 3,100 cells shares 13 % of its
-    // elements when cut in index order (z planes through the whole ring), fewer across x or y.
-    std::vector<int> order(num_elements);
-    size_t fewest_shared = num_elements + 1;
-    for (int axis = -1; axis < 3 && threads > 1; ++axis) {
-      std::iota(order.begin(), order.end(), 0);
-      if (axis >= 0) {
-        std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
-          return mesh_.ElementCentre(a)[axis] < mesh_.ElementCentre(b)[axis];
-        });
-      }
-      std::vector<int> candidate(num_elements);
-      for (size_t rank = 0; rank < num_elements; ++rank)
-        candidate[order[rank]] = static_cast<int>(rank * threads / num_elements);
-      const auto [chunks, shared] = SplitElements(mesh_, candidate, threads);
-      if (shared.size() < fewest_shared) {
-        fewest_shared = shared.size();
-        element_chunks_ = chunks;
-        shared_elements_ = shared;
-      }
-    }
-    if (threads == 1) {
-      element_chunks_.assign(1, std::vector<int>(num_elements));
-      std::iota(element_chunks_[0].begin(), element_chunks_[0].end(), 0);
-      shared_elements_.clear();
-    }
-    std::vector<int> chunk_of(num_elements, -1);
-    for (int t = 0; t < threads; ++t)
-      for (int e : element_chunks_[t]) chunk_of[e] = t;
-    point_chunks_.assign(threads, {});
-    shared_points_.clear();
-    for (int p = 0; p < force_embedding_.NumPoints(); ++p) {
-      const int chunk = chunk_of[force_embedding_.element[p]];
-      (chunk >= 0 ? point_chunks_[chunk] : shared_points_).push_back(p);
-    }
-  }
-
   fixed_.assign(n, 0);
   if (fixed_region) {
     for (int i = 0; i < n; ++i) fixed_[i] = fixed_region->contains(mesh_.rest_positions[i]) ? 1 : 0;
   }
-
   assembler_ = ElementAssembler(n, mesh_.element_nodes);
   solver_.SetThreadTeam(team_.get());
   residual_.resize(3 * n);
   update_.resize(3 * n);
   ApplyParameters();
+}
+
+void Simulator::BuildGrid(const geometry::TriangleMesh& rest_mesh) {
+  geometry::SignedDistanceOptions sdf_options;
+  sdf_options.cells_along_longest_side = options_.cells_along_longest_side;
+  sdf_options.cell_size = options_.cell_size;
+  sdf_options.padding_cells = options_.padding_cells;
+  Result<geometry::SignedDistanceField> sdf =
+      geometry::ComputeSignedDistanceField(rest_mesh, sdf_options);
+  ThrowIfError(sdf.status());
+  sdf_ = std::move(sdf).value();
+  mesh_ = BuildHexMesh(sdf_, options_.min_cell_volume_fraction);
+  Eigen::AlignedBox3d rest_box;
+  for (const Eigen::Vector3d& x : mesh_.rest_positions) rest_box.extend(x);
+  rest_extent_ = rest_box.isEmpty() ? 0.0 : rest_box.diagonal().norm();
+  SOFTID_THROW_UNLESS(mesh_.NumElements() > 0, "the mesh has no inside at this grid resolution");
+}
+
+// The surface carried by the grid: the rest mesh subdivided to a fraction of a cell, embedded.
+void Simulator::EmbedSurface(const geometry::TriangleMesh& rest_mesh) {
+  surface_ =
+      geometry::SubdivideToEdgeLength(rest_mesh, options_.surface_edge_fraction * mesh_.CellSize());
+  embedding_ = EmbedPoints(mesh_, surface_.vertices);
+  force_embedding_ = EmbedPoints(mesh_, surface_.vertices, /*clamp_to_element=*/true,
+                                 options_.min_force_volume_fraction);
+  surface_areas_ = geometry::VertexAreas(surface_);
+}
+
+int Simulator::AssemblyThreads() const {
+  const int available = options_.threads > 0
+                            ? options_.threads
+                            : static_cast<int>(std::thread::hardware_concurrency());
+  return std::clamp(std::min(available, mesh_.NumElements() / kMinElementsPerThread), 1,
+                    kMaxSimulationThreads);
+}
+
+// Element ranges of the parallel assembly, one per team member: a node touched by two ranges is
+// shared, and the elements with a shared node run on one thread.
+void Simulator::PartitionElements() {
+  const int threads = team_->size();
+  const size_t num_elements = mesh_.element_nodes.size();
+  if (threads == 1) {
+    element_chunks_.assign(1, std::vector<int>(num_elements));
+    std::iota(element_chunks_[0].begin(), element_chunks_[0].end(), 0);
+    shared_elements_.clear();
+    return;
+  }
+  // Ranges of equal element counts, cut across the axis where the cuts cross the fewest
+  // elements: torus-drop at 3,100 cells shares 13 % of its elements when cut in index order (z
+  // planes through the whole ring), fewer across x or y.
+  std::vector<int> order(num_elements);
+  size_t fewest_shared = num_elements + 1;
+  for (int axis = -1; axis < 3; ++axis) {
+    std::iota(order.begin(), order.end(), 0);
+    if (axis >= 0) {
+      std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+        return mesh_.ElementCentre(a)[axis] < mesh_.ElementCentre(b)[axis];
+      });
+    }
+    std::vector<int> candidate(num_elements);
+    for (size_t rank = 0; rank < num_elements; ++rank)
+      candidate[order[rank]] = static_cast<int>(rank * threads / num_elements);
+    const auto [chunks, shared] = SplitElements(mesh_, candidate, threads);
+    if (shared.size() < fewest_shared) {
+      fewest_shared = shared.size();
+      element_chunks_ = chunks;
+      shared_elements_ = shared;
+    }
+  }
+}
+
+// Each surface point's forces go with its element's range, or to the shared ones.
+void Simulator::AssignSurfacePointsToChunks() {
+  const int threads = team_->size();
+  std::vector<int> chunk_of(mesh_.element_nodes.size(), -1);
+  for (int t = 0; t < threads; ++t)
+    for (int e : element_chunks_[t]) chunk_of[e] = t;
+  point_chunks_.assign(threads, {});
+  shared_points_.clear();
+  for (int p = 0; p < force_embedding_.NumPoints(); ++p) {
+    const int chunk = chunk_of[force_embedding_.element[p]];
+    (chunk >= 0 ? point_chunks_[chunk] : shared_points_).push_back(p);
+  }
 }
 
 void Simulator::SetParameters(const PhysicalParameters& parameters) {
@@ -192,11 +207,16 @@ void Simulator::SetParameters(const PhysicalParameters& parameters) {
 }
 
 void Simulator::ApplyParameters() {
+  BuildMassAndStiffness();
+  SetUpSurfaceForces();
+  Reset();
+  FactorizeReference();
+}
+
+void Simulator::BuildMassAndStiffness() {
   const PhysicalParameters& parameters = parameters_;
   const double h = mesh_.CellSize();
-  const int n = mesh_.NumNodes();
-  // Lumped mass and element stiffness (fixed for the whole run).
-  mass_ = Eigen::VectorXd::Zero(n);
+  mass_ = Eigen::VectorXd::Zero(mesh_.NumNodes());
   stiffness_matrices_.clear();
   element_stiffness_index_.resize(mesh_.NumElements());
   std::map<std::array<double, 9>, int> distinct;  // (weights, scale) -> matrix, exact match
@@ -206,25 +226,11 @@ void Simulator::ApplyParameters() {
   const double lambda = parameters.LameLambda();
   const double mu = parameters.LameMu();
   for (int e = 0; e < mesh_.NumElements(); ++e) {
-    const auto& w = mesh_.element_weights[e];
-    // Lumped mass: each corner gets the material of its own octant (the row sum of the consistent
-    // mass matrix under the same octant quadrature as the stiffness). A uniform V_e / 8 share
-    // would put the material of a cut cell on its empty corners as well, moving mass outwards:
-    // torus-drop fitted at 16 cells on a 28-cell capture then gives E 7.9 % high (octant
-    // lumping on an octant capture: 0.9 %). A floor of a quarter of the uniform share keeps
-    // nodes touching only slivers from being nearly massless; the element's mass is unchanged.
-    std::array<double, 8> share;
-    double total = 0.0;
-    for (int c = 0; c < 8; ++c) {
-      share[c] = std::max(w.octant_volume[c], kMinNodeMassShare * w.volume / 8.0);
-      total += share[c];
-    }
-    for (int c = 0; c < 8; ++c)
-      mass_[mesh_.element_nodes[e][c]] += parameters.density * w.volume * share[c] / total;
+    AddLumpedMass(e);
     const double scale = parameters.stiffness_field.Scale(mesh_.ElementCentre(e));
     // Ghost stiffness (as in CutFEM): nearly empty octants keep a small floor of stiffness, so
     // nodes that only touch slivers of material are not free to be pushed around by contact.
-    std::array<double, 8> stiffness_weights = w.octant_volume;
+    std::array<double, 8> stiffness_weights = mesh_.element_weights[e].octant_volume;
     const double floor = options_.ghost_stiffness_fraction * h * h * h / 8.0;
     for (double& weight : stiffness_weights) weight = std::max(weight, floor);
     std::array<double, 9> key;
@@ -239,7 +245,28 @@ void Simulator::ApplyParameters() {
     element_stiffness_weights_[e] = stiffness_weights;
     element_scale_[e] = scale;
   }
+}
 
+// Lumped mass: each corner gets the material of its own octant (the row sum of the consistent
+// mass matrix under the same octant quadrature as the stiffness). A uniform V_e / 8 share would
+// put the material of a cut cell on its empty corners as well, moving mass outwards: torus-drop
+// fitted at 16 cells on a 28-cell capture then gives E 7.9 % high (octant lumping on an octant
+// capture: 0.9 %). A floor of a quarter of the uniform share keeps nodes touching only slivers
+// from being nearly massless; the element's mass is unchanged.
+void Simulator::AddLumpedMass(int e) {
+  const auto& w = mesh_.element_weights[e];
+  std::array<double, 8> share;
+  double total = 0.0;
+  for (int c = 0; c < 8; ++c) {
+    share[c] = std::max(w.octant_volume[c], kMinNodeMassShare * w.volume / 8.0);
+    total += share[c];
+  }
+  for (int c = 0; c < 8; ++c)
+    mass_[mesh_.element_nodes[e][c]] += parameters_.density * w.volume * share[c] / total;
+}
+
+void Simulator::SetUpSurfaceForces() {
+  const PhysicalParameters& parameters = parameters_;
   contact_ = ContactLaw();
   if (parameters.ground) {
     contact_.plane = *parameters.ground;
@@ -254,11 +281,11 @@ void Simulator::ApplyParameters() {
   }
   has_surface_forces_ = parameters.ground.has_value() || parameters.drag_linear > 0.0 ||
                         parameters.drag_quadratic > 0.0;
+}
 
-  Reset();
-
-  // Reference factor: the step matrix at rest (no rotation, no contact).
-  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(3 * n);
+// Reference factor: the step matrix at rest (no rotation, no contact).
+void Simulator::FactorizeReference() {
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(3 * mesh_.NumNodes());
   const bool saved_forces = has_surface_forces_;
   has_surface_forces_ = false;
   Assemble(Mode::kDynamic, zero, zero, zero);

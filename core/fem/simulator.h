@@ -215,6 +215,17 @@ class Simulator {
   Eigen::VectorXd InitialAcceleration(const Eigen::VectorXd& v);
   // Mass, element stiffness and contact law from parameters_; refactorises the reference.
   void ApplyParameters();
+  void BuildMassAndStiffness();
+  void AddLumpedMass(int e);
+  void SetUpSurfaceForces();
+  void FactorizeReference();
+  // The constructor's stages: the hex grid from the rest mesh's signed distance, the embedded
+  // surface, the assembly's threads and their element and surface-point ranges.
+  void BuildGrid(const geometry::TriangleMesh& rest_mesh);
+  void EmbedSurface(const geometry::TriangleMesh& rest_mesh);
+  int AssemblyThreads() const;
+  void PartitionElements();
+  void AssignSurfacePointsToChunks();
   // The adjoint of the step residual r(u, v, a; u_previous, parameters) (u_previous enters through
   // the lagged friction normal force) for multiplier lambda: sets velocity_adjoint = (dr/dv)^T
   // lambda and previous_adjoint = -(dr/du_previous)^T lambda, and adds -lambda^T dr/dparameters
