@@ -149,26 +149,63 @@ const VariableIdentifiability* IdentifiabilityReport::Find(const std::string& na
   return nullptr;
 }
 
+namespace {
+
+// H~ = D^-1/2 H D^-1/2 over the variables with upward curvature (D = diag H), and its
+// eigen-decomposition into `out`; returns D^-1/2 over the kept variables.
+Eigen::VectorXd DecomposeScaledHessian(const Eigen::MatrixXd& h, HessianCovariance* out) {
+  const int p = static_cast<int>(h.rows());
+  // Variables without upward curvature are left out of the scaled analysis.
+  for (int i = 0; i < p; ++i) {
+    if (h(i, i) > 0.0 && std::isfinite(h(i, i))) out->kept.push_back(i);
+  }
+  const int k = static_cast<int>(out->kept.size());
+  Eigen::VectorXd d_inv_sqrt(k);
+  Eigen::MatrixXd scaled(k, k);
+  for (int a = 0; a < k; ++a) d_inv_sqrt[a] = 1.0 / std::sqrt(h(out->kept[a], out->kept[a]));
+  for (int a = 0; a < k; ++a)
+    for (int b = 0; b < k; ++b)
+      scaled(a, b) = h(out->kept[a], out->kept[b]) * d_inv_sqrt[a] * d_inv_sqrt[b];
+  if (k > 0) {
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(scaled);
+    out->scaled_eigenvalues = eigen.eigenvalues();
+    out->scaled_eigenvectors = eigen.eigenvectors();
+  }
+  return d_inv_sqrt;
+}
+
+// The directions of H~ the cost does not curve along (eigenvalue at or below `lambda_floor`) are
+// marked singular in `out`; returns 1 / lambda per eigenvalue (0 where singular) and sets, per
+// kept variable, whether it loads on a singular direction (is unbounded).
+Eigen::VectorXd PseudoInverseEigenvalues(double lambda_floor, HessianCovariance* out,
+                                         std::vector<bool>* unbounded_kept) {
+  const Eigen::VectorXd& lambda = out->scaled_eigenvalues;
+  const Eigen::MatrixXd& vectors = out->scaled_eigenvectors;
+  const int k = static_cast<int>(out->kept.size());
+  out->singular.assign(k, false);
+  unbounded_kept->assign(k, false);
+  Eigen::VectorXd inverse_lambda = Eigen::VectorXd::Zero(k);
+  for (int e = 0; e < k; ++e) {
+    if (lambda[e] > lambda_floor) {
+      inverse_lambda[e] = 1.0 / lambda[e];
+      continue;
+    }
+    out->singular[e] = true;
+    for (int a = 0; a < k; ++a) {
+      if (std::abs(vectors(a, e)) >= kUnboundedLoading) (*unbounded_kept)[a] = true;
+    }
+  }
+  return inverse_lambda;
+}
+
+}  // namespace
+
 HessianCovariance CovarianceFromHessian(const Eigen::MatrixXd& h, double variance_scale) {
   SOFTID_DEMAND(h.rows() == h.cols());
   const int p = static_cast<int>(h.rows());
   HessianCovariance out;
-  // Variables without upward curvature are left out of the scaled analysis.
-  for (int i = 0; i < p; ++i) {
-    if (h(i, i) > 0.0 && std::isfinite(h(i, i))) out.kept.push_back(i);
-  }
+  const Eigen::VectorXd d_inv_sqrt = DecomposeScaledHessian(h, &out);
   const int k = static_cast<int>(out.kept.size());
-  Eigen::VectorXd d_inv_sqrt(k);
-  Eigen::MatrixXd scaled(k, k);
-  for (int a = 0; a < k; ++a) d_inv_sqrt[a] = 1.0 / std::sqrt(h(out.kept[a], out.kept[a]));
-  for (int a = 0; a < k; ++a)
-    for (int b = 0; b < k; ++b)
-      scaled(a, b) = h(out.kept[a], out.kept[b]) * d_inv_sqrt[a] * d_inv_sqrt[b];
-  if (k > 0) {
-    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eigen(scaled);
-    out.scaled_eigenvalues = eigen.eigenvalues();
-    out.scaled_eigenvectors = eigen.eigenvectors();
-  }
   const Eigen::VectorXd& lambda = out.scaled_eigenvalues;
   const Eigen::MatrixXd& vectors = out.scaled_eigenvectors;
 
@@ -181,45 +218,35 @@ HessianCovariance CovarianceFromHessian(const Eigen::MatrixXd& h, double varianc
   // eigenvalue instead made every marginal variance infinite and every correlation +-1.
   const double lambda_max = k > 0 ? std::max(lambda.maxCoeff(), 0.0) : 0.0;
   const double lambda_floor = kSingularEigenvalue * std::max(lambda_max, 1.0);
-  out.singular.assign(k, false);
-  out.unbounded.assign(p, false);
-  Eigen::VectorXd inverse_lambda = Eigen::VectorXd::Zero(k);
-  std::vector<bool> unbounded_kept(k, false);
-  for (int e = 0; e < k; ++e) {
-    if (lambda[e] > lambda_floor) {
-      inverse_lambda[e] = 1.0 / lambda[e];
-      continue;
-    }
-    out.singular[e] = true;
-    for (int a = 0; a < k; ++a) {
-      if (std::abs(vectors(a, e)) >= kUnboundedLoading) unbounded_kept[a] = true;
-    }
-  }
+  std::vector<bool> unbounded_kept;
+  const Eigen::VectorXd inverse_lambda =
+      PseudoInverseEigenvalues(lambda_floor, &out, &unbounded_kept);
   const Eigen::MatrixXd scaled_covariance =
       vectors * inverse_lambda.asDiagonal() * vectors.transpose();
-  out.covariance = Eigen::MatrixXd::Constant(p, p, kInfinity);
-  out.correlation = Eigen::MatrixXd::Constant(p, p, std::nan(""));
-  for (int i = 0; i < p; ++i) out.correlation(i, i) = 1.0;
   // Between two unbounded variables the correlation is its limit as the singular eigenvalues go
   // to zero (+-1 for a pair in one valley): from the eigenvalues clamped to the floor.
   Eigen::VectorXd clamped_inverse_lambda(k);
   for (int e = 0; e < k; ++e) clamped_inverse_lambda[e] = 1.0 / std::max(lambda[e], lambda_floor);
   const Eigen::MatrixXd limit_covariance =
       vectors * clamped_inverse_lambda.asDiagonal() * vectors.transpose();
+
+  out.unbounded.assign(p, false);
   for (int a = 0; a < k; ++a) out.unbounded[out.kept[a]] = unbounded_kept[a];
+  out.covariance = Eigen::MatrixXd::Constant(p, p, kInfinity);
+  out.correlation = Eigen::MatrixXd::Constant(p, p, std::nan(""));
+  for (int i = 0; i < p; ++i) out.correlation(i, i) = 1.0;
+  const auto correlation = [](const Eigen::MatrixXd& c, int a, int b) {
+    return c(a, b) / std::sqrt(c(a, a) * c(b, b));
+  };
   for (int a = 0; a < k; ++a) {
     for (int b = 0; b < k; ++b) {
       const int i = out.kept[a], j = out.kept[b];
       if (!unbounded_kept[a] && !unbounded_kept[b]) {
         out.covariance(i, j) =
             variance_scale * scaled_covariance(a, b) * d_inv_sqrt[a] * d_inv_sqrt[b];
-        if (i != j) {
-          out.correlation(i, j) = scaled_covariance(a, b) /
-                                  std::sqrt(scaled_covariance(a, a) * scaled_covariance(b, b));
-        }
+        if (i != j) out.correlation(i, j) = correlation(scaled_covariance, a, b);
       } else if (unbounded_kept[a] && unbounded_kept[b] && i != j) {
-        out.correlation(i, j) =
-            limit_covariance(a, b) / std::sqrt(limit_covariance(a, a) * limit_covariance(b, b));
+        out.correlation(i, j) = correlation(limit_covariance, a, b);
       }
     }
   }
