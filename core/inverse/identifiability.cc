@@ -612,67 +612,80 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const capture::Capture& cap
       space, optimum, resolved);
 }
 
-nlohmann::json ToJson(const IdentifiabilityReport& report) {
-  const auto number = [](double v) {
-    return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
-  };
-  const auto matrix = [&](const Eigen::MatrixXd& m) {
-    nlohmann::json rows = nlohmann::json::array();
-    for (int i = 0; i < m.rows(); ++i) {
-      nlohmann::json row = nlohmann::json::array();
-      for (int j = 0; j < m.cols(); ++j) row.push_back(number(m(i, j)));
-      rows.push_back(row);
-    }
-    return rows;
-  };
-  const auto vector = [&](const Eigen::VectorXd& v) {
-    nlohmann::json out = nlohmann::json::array();
-    for (int i = 0; i < v.size(); ++i) out.push_back(number(v[i]));
-    return out;
-  };
-  nlohmann::json variables = nlohmann::json::array();
-  for (const VariableIdentifiability& v : report.variables) {
-    nlohmann::json flags = nlohmann::json::array();
-    for (IdentifiabilityFlag f : v.flags) flags.push_back(ToString(f));
-    variables.push_back(
-        {{"name", v.name},
-         {"parameter", v.parameter},
-         {"unit", v.unit},
-         {"value", number(v.value)},
-         {"variable", number(v.variable)},
-         {"variable_uncertainty", number(v.variable_uncertainty)},
-         {"standard_uncertainty", number(v.standard_uncertainty)},
-         {"relative_uncertainty",
-          v.relative_uncertainty >= 0.0 ? number(v.relative_uncertainty) : nlohmann::json(nullptr)},
-         {"identifiable", v.identifiable()},
-         {"flags", flags}});
+namespace {
+
+// A number, or null where it is not finite (JSON has no infinity or NaN).
+nlohmann::json FiniteOrNull(double v) {
+  return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(nullptr);
+}
+
+nlohmann::json VectorJson(const Eigen::VectorXd& v) {
+  nlohmann::json out = nlohmann::json::array();
+  for (int i = 0; i < v.size(); ++i) out.push_back(FiniteOrNull(v[i]));
+  return out;
+}
+
+nlohmann::json MatrixJson(const Eigen::MatrixXd& m) {
+  nlohmann::json rows = nlohmann::json::array();
+  for (int i = 0; i < m.rows(); ++i) {
+    nlohmann::json row = nlohmann::json::array();
+    for (int j = 0; j < m.cols(); ++j) row.push_back(FiniteOrNull(m(i, j)));
+    rows.push_back(row);
   }
+  return rows;
+}
+
+nlohmann::json VariableJson(const VariableIdentifiability& v) {
+  nlohmann::json flags = nlohmann::json::array();
+  for (IdentifiabilityFlag f : v.flags) flags.push_back(ToString(f));
+  return {
+      {"name", v.name},
+      {"parameter", v.parameter},
+      {"unit", v.unit},
+      {"value", FiniteOrNull(v.value)},
+      {"variable", FiniteOrNull(v.variable)},
+      {"variable_uncertainty", FiniteOrNull(v.variable_uncertainty)},
+      {"standard_uncertainty", FiniteOrNull(v.standard_uncertainty)},
+      {"relative_uncertainty", v.relative_uncertainty >= 0.0 ? FiniteOrNull(v.relative_uncertainty)
+                                                             : nlohmann::json(nullptr)},
+      {"identifiable", v.identifiable()},
+      {"flags", flags}};
+}
+
+nlohmann::json CombinationJson(const DegenerateCombination& c) {
+  nlohmann::json loadings = nlohmann::json::object();
+  for (const auto& [name, w] : c.loadings) loadings[name] = w;
+  return {{"scaled_eigenvalue", FiniteOrNull(c.scaled_eigenvalue)},
+          {"loadings", loadings},
+          {"direction", VectorJson(c.direction)}};
+}
+
+}  // namespace
+
+nlohmann::json ToJson(const IdentifiabilityReport& report) {
+  nlohmann::json variables = nlohmann::json::array();
+  for (const VariableIdentifiability& v : report.variables) variables.push_back(VariableJson(v));
   nlohmann::json pairs = nlohmann::json::array();
   for (const auto& [a, b] : report.correlated_pairs) pairs.push_back({a, b});
   nlohmann::json combinations = nlohmann::json::array();
-  for (const DegenerateCombination& c : report.degenerate_combinations) {
-    nlohmann::json loadings = nlohmann::json::object();
-    for (const auto& [name, w] : c.loadings) loadings[name] = w;
-    combinations.push_back({{"scaled_eigenvalue", number(c.scaled_eigenvalue)},
-                            {"loadings", loadings},
-                            {"direction", vector(c.direction)}});
-  }
+  for (const DegenerateCombination& c : report.degenerate_combinations)
+    combinations.push_back(CombinationJson(c));
   return {
       {"method", std::string("Laplace approximation: Cov(x) = 2 C_min / (N_eff - p) * H^-1, H ") +
                      (report.curvature == CurvatureMethod::kGaussNewton
                           ? "= J^T J (Gauss-Newton, forward differences of the residuals)"
                           : "by central differences of adjoint gradients") +
                      " in the optimiser's variables (log for positive quantities)"},
-      {"cost", number(report.cost)},
-      {"residual_sigma", number(report.residual_sigma)},
-      {"num_effective_samples", number(report.num_effective_samples)},
+      {"cost", FiniteOrNull(report.cost)},
+      {"residual_sigma", FiniteOrNull(report.residual_sigma)},
+      {"num_effective_samples", FiniteOrNull(report.num_effective_samples)},
       {"hessian_positive_definite", report.hessian_positive_definite},
-      {"hessian_asymmetry", number(report.hessian_asymmetry)},
+      {"hessian_asymmetry", FiniteOrNull(report.hessian_asymmetry)},
       {"variables", variables},
-      {"gradient", vector(report.gradient)},
-      {"hessian", matrix(report.hessian)},
-      {"correlation", matrix(report.correlation)},
-      {"scaled_eigenvalues", vector(report.scaled_eigenvalues)},
+      {"gradient", VectorJson(report.gradient)},
+      {"hessian", MatrixJson(report.hessian)},
+      {"correlation", MatrixJson(report.correlation)},
+      {"scaled_eigenvalues", VectorJson(report.scaled_eigenvalues)},
       {"correlated_pairs", pairs},
       {"degenerate_combinations", combinations},
       {"evaluations", report.evaluations},
