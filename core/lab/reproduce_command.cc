@@ -560,6 +560,41 @@ void PrintRows(const Benchmark& b, const std::vector<RowSummary>& rows) {
       100.0 * reproduce::ConvergenceLimit(Metric::kRelative), b.description.c_str());
 }
 
+// The rows --rows names, or every row (every quick row with --quick); InvalidArgument naming an
+// unknown row and the known ones.
+Result<std::vector<const Row*>> SelectRows(const Benchmark& b, const ReproduceFlags& flags) {
+  std::vector<const Row*> rows;
+  if (flags.rows.empty()) {
+    for (const Row& row : b.rows) {
+      if (!flags.quick || row.in_quick) rows.push_back(&row);
+    }
+    return rows;
+  }
+  for (const std::string& id : flags.rows) {
+    auto it = std::find_if(b.rows.begin(), b.rows.end(), [&](const Row& r) { return r.id == id; });
+    if (it == b.rows.end()) {
+      std::string known;
+      for (const Row& r : b.rows) known += (known.empty() ? "" : ", ") + r.id;
+      return Status::InvalidArgument(
+          fmt::format("--rows: \"{}\" is not a row of {} (rows: {})", id, b.name, known));
+    }
+    rows.push_back(&*it);
+  }
+  return rows;
+}
+
+// A row of the summary file: the row's "reproduce" object from its result file, without the
+// per-start scores, with the result file named.
+nlohmann::json SummaryRowJson(const RowSummary& summary) {
+  std::ifstream in(summary.result_file);
+  const nlohmann::json written = nlohmann::json::parse(in, nullptr, false);
+  nlohmann::json row_json = written.is_discarded() ? nlohmann::json::object()
+                                                   : written.value("reproduce", nlohmann::json());
+  row_json.erase("start_scores");
+  row_json["result_file"] = summary.result_file;
+  return row_json;
+}
+
 int RunReproduce(const ReproduceFlags& flags) {
   Result<Benchmark> made = reproduce::MakeBenchmark(flags.benchmark);
   if (!made.ok()) {
@@ -580,24 +615,12 @@ int RunReproduce(const ReproduceFlags& flags) {
       return kExitInvalidInput;
     }
   }
-  std::vector<const Row*> rows;
-  if (flags.rows.empty()) {
-    for (const Row& row : b.rows) {
-      if (!flags.quick || row.in_quick) rows.push_back(&row);
-    }
-  } else {
-    for (const std::string& id : flags.rows) {
-      auto it =
-          std::find_if(b.rows.begin(), b.rows.end(), [&](const Row& r) { return r.id == id; });
-      if (it == b.rows.end()) {
-        std::string known;
-        for (const Row& r : b.rows) known += (known.empty() ? "" : ", ") + r.id;
-        spdlog::error("--rows: \"{}\" is not a row of {} (rows: {})", id, b.name, known);
-        return kExitInvalidInput;
-      }
-      rows.push_back(&*it);
-    }
+  Result<std::vector<const Row*>> selected = SelectRows(b, flags);
+  if (!selected.ok()) {
+    spdlog::error("{}", selected.status().message());
+    return kExitInvalidInput;
   }
+  const std::vector<const Row*>& rows = *selected;
   const std::filesystem::path out = flags.out;
   const std::filesystem::path work =
       flags.work.empty() ? out / "captures" : std::filesystem::path(flags.work);
@@ -626,13 +649,7 @@ int RunReproduce(const ReproduceFlags& flags) {
     pass = pass && summary->pass;
     PrintRows(b, {summaries.back()});
     std::fflush(stdout);
-    std::ifstream in(summary->result_file);
-    const nlohmann::json written = nlohmann::json::parse(in, nullptr, false);
-    nlohmann::json row_json = written.is_discarded() ? nlohmann::json::object()
-                                                     : written.value("reproduce", nlohmann::json());
-    row_json.erase("start_scores");
-    row_json["result_file"] = summary->result_file;
-    summary_rows.push_back(row_json);
+    summary_rows.push_back(SummaryRowJson(*summary));
   }
   std::printf("\n== reproduce %s: %s ==", b.name.c_str(), b.description.c_str());
   PrintRows(b, summaries);
