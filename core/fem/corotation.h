@@ -16,4 +16,12 @@ Eigen::Matrix3d DeformationGradient(const std::array<Eigen::Vector3d, 8>& x, dou
 // Rotation factor R of F = R S (S symmetric); R is proper (det R = +1).
 Eigen::Matrix3d PolarRotation(const Eigen::Matrix3d& f);
 
+// [v]x: the matrix of the cross product v x (.). Inline: the element assembly calls it 24 times
+// per element.
+inline Eigen::Matrix3d Skew(const Eigen::Vector3d& v) {
+  Eigen::Matrix3d m;
+  m << 0.0, -v.z(), v.y(), v.z(), 0.0, -v.x(), -v.y(), v.x(), 0.0;
+  return m;
+}
+
 }  // namespace softid::fem

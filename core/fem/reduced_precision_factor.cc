@@ -135,6 +135,101 @@ void StoreBelowColumn(const double* v, int m, float /*scale*/, StoredBelow* out)
 }
 #endif
 
+// The supernodal elimination tree, with each subtree's work (~ entries of its factor columns).
+struct SupernodeTree {
+  std::vector<int> parent;            // -1 at a root
+  std::vector<int> first_descendant;  // a subtree is the range [first_descendant, root]
+  std::vector<double> work;           // of the subtree rooted at s
+  std::vector<std::vector<int>> children;
+  double total_work = 0.0;
+};
+
+SupernodeTree BuildSupernodeTree(int n, const std::vector<int>& super, const std::vector<int>& pi,
+                                 const std::vector<int>& rows) {
+  const int nsuper = static_cast<int>(super.size()) - 1;
+  std::vector<int> supernode_of(n);
+  for (int s = 0; s < nsuper; ++s)
+    std::fill(supernode_of.begin() + super[s], supernode_of.begin() + super[s + 1], s);
+  // Parent: the supernode of the first row below the diagonal block (rows ascend). CHOLMOD
+  // numbers supernodes in postorder, so a subtree is the range [first_descendant, root].
+  SupernodeTree tree;
+  tree.parent.assign(nsuper, -1);
+  tree.first_descendant.resize(nsuper);
+  tree.work.resize(nsuper);
+  tree.children.resize(nsuper);
+  for (int s = 0; s < nsuper; ++s) tree.first_descendant[s] = s;
+  for (int s = 0; s < nsuper; ++s) {
+    const int ncol = super[s + 1] - super[s], nrow = pi[s + 1] - pi[s];
+    tree.work[s] += static_cast<double>(ncol) * nrow;
+    if (nrow > ncol) {
+      const int p = tree.parent[s] = supernode_of[rows[pi[s] + ncol]];
+      SOFTID_DEMAND(p > s);
+      tree.work[p] += tree.work[s];
+      tree.first_descendant[p] = std::min(tree.first_descendant[p], tree.first_descendant[s]);
+      tree.children[p].push_back(s);
+    }
+  }
+  for (int s = 0; s < nsuper; ++s)
+    if (tree.parent[s] < 0) tree.total_work += tree.work[s];
+  return tree;
+}
+
+// Subtrees dealt to `threads` bins, largest first, each to the least loaded; returns the largest
+// load.
+double DealSubtrees(const SupernodeTree& tree, const std::vector<int>& subtrees, int threads,
+                    std::vector<std::vector<int>>* bins) {
+  std::vector<int> order = subtrees;
+  std::sort(order.begin(), order.end(), [&](int a, int b) {
+    return tree.work[a] != tree.work[b] ? tree.work[a] > tree.work[b] : a < b;
+  });
+  std::vector<double> load(threads, 0.0);
+  bins->assign(threads, {});
+  for (int s : order) {
+    const int m = static_cast<int>(std::min_element(load.begin(), load.end()) - load.begin());
+    load[m] += tree.work[s];
+    (*bins)[m].push_back(s);
+  }
+  return *std::max_element(load.begin(), load.end());
+}
+
+// The plan's split: the top supernodes (run after the members) and each member's subtrees.
+struct SubtreeSplit {
+  std::vector<int> top;
+  std::vector<std::vector<int>> bins;
+};
+
+// Starting from the roots, moves the heaviest subtree to the top (its children join the
+// candidates) while that lowers the time of the slowest member plus the top.
+SubtreeSplit SplitSubtrees(const SupernodeTree& tree, int threads) {
+  const int nsuper = static_cast<int>(tree.parent.size());
+  std::vector<int> candidates, top;
+  for (int s = 0; s < nsuper; ++s)
+    if (tree.parent[s] < 0) candidates.push_back(s);
+  double top_work = 0.0;
+  std::vector<std::vector<int>> bins;
+  double best_time = threads == 1 ? 0.0 : top_work + DealSubtrees(tree, candidates, threads, &bins);
+  SubtreeSplit best{top, bins};
+  constexpr int kMaxSplits = 64;
+  for (int split = 0; threads > 1 && split < kMaxSplits; ++split) {
+    const auto heaviest = std::max_element(candidates.begin(), candidates.end(), [&](int a, int b) {
+      return tree.work[a] < tree.work[b];
+    });
+    const int s = *heaviest;
+    if (tree.children[s].empty()) break;
+    candidates.erase(heaviest);
+    candidates.insert(candidates.end(), tree.children[s].begin(), tree.children[s].end());
+    top.push_back(s);
+    top_work += tree.work[s];
+    for (int c : tree.children[s]) top_work -= tree.work[c];
+    const double time = top_work + DealSubtrees(tree, candidates, threads, &bins);
+    if (time < best_time) {
+      best_time = time;
+      best = {top, bins};
+    }
+  }
+  return best;
+}
+
 }  // namespace
 
 void ReducedPrecisionFactor::Assign(const cholmod_factor& l, int threads) {
@@ -301,69 +396,8 @@ void ReducedPrecisionFactor::Backward(int first, int last, Member* member) {
 
 void ReducedPrecisionFactor::Plan(int threads) {
   const int nsuper = static_cast<int>(super_.size()) - 1;
-  std::vector<int> supernode_of(n_);
-  for (int s = 0; s < nsuper; ++s)
-    std::fill(supernode_of.begin() + super_[s], supernode_of.begin() + super_[s + 1], s);
-  // Parent: the supernode of the first row below the diagonal block (rows ascend). CHOLMOD
-  // numbers supernodes in postorder, so a subtree is the range [first_descendant, root].
-  std::vector<int> parent(nsuper, -1), first_descendant(nsuper);
-  std::vector<double> work(nsuper);
-  std::vector<std::vector<int>> children(nsuper);
-  for (int s = 0; s < nsuper; ++s) first_descendant[s] = s;
-  for (int s = 0; s < nsuper; ++s) {
-    const int ncol = super_[s + 1] - super_[s], nrow = pi_[s + 1] - pi_[s];
-    work[s] += static_cast<double>(ncol) * nrow;
-    if (nrow > ncol) {
-      parent[s] = supernode_of[rows_[pi_[s] + ncol]];
-      SOFTID_DEMAND(parent[s] > s);
-      work[parent[s]] += work[s];
-      first_descendant[parent[s]] = std::min(first_descendant[parent[s]], first_descendant[s]);
-      children[parent[s]].push_back(s);
-    }
-  }
-  // work[s] is now the work of the subtree rooted at s.
-  double total_work = 0.0;
-  for (int s = 0; s < nsuper; ++s)
-    if (parent[s] < 0) total_work += work[s];
-  std::vector<int> candidates, top;
-  for (int s = 0; s < nsuper; ++s)
-    if (parent[s] < 0) candidates.push_back(s);
-  double top_work = 0.0;
-  const auto assign = [&](const std::vector<int>& subtrees, std::vector<std::vector<int>>* bins) {
-    std::vector<int> order = subtrees;
-    std::sort(order.begin(), order.end(),
-              [&](int a, int b) { return work[a] != work[b] ? work[a] > work[b] : a < b; });
-    std::vector<double> load(threads, 0.0);
-    bins->assign(threads, {});
-    for (int s : order) {
-      const int m = static_cast<int>(std::min_element(load.begin(), load.end()) - load.begin());
-      load[m] += work[s];
-      (*bins)[m].push_back(s);
-    }
-    return *std::max_element(load.begin(), load.end());
-  };
-  std::vector<std::vector<int>> bins;
-  double best_time = threads == 1 ? 0.0 : top_work + assign(candidates, &bins);
-  std::vector<int> best_top = top;
-  std::vector<std::vector<int>> best_bins = bins;
-  constexpr int kMaxSplits = 64;
-  for (int split = 0; threads > 1 && split < kMaxSplits; ++split) {
-    const auto heaviest = std::max_element(candidates.begin(), candidates.end(),
-                                           [&](int a, int b) { return work[a] < work[b]; });
-    const int s = *heaviest;
-    if (children[s].empty()) break;
-    candidates.erase(heaviest);
-    candidates.insert(candidates.end(), children[s].begin(), children[s].end());
-    top.push_back(s);
-    top_work += work[s];
-    for (int c : children[s]) top_work -= work[c];
-    const double time = top_work + assign(candidates, &bins);
-    if (time < best_time) {
-      best_time = time;
-      best_top = top;
-      best_bins = bins;
-    }
-  }
+  const SupernodeTree tree = BuildSupernodeTree(n_, super_, pi_, rows_);
+  const SubtreeSplit split = SplitSubtrees(tree, threads);
   member_ranges_.assign(threads, {});
   own_below_.assign(nsuper, 0);
   for (int s = 0; s < nsuper; ++s)
@@ -376,12 +410,12 @@ void ReducedPrecisionFactor::Plan(int threads) {
     return;
   }
   for (int m = 0; m < threads; ++m) {
-    for (int root : best_bins[m]) {
-      parallel_share_ += work[root] / total_work;
-      member_ranges_[m].push_back({first_descendant[root], root + 1});
+    for (int root : split.bins[m]) {
+      parallel_share_ += tree.work[root] / tree.total_work;
+      member_ranges_[m].push_back({tree.first_descendant[root], root + 1});
       // Rows below a subtree's columns that lie past its last column belong to the top.
       const int end_column = super_[root + 1];
-      for (int s = first_descendant[root]; s <= root; ++s) {
+      for (int s = tree.first_descendant[root]; s <= root; ++s) {
         const int ncol = super_[s + 1] - super_[s];
         const int* rows = rows_.data() + pi_[s] + ncol;
         own_below_[s] = static_cast<int>(
@@ -391,7 +425,7 @@ void ReducedPrecisionFactor::Plan(int threads) {
     }
     std::sort(member_ranges_[m].begin(), member_ranges_[m].end());
   }
-  top_ = best_top;
+  top_ = split.top;
   std::sort(top_.begin(), top_.end());
   top_columns_.clear();
   for (int s : top_)

@@ -1,13 +1,9 @@
 #include "core/fem/rest_frame.h"
 
+#include "core/fem/corotation.h"
+
 namespace softid::fem {
 namespace {
-
-Eigen::Matrix3d Skew(const Eigen::Vector3d& w) {
-  Eigen::Matrix3d s;
-  s << 0.0, -w.z(), w.y(), w.z(), 0.0, -w.x(), -w.y(), w.x(), 0.0;
-  return s;
-}
 
 // d R / d theta_k of R = exp([theta]x) (Gallego and Yezzi, J. Math. Imaging Vis. 2015):
 // (theta_k [theta]x + [theta x (I - R) e_k]x) R / |theta|^2, and [e_k]x at theta = 0.

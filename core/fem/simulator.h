@@ -14,6 +14,7 @@
 
 #include <Eigen/Core>
 #include <Eigen/Geometry>
+#include <array>
 #include <limits>
 #include <memory>
 #include <optional>
@@ -184,8 +185,8 @@ class Simulator {
   const Eigen::VectorXd* surface_u_ = nullptr;
   const Eigen::VectorXd* surface_v_ = nullptr;
   double surface_jacobian_scale_ = 1.0;
-  // Coefficients of one assembly shared by all elements.
-  struct ElementTerms {
+  // Coefficients of one assembly shared by all elements and surface points.
+  struct AssemblyTerms {
     bool dynamic = false;
     bool jacobian = true;          // assemble the tangent blocks too
     bool reuse_rotations = false;  // element_rotation_ is current
@@ -195,16 +196,35 @@ class Simulator {
     double stiffness_damping = 0.0;      // beta_k, applied when dynamic
     double stiffness_coefficient = 1.0;  // of R K R^T in the tangent
     double mass_coefficient = 0.0;       // of the lumped mass in the tangent
+    double dv_du = 0.0;                  // d v / d u of the Newmark update [1/s], 0 when static
   };
+  AssemblyTerms MakeAssemblyTerms(Mode mode, bool residual_only, bool reuse_rotations) const;
+  // The stages of Assemble, in order (core/fem/simulator_assembly.cc).
+  void BeginAssembly(const AssemblyTerms& terms);
+  Eigen::Matrix3d AssembleElements(const AssemblyTerms& terms, const Eigen::VectorXd& u,
+                                   const Eigen::VectorXd& v);  // returns sum V_e R_e
+  void AssembleInertiaAndGravity(const AssemblyTerms& terms, const Eigen::VectorXd& v,
+                                 const Eigen::VectorXd& a);
+  void AssembleSurfaceForces(const AssemblyTerms& terms, const Eigen::VectorXd& u,
+                             const Eigen::VectorXd& v);
+  void EliminateFixedNodes(const AssemblyTerms& terms);
   // One element's force (into residual_), tangent blocks (into assembler_) and rotation (into
   // element_rotation_). Touches only the element's own nodes, so elements sharing no node may be
   // assembled concurrently.
-  void AssembleElement(int e, const ElementTerms& terms, const Eigen::VectorXd& u,
+  void AssembleElement(int e, const AssemblyTerms& terms, const Eigen::VectorXd& u,
                        const Eigen::VectorXd& v);
+  // An element's corotated state at (u, v), its stages (simulator_assembly.cc).
+  struct CorotatedElement;
+  void CorotateElement(int e, const AssemblyTerms& terms, const Eigen::VectorXd& u,
+                       const Eigen::VectorXd& v, CorotatedElement* element);
+  bool GeometricTangentTerm(int e, const AssemblyTerms& terms, const CorotatedElement& element,
+                            const std::array<Eigen::Matrix3d, 64>& stiffness,
+                            std::array<Eigen::Matrix3d, 8>* w,
+                            std::array<Eigen::Matrix3d, 8>* q) const;
   // One surface point's contact, friction and drag force (into residual_) and tangent blocks (into
   // assembler_), at (surface_u, surface_v). Touches only the nodes of the point's element.
-  void AssembleSurfacePoint(int p, const ElementTerms& terms, const Eigen::VectorXd& surface_u,
-                            const Eigen::VectorXd& surface_v, double dv_du);
+  void AssembleSurfacePoint(int p, const AssemblyTerms& terms, const Eigen::VectorXd& surface_u,
+                            const Eigen::VectorXd& surface_v);
   // Largest fraction of a Newton update (<= 1) that keeps every surface point above
   // min(its distance, 0) - 4 contact smoothing lengths.
   double ContactStepLimit(const Eigen::VectorXd& u, const Eigen::VectorXd& update) const;

@@ -8,15 +8,12 @@
 
 namespace softid::fem {
 
-SurfaceEmbedding EmbedPoints(const HexMesh& mesh, const std::vector<Eigen::Vector3d>& points,
-                             bool clamp_to_element, double min_volume_fraction) {
-  SurfaceEmbedding embedding;
-  const auto& grid = mesh.grid;
-  const double h = grid.cell_size;
-  embedding.element.reserve(points.size());
-  embedding.weights.reserve(points.size());
-  embedding.rest_positions = points;
-  // Elements allowed to carry points; all of them when none is full enough.
+namespace {
+
+// Elements allowed to carry points: those filled to min_volume_fraction; all of them when none
+// is full enough.
+std::vector<char> EligibleElements(const HexMesh& mesh, double min_volume_fraction) {
+  const double h = mesh.grid.cell_size;
   const double h3 = h * h * h;
   std::vector<char> eligible(mesh.NumElements(), 1);
   if (min_volume_fraction > 0.0) {
@@ -27,38 +24,62 @@ SurfaceEmbedding EmbedPoints(const HexMesh& mesh, const std::vector<Eigen::Vecto
     }
     if (!any) eligible.assign(mesh.NumElements(), 1);
   }
-  auto element_of_cell = [&](int cell) {
-    const int e = mesh.grid_cell_to_element[cell];
-    return e >= 0 && eligible[e] ? e : -1;
-  };
-  for (size_t p = 0; p < points.size(); ++p) {
-    Eigen::Vector3d local;
-    const int cell = grid.LocateCell(points[p], &local);
-    int element = element_of_cell(cell);
-    if (element < 0) {
-      // Nearest element centre, searching rings of growing radius (features thinner than a cell
-      // may have lost all their cells).
-      const Eigen::Vector3i c0 = grid.CellCoords(cell);
-      const int max_radius = grid.num_cells.maxCoeff();
-      double best = std::numeric_limits<double>::infinity();
-      for (int radius = 1; radius <= max_radius && element < 0; ++radius) {
-        for (int dz = -radius; dz <= radius; ++dz) {
-          for (int dy = -radius; dy <= radius; ++dy) {
-            for (int dx = -radius; dx <= radius; ++dx) {
-              if (std::max({std::abs(dx), std::abs(dy), std::abs(dz)}) != radius) continue;
-              const Eigen::Vector3i c = c0 + Eigen::Vector3i(dx, dy, dz);
-              if ((c.array() < 0).any() || (c.array() >= grid.num_cells.array()).any()) continue;
-              const int e = element_of_cell(grid.CellIndex(c.x(), c.y(), c.z()));
-              if (e < 0) continue;
-              const double d = (mesh.ElementCentre(e) - points[p]).squaredNorm();
-              if (d < best) {
-                best = d;
-                element = e;
-              }
-            }
+  return eligible;
+}
+
+// The eligible element of a grid cell, -1 if none.
+int EligibleElementOfCell(const HexMesh& mesh, const std::vector<char>& eligible, int cell) {
+  const int e = mesh.grid_cell_to_element[cell];
+  return e >= 0 && eligible[e] ? e : -1;
+}
+
+// The eligible element whose centre is nearest to `point`, searching rings of cells of growing
+// radius around `cell` (features thinner than a cell may have lost all their cells); -1 if none.
+int NearestEligibleElement(const HexMesh& mesh, const std::vector<char>& eligible, int cell,
+                           const Eigen::Vector3d& point) {
+  const auto& grid = mesh.grid;
+  const Eigen::Vector3i c0 = grid.CellCoords(cell);
+  const int max_radius = grid.num_cells.maxCoeff();
+  double best = std::numeric_limits<double>::infinity();
+  int element = -1;
+  for (int radius = 1; radius <= max_radius && element < 0; ++radius) {
+    for (int dz = -radius; dz <= radius; ++dz) {
+      for (int dy = -radius; dy <= radius; ++dy) {
+        for (int dx = -radius; dx <= radius; ++dx) {
+          if (std::max({std::abs(dx), std::abs(dy), std::abs(dz)}) != radius) continue;
+          const Eigen::Vector3i c = c0 + Eigen::Vector3i(dx, dy, dz);
+          if ((c.array() < 0).any() || (c.array() >= grid.num_cells.array()).any()) continue;
+          const int e = EligibleElementOfCell(mesh, eligible, grid.CellIndex(c.x(), c.y(), c.z()));
+          if (e < 0) continue;
+          const double d = (mesh.ElementCentre(e) - point).squaredNorm();
+          if (d < best) {
+            best = d;
+            element = e;
           }
         }
       }
+    }
+  }
+  return element;
+}
+
+}  // namespace
+
+SurfaceEmbedding EmbedPoints(const HexMesh& mesh, const std::vector<Eigen::Vector3d>& points,
+                             bool clamp_to_element, double min_volume_fraction) {
+  SurfaceEmbedding embedding;
+  const auto& grid = mesh.grid;
+  const double h = grid.cell_size;
+  embedding.element.reserve(points.size());
+  embedding.weights.reserve(points.size());
+  embedding.rest_positions = points;
+  const std::vector<char> eligible = EligibleElements(mesh, min_volume_fraction);
+  for (size_t p = 0; p < points.size(); ++p) {
+    Eigen::Vector3d local;
+    const int cell = grid.LocateCell(points[p], &local);
+    int element = EligibleElementOfCell(mesh, eligible, cell);
+    if (element < 0) {
+      element = NearestEligibleElement(mesh, eligible, cell, points[p]);
       SOFTID_THROW_UNLESS(element >= 0, "surface point " + std::to_string(p) +
                                             " has no simulated element anywhere in the grid");
     }
