@@ -85,11 +85,8 @@ Status ValidateStagedRecording(const fs::path& dir) {
   return Status::Ok();
 }
 
-}  // namespace
-
-ServiceResult<std::unique_ptr<CaptureUpload>> CaptureUpload::Begin(UploadManifest manifest,
-                                                                   const fs::path& staging_root,
-                                                                   const UploadLimits& limits) {
+// Exactly one description: capture_json for a capture, recording_json for a raw recording.
+ServiceStatus CheckOneDescription(const UploadManifest& manifest) {
   if (!manifest.capture_json.empty() && !manifest.recording_json.empty()) {
     return ServiceStatus(ServiceCode::kInvalidArgument,
                          "capture_json, recording_json: both are set: send exactly one "
@@ -100,12 +97,12 @@ ServiceResult<std::unique_ptr<CaptureUpload>> CaptureUpload::Begin(UploadManifes
                          "capture_json, recording_json: neither is set: send exactly one "
                          "(capture_json for a capture, recording_json for a raw recording)");
   }
-  // The description first: a malformed one is rejected before any frame is sent.
-  ServiceResult<References> references = manifest.recording_json.empty()
-                                             ? CaptureReferences(manifest.capture_json)
-                                             : RecordingReferences(manifest.recording_json);
-  if (!references.ok()) return references.status();
+  return ServiceStatus::Ok();
+}
 
+// The manifest's files within the limits, and every file the description refers to among them.
+ServiceStatus CheckManifestFiles(const UploadManifest& manifest, const References& references,
+                                 const UploadLimits& limits) {
   if (static_cast<int64_t>(manifest.files.size()) > limits.max_files) {
     return ServiceStatus(ServiceCode::kInvalidArgument,
                          fmt::format("files: {} files: at most {} are accepted",
@@ -136,11 +133,28 @@ ServiceResult<std::unique_ptr<CaptureUpload>> CaptureUpload::Begin(UploadManifes
     return json::Invalid("files", fmt::format("{} bytes in total", total),
                          fmt::format("exceeds the limit of {} bytes", limits.max_total_bytes));
   }
-  for (const auto& [path, where] : *references) {
+  for (const auto& [path, where] : references) {
     if (!listed.contains(path)) {
       return ServiceStatus(ServiceCode::kInvalidArgument,
                            fmt::format("files: \"{}\" ({}) is not listed", path, where));
     }
+  }
+  return ServiceStatus::Ok();
+}
+
+}  // namespace
+
+ServiceResult<std::unique_ptr<CaptureUpload>> CaptureUpload::Begin(UploadManifest manifest,
+                                                                   const fs::path& staging_root,
+                                                                   const UploadLimits& limits) {
+  if (ServiceStatus one = CheckOneDescription(manifest); !one.ok()) return one;
+  // The description first: a malformed one is rejected before any frame is sent.
+  ServiceResult<References> references = manifest.recording_json.empty()
+                                             ? CaptureReferences(manifest.capture_json)
+                                             : RecordingReferences(manifest.recording_json);
+  if (!references.ok()) return references.status();
+  if (ServiceStatus files = CheckManifestFiles(manifest, *references, limits); !files.ok()) {
+    return files;
   }
 
   std::error_code error;

@@ -187,6 +187,149 @@ void KeepReport(const store::Job& job, const fs::path& dir, const JobRunnerConte
   }
 }
 
+// One attempt at a claimed job: what the stages of RunClaimedJob share.
+struct JobAttempt {
+  const store::Job& job;
+  const std::string& worker_id;
+  const JobRunnerContext& context;
+  const inverse::JobConfig& config;
+  std::atomic<bool>& cancel;
+  Stopwatch::time_point started;
+  fs::path report_dir;  // the pictures, in the job's work folder
+};
+
+// What an attempt produced while its lease was renewed, for the outcome to record.
+struct AttemptResults {
+  bool lost = false;
+  bool cancel_requested = false;
+  Result<inverse::FitResult> fit = Status::Internal("the fit did not run");
+  nlohmann::json ingest_json;                          // a job on a recording only
+  nlohmann::json diagnosis_json;                       // "diagnose": true only
+  nlohmann::json report_json;                          // the pictures (core/diagnosis/fit_report.h)
+  std::optional<inverse::FitUncertainty> uncertainty;  // "uncertainty": true (the default)
+  std::string uncertainty_error;
+  nlohmann::json resumed_json;  // when an earlier attempt's starts were kept
+  Status prepared;              // the capture laid out (a recording ingested)
+};
+
+// What is derived from a fit that ran to its end: its uncertainty, diagnosis and pictures, as
+// the config asks.
+void DeriveFromFit(const JobAttempt& attempt, const Result<capture::Capture>& capture,
+                   AttemptResults* out) {
+  const store::Job& job = attempt.job;
+  const JobRunnerContext& context = attempt.context;
+  const inverse::JobConfig& config = attempt.config;
+  std::atomic<bool>& cancel = attempt.cancel;
+  const Result<inverse::FitResult>& result = out->fit;
+  if (result.ok() && !result->cancelled && config.uncertainty) {
+    Result<inverse::FitUncertainty> estimated =
+        inverse::EstimateFitUncertainty(*capture, config, *result);
+    if (estimated.ok()) {
+      out->uncertainty = std::move(estimated).value();
+    } else {
+      out->uncertainty_error = estimated.status().message();
+      context.logger->warn("job {}: no uncertainty: {}", job.id, out->uncertainty_error);
+    }
+  }
+  if (result.ok() && !result->cancelled && config.diagnose) {
+    out->diagnosis_json = RunDiagnosis(job, *capture, config, *result, attempt.worker_id, cancel,
+                                       context, attempt.report_dir);
+  }
+  if (result.ok() && !result->cancelled && !cancel.load() && context.reports != nullptr) {
+    out->report_json =
+        DrawReport(job, *capture, config, *result, cancel, context, attempt.report_dir);
+  }
+}
+
+// The attempt's work while its lease is renewed: the capture laid out in `work_dir` (a recording
+// ingested), the fit, and what is derived from it.
+// The heartbeat stops before the outcome is written, so it never renews a lease that the
+// outcome just gave up (which would look like a lost lease). It runs during an ingest too,
+// which can take minutes on a long recording.
+AttemptResults RunUnderLease(const JobAttempt& attempt, const store::Capture& stored,
+                             const std::optional<inverse::FitCheckpoint>& resume_from,
+                             const fs::path& work_dir) {
+  const store::Job& job = attempt.job;
+  const std::string& worker_id = attempt.worker_id;
+  const JobRunnerContext& context = attempt.context;
+  std::atomic<bool>& cancel = attempt.cancel;
+  AttemptResults out;
+  LeaseHeartbeat heartbeat(JobLease(job, worker_id, context), context.heartbeat_interval, cancel);
+  Result<capture::Capture> capture =
+      PrepareCapture(job, stored, worker_id, context, work_dir, cancel, &out.ingest_json);
+  if (!capture.ok()) out.prepared = capture.status();
+  std::vector<int> kept_starts;  // finished on an earlier attempt
+  if (capture.ok() && !cancel.load()) {
+    if (context.fan_out_starts) {
+      out.fit = FitByStartTasks(job, *capture, attempt.config, resume_from, worker_id, context,
+                                cancel, &kept_starts);
+    } else {
+      if (resume_from) kept_starts = FinishedStarts(job, *resume_from, context);
+      out.fit = FitHere(job, *capture, attempt.config, resume_from, context, attempt.started,
+                        cancel, heartbeat);
+    }
+  }
+  if (!kept_starts.empty()) out.resumed_json = ResumedJson(job, kept_starts);
+  DeriveFromFit(attempt, capture, &out);
+  out.lost = heartbeat.lost();
+  out.cancel_requested = heartbeat.stop_requested();
+  return out;
+}
+
+// A fit that stopped early: handed back to the queue when a shutdown stopped it, else CANCELLED.
+JobOutcome RecordStoppedEarly(const store::Job& job, const std::string& worker_id,
+                              const JobRunnerContext& context, bool cancel_requested,
+                              const std::atomic<bool>& shutdown) {
+  const auto& log = context.logger;
+  if (!cancel_requested && shutdown.load()) {
+    // Handed back at once, so a clean shutdown leaves nothing RUNNING, and the attempt is not
+    // held against max_attempts: the job did nothing wrong.
+    if (Status released = context.jobs->ReleaseJob(job.id, worker_id, "the server shut down");
+        !released.ok()) {
+      log->warn("job {}: not released ({}); the next start requeues it", job.id,
+                released.message());
+    } else {
+      log->info("job {}: interrupted by shutdown; QUEUED again", job.id);
+    }
+    context.events->Notify(job.id);
+    return JobOutcome::kInterrupted;
+  }
+  if (Status marked = context.jobs->MarkCancelled(job.id); !marked.ok()) {
+    log->error("job {}: cannot mark CANCELLED: {}", job.id, marked.message());
+  }
+  context.events->Notify(job.id);
+  log->info("job {}: CANCELLED", job.id);
+  return JobOutcome::kCancelled;
+}
+
+// Records the fit's result, with what was derived from it, and keeps its report.
+JobOutcome RecordSuccess(const JobAttempt& attempt, AttemptResults& results) {
+  const store::Job& job = attempt.job;
+  const JobRunnerContext& context = attempt.context;
+  const auto& log = context.logger;
+  const Result<inverse::FitResult>& result = results.fit;
+  nlohmann::json result_json = inverse::ToJson(
+      *result, results.uncertainty ? &*results.uncertainty : nullptr, results.uncertainty_error);
+  if (!results.diagnosis_json.is_null()) {
+    result_json["diagnosis"] = std::move(results.diagnosis_json);
+  }
+  if (!results.ingest_json.is_null()) result_json["ingest"] = std::move(results.ingest_json);
+  if (!results.report_json.is_null()) result_json["report"] = std::move(results.report_json);
+  if (!results.resumed_json.is_null()) result_json["resumed"] = std::move(results.resumed_json);
+  KeepReport(job, attempt.report_dir, context, &result_json);
+  if (Status completed = context.jobs->CompleteJob(job.id, result_json); !completed.ok()) {
+    log->error("job {}: cannot record the result: {}", job.id, completed.message());
+    if (context.reports != nullptr) context.reports->Remove(job.id);
+    context.events->Notify(job.id);
+    return JobOutcome::kFailed;
+  }
+  context.events->Notify(job.id);
+  log->info("job {}: SUCCEEDED in {:.1f} s (final cost {:.4e})", job.id,
+            std::chrono::duration<double>(Stopwatch::now() - attempt.started).count(),
+            result->Best().final_cost);
+  return JobOutcome::kSucceeded;
+}
+
 }  // namespace
 
 const char* ToString(JobOutcome outcome) {
@@ -216,107 +359,32 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
   if (!stored.ok()) return Fail(job, context, stored.status().message());
 
   WorkFolder folder(context.work_root / job.id);
-
-  // The heartbeat stops before the outcome is written, so it never renews a lease that the
-  // outcome just gave up (which would look like a lost lease). It runs during an ingest too,
-  // which can take minutes on a long recording.
-  bool lost = false;
-  bool cancel_requested = false;
-  Result<inverse::FitResult> result = Status::Internal("the fit did not run");
-  nlohmann::json ingest_json;     // a job on a recording only
-  nlohmann::json diagnosis_json;  // "diagnose": true only
-  nlohmann::json report_json;     // the pictures (core/diagnosis/fit_report.h)
-  const fs::path report_dir = folder.path / "report";
-  std::optional<inverse::FitUncertainty> uncertainty;  // "uncertainty": true (the default)
-  std::string uncertainty_error;
+  const JobAttempt attempt{.job = job,
+                           .worker_id = worker_id,
+                           .context = context,
+                           .config = *config,
+                           .cancel = cancel,
+                           .started = started,
+                           .report_dir = folder.path / "report"};
   const std::optional<inverse::FitCheckpoint> resume_from = EarlierCheckpoint(job, context);
-  nlohmann::json resumed_json;  // when an earlier attempt's starts were kept
-  Status prepared;
-  {
-    LeaseHeartbeat heartbeat(JobLease(job, worker_id, context), context.heartbeat_interval, cancel);
-    Result<capture::Capture> capture =
-        PrepareCapture(job, *stored, worker_id, context, folder.path, cancel, &ingest_json);
-    if (!capture.ok()) prepared = capture.status();
-    std::vector<int> kept_starts;  // finished on an earlier attempt
-    if (capture.ok() && !cancel.load()) {
-      if (context.fan_out_starts) {
-        result = FitByStartTasks(job, *capture, *config, resume_from, worker_id, context, cancel,
-                                 &kept_starts);
-      } else {
-        if (resume_from) kept_starts = FinishedStarts(job, *resume_from, context);
-        result = FitHere(job, *capture, *config, resume_from, context, started, cancel, heartbeat);
-      }
-    }
-    if (!kept_starts.empty()) resumed_json = ResumedJson(job, kept_starts);
-    if (result.ok() && !result->cancelled && config->uncertainty) {
-      Result<inverse::FitUncertainty> estimated =
-          inverse::EstimateFitUncertainty(*capture, *config, *result);
-      if (estimated.ok()) {
-        uncertainty = std::move(estimated).value();
-      } else {
-        uncertainty_error = estimated.status().message();
-        log->warn("job {}: no uncertainty: {}", job.id, uncertainty_error);
-      }
-    }
-    if (result.ok() && !result->cancelled && config->diagnose) {
-      diagnosis_json =
-          RunDiagnosis(job, *capture, *config, *result, worker_id, cancel, context, report_dir);
-    }
-    if (result.ok() && !result->cancelled && !cancel.load() && context.reports != nullptr) {
-      report_json = DrawReport(job, *capture, *config, *result, cancel, context, report_dir);
-    }
-    lost = heartbeat.lost();
-    cancel_requested = heartbeat.stop_requested();
-  }
+  AttemptResults results = RunUnderLease(attempt, *stored, resume_from, folder.path);
 
-  if (lost) return JobOutcome::kLost;
+  if (results.lost) return JobOutcome::kLost;
   // An ingest stopped by a cancel or a shutdown is handled as a stopped fit below.
-  const bool ingest_stopped = prepared.code() == StatusCode::kCancelled && cancel.load();
-  if (!prepared.ok() && !ingest_stopped) return Fail(job, context, prepared.message());
+  const bool ingest_stopped = results.prepared.code() == StatusCode::kCancelled && cancel.load();
+  if (!results.prepared.ok() && !ingest_stopped) {
+    return Fail(job, context, results.prepared.message());
+  }
   // A fit that ran to its end is recorded whatever was asked meanwhile; only one that stopped
   // early is a cancel or an interruption.
+  const Result<inverse::FitResult>& result = results.fit;
   const bool stopped_early =
       result.ok() ? result->cancelled || (config->diagnose && cancel.load()) : cancel.load();
-  if (stopped_early && !cancel_requested && shutdown.load()) {
-    // Handed back at once, so a clean shutdown leaves nothing RUNNING, and the attempt is not
-    // held against max_attempts: the job did nothing wrong.
-    if (Status released = context.jobs->ReleaseJob(job.id, worker_id, "the server shut down");
-        !released.ok()) {
-      log->warn("job {}: not released ({}); the next start requeues it", job.id,
-                released.message());
-    } else {
-      log->info("job {}: interrupted by shutdown; QUEUED again", job.id);
-    }
-    context.events->Notify(job.id);
-    return JobOutcome::kInterrupted;
-  }
   if (stopped_early) {
-    if (Status marked = context.jobs->MarkCancelled(job.id); !marked.ok()) {
-      log->error("job {}: cannot mark CANCELLED: {}", job.id, marked.message());
-    }
-    context.events->Notify(job.id);
-    log->info("job {}: CANCELLED", job.id);
-    return JobOutcome::kCancelled;
+    return RecordStoppedEarly(job, worker_id, context, results.cancel_requested, shutdown);
   }
   if (!result.ok()) return Fail(job, context, result.status().message());
-  nlohmann::json result_json =
-      inverse::ToJson(*result, uncertainty ? &*uncertainty : nullptr, uncertainty_error);
-  if (!diagnosis_json.is_null()) result_json["diagnosis"] = std::move(diagnosis_json);
-  if (!ingest_json.is_null()) result_json["ingest"] = std::move(ingest_json);
-  if (!report_json.is_null()) result_json["report"] = std::move(report_json);
-  if (!resumed_json.is_null()) result_json["resumed"] = std::move(resumed_json);
-  KeepReport(job, report_dir, context, &result_json);
-  if (Status completed = context.jobs->CompleteJob(job.id, result_json); !completed.ok()) {
-    log->error("job {}: cannot record the result: {}", job.id, completed.message());
-    if (context.reports != nullptr) context.reports->Remove(job.id);
-    context.events->Notify(job.id);
-    return JobOutcome::kFailed;
-  }
-  context.events->Notify(job.id);
-  log->info("job {}: SUCCEEDED in {:.1f} s (final cost {:.4e})", job.id,
-            std::chrono::duration<double>(Stopwatch::now() - started).count(),
-            result->Best().final_cost);
-  return JobOutcome::kSucceeded;
+  return RecordSuccess(attempt, results);
 }
 
 }  // namespace softid::server

@@ -102,6 +102,55 @@ std::string TaskName(const store::StartTask& task) {
   return "refit task " + std::to_string(task.index) + " (" + task.batch + ")";
 }
 
+// The task's lease, renewed while it runs; `outer_stop` (the job's worker's, when that worker
+// runs the task itself) stops it.
+LeaseCalls StartTaskLease(const store::StartTask& task, const std::string& worker_id,
+                          const JobRunnerContext& context, const std::atomic<bool>* outer_stop,
+                          const std::string& name) {
+  LeaseCalls calls;
+  calls.renew = [&task, &worker_id, &context] {
+    return context.jobs->RenewStartTask(task.job_id, task.index, worker_id, context.lease);
+  };
+  calls.stop_requested = [outer_stop] { return outer_stop != nullptr && outer_stop->load(); };
+  calls.on_lost = [&context, &name](const Status& status) {
+    context.logger->warn("{}: stopping: {}", name, status.message());
+  };
+  return calls;
+}
+
+// A start whose earlier run stopped (a lost or stopped worker) begins again at iteration 0:
+// the history says why its iterations repeat.
+void NoteRunAgain(const store::StartTask& task, const store::Job& job,
+                  const JobRunnerContext& context) {
+  const std::string what =
+      task.batch.empty() ? "start " + std::to_string(task.index + 1) : TaskName(task);
+  RecordNote(job, what + " runs again (task attempt " + std::to_string(task.attempts) + ")",
+             context);
+}
+
+// A task that did not finish: `why` (empty when it was stopped) into `error`, and the task left
+// to its lease or handed back.
+StartTaskOutcome ReleaseUnfinished(const store::StartTask& task, const std::string& worker_id,
+                                   const JobRunnerContext& context,
+                                   const std::atomic<bool>* outer_stop, const std::string& name,
+                                   const std::string& why, std::string* error) {
+  const auto& log = context.logger;
+  if (error != nullptr) *error = why;
+  // A task that could not run here is left to its lease rather than handed straight back: an
+  // idle worker would take it again at once and fail the same way. The job's worker fails the
+  // job once the task was claimed too often (RunAndAwaitTasks).
+  if (!why.empty() && outer_stop == nullptr) {
+    log->warn("{}: cannot run here, left to its lease: {}", name, why);
+    return StartTaskOutcome::kReleased;
+  }
+  if (!why.empty()) log->warn("{}: cannot run: {}", name, why);
+  if (Status released = context.jobs->ReleaseStartTask(task.job_id, task.index, worker_id);
+      !released.ok()) {
+    log->warn("{}: not released: {}", name, released.message());
+  }
+  return StartTaskOutcome::kReleased;
+}
+
 }  // namespace
 
 Status CheckTaskAttempts(const std::vector<store::StartTask>& tasks,
@@ -135,25 +184,10 @@ StartTaskOutcome RunStartTask(const store::StartTask& task, const std::string& w
   std::optional<nlohmann::json> finished;
   bool lost = false;
   {
-    LeaseCalls calls;
-    calls.renew = [&] {
-      return context.jobs->RenewStartTask(task.job_id, task.index, worker_id, context.lease);
-    };
-    calls.stop_requested = [&] { return outer_stop != nullptr && outer_stop->load(); };
-    calls.on_lost = [&](const Status& status) {
-      log->warn("{}: stopping: {}", name, status.message());
-    };
-    LeaseHeartbeat heartbeat(std::move(calls), context.heartbeat_interval, stop);
+    LeaseHeartbeat heartbeat(StartTaskLease(task, worker_id, context, outer_stop, name),
+                             context.heartbeat_interval, stop);
     Result<TaskInputs> inputs = LoadTaskInputs(task, context);
-    // A start whose earlier run stopped (a lost or stopped worker) begins again at iteration 0:
-    // the history says why its iterations repeat.
-    if (inputs.ok() && task.attempts > 1) {
-      const std::string what =
-          task.batch.empty() ? "start " + std::to_string(task.index + 1) : TaskName(task);
-      RecordNote(inputs->job,
-                 what + " runs again (task attempt " + std::to_string(task.attempts) + ")",
-                 context);
-    }
+    if (inputs.ok() && task.attempts > 1) NoteRunAgain(task, inputs->job, context);
     if (inputs.ok()) {
       finished = RunTask(task, *inputs, worker_id, context, stop, &why);
     } else {
@@ -163,20 +197,7 @@ StartTaskOutcome RunStartTask(const store::StartTask& task, const std::string& w
   }
   if (lost) return StartTaskOutcome::kLost;
   if (!finished) {
-    if (error != nullptr) *error = why;
-    // A task that could not run here is left to its lease rather than handed straight back: an
-    // idle worker would take it again at once and fail the same way. The job's worker fails the
-    // job once the task was claimed too often (RunAndAwaitTasks).
-    if (!why.empty() && outer_stop == nullptr) {
-      log->warn("{}: cannot run here, left to its lease: {}", name, why);
-      return StartTaskOutcome::kReleased;
-    }
-    if (!why.empty()) log->warn("{}: cannot run: {}", name, why);
-    if (Status released = context.jobs->ReleaseStartTask(task.job_id, task.index, worker_id);
-        !released.ok()) {
-      log->warn("{}: not released: {}", name, released.message());
-    }
-    return StartTaskOutcome::kReleased;
+    return ReleaseUnfinished(task, worker_id, context, outer_stop, name, why, error);
   }
   if (Status completed =
           context.jobs->CompleteStartTask(task.job_id, task.index, worker_id, *finished);

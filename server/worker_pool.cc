@@ -11,6 +11,32 @@
 
 namespace softid::server {
 
+namespace {
+
+// A job began running: one more worker busy, and how long the job waited in the queue.
+void CountJobStarted(Metrics* metrics, const store::Job& job) {
+  if (metrics != nullptr) {
+    metrics->AddBusyWorkers(1);
+    if (job.started_at.has_value()) {
+      metrics->ObserveQueueWait(
+          std::chrono::duration<double>(*job.started_at - job.created_at).count());
+    }
+  }
+}
+
+// A job's run ended: its worker free again, and the run's outcome and duration.
+void CountJobEnded(Metrics* metrics, const std::string& outcome_name,
+                   std::chrono::steady_clock::time_point began) {
+  if (metrics != nullptr) {
+    metrics->AddBusyWorkers(-1);
+    metrics->ObserveRun(
+        outcome_name,
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - began).count());
+  }
+}
+
+}  // namespace
+
 WorkerPool::WorkerPool(store::JobStore* jobs, const store::BlobStore* blobs, JobEvents* events,
                        WorkerPoolOptions options, std::shared_ptr<spdlog::logger> logger)
     : jobs_(jobs), options_(std::move(options)) {
@@ -147,13 +173,7 @@ void WorkerPool::WorkerLoop(int index) {
     }
     Metrics* metrics = options_.metrics;
     const auto began = std::chrono::steady_clock::now();
-    if (metrics != nullptr) {
-      metrics->AddBusyWorkers(1);
-      if (job.started_at.has_value()) {
-        metrics->ObserveQueueWait(
-            std::chrono::duration<double>(*job.started_at - job.created_at).count());
-      }
-    }
+    CountJobStarted(metrics, job);
     std::string outcome_name = "failed";
     const ScopedJobLog job_log(job.id);  // this thread's lines name the job, the core's too
     // Exceptions must not cross the thread boundary (they would terminate the server).
@@ -168,12 +188,7 @@ void WorkerPool::WorkerLoop(int index) {
       log->error("job {}: internal error (unknown exception)", job.id);
       RecordCrash(job.id, "internal error (unknown exception)");
     }
-    if (metrics != nullptr) {
-      metrics->AddBusyWorkers(-1);
-      metrics->ObserveRun(
-          outcome_name,
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - began).count());
-    }
+    CountJobEnded(metrics, outcome_name, began);
     std::lock_guard lock(mutex_);
     running_.erase(&cancel);
   }
