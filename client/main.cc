@@ -494,15 +494,29 @@ int Health(ReconstructionClient& client, const GlobalFlags& flags) {
   return serving == softid::client::ServingStatus::kServing ? kExitOk : kExitUnreachable;
 }
 
-}  // namespace
+// The values the subcommands' arguments and options write into.
+struct CommandArgs {
+  std::string capture_dir, config_file, request_id, job_id, out_file, truth_file, report_dir, state;
+  bool wait = false;
+  std::string capture_id;
+};
 
-int main(int argc, char** argv) {
-  GlobalFlags flags;
-  const char* env_server = std::getenv("SOFTID_SERVER");
-  flags.server = env_server != nullptr && *env_server != '\0' ? env_server : "localhost:50051";
+// The subcommands, to tell after parsing which one was given.
+struct Subcommands {
+  CLI::App* submit = nullptr;
+  CLI::App* status = nullptr;
+  CLI::App* watch = nullptr;
+  CLI::App* result = nullptr;
+  CLI::App* list = nullptr;
+  CLI::App* cancel = nullptr;
+  CLI::App* health = nullptr;
+  CLI::App* captures = nullptr;
+  CLI::App* delete_job = nullptr;
+  CLI::App* delete_capture = nullptr;
+  CLI::App* download = nullptr;
+};
 
-  CLI::App app{"softid: submit captures to a softid server and follow their jobs"};
-  app.require_subcommand(1);
+void AddGlobalOptions(CLI::App& app, GlobalFlags& flags) {
   app.add_option("--server", flags.server, "server address host:port (env SOFTID_SERVER)")
       ->capture_default_str();
   app.add_flag("--json", flags.json, "machine-readable output");
@@ -524,72 +538,154 @@ int main(int argc, char** argv) {
       ->envname("SOFTID_TLS_CERT");
   app.add_option("--tls-key", flags.tls.key_file, "the client certificate's private key (PEM)")
       ->envname("SOFTID_TLS_KEY");
+}
 
-  std::string capture_dir, config_file, request_id, job_id, out_file, truth_file, report_dir, state;
-  bool wait = false;
-  std::string capture_id;
+CLI::App* AddSubmitCommand(CLI::App& app, CommandArgs& args) {
   CLI::App* submit =
       app.add_subcommand("submit", "upload a capture or raw recording folder and queue a job");
   CLI::Option* dir_option = submit->add_option(
-      "capture_dir", capture_dir,
+      "capture_dir", args.capture_dir,
       "capture folder (capture.json) or raw recording folder (recording.json; the job ingests it)");
-  CLI::Option* capture_option = submit->add_option(
-      "--capture", capture_id, "queue the job on this uploaded capture instead (see `captures`)");
+  CLI::Option* capture_option =
+      submit->add_option("--capture", args.capture_id,
+                         "queue the job on this uploaded capture instead (see `captures`)");
   dir_option->excludes(capture_option);
-  submit->callback([&] {
-    if (capture_dir.empty() && capture_id.empty()) {
+  submit->callback([&args] {
+    if (args.capture_dir.empty() && args.capture_id.empty()) {
       throw CLI::ValidationError("submit", "give a capture folder or --capture ID");
     }
   });
-  submit->add_option("-c,--config", config_file, "job config JSON (default: fit youngs_modulus)");
-  submit->add_option("--request-id", request_id, "idempotency key for retried submissions");
-  submit->add_flag("--wait", wait, "watch the job until it ends");
+  submit->add_option("-c,--config", args.config_file,
+                     "job config JSON (default: fit youngs_modulus)");
+  submit->add_option("--request-id", args.request_id, "idempotency key for retried submissions");
+  submit->add_flag("--wait", args.wait, "watch the job until it ends");
   submit->footer(
       "Examples:\n"
       "  softid submit capture/ --config job.json --wait\n"
       "  softid submit recording/ --config job.json     # a raw recording: the job ingests it\n"
       "  softid submit --capture cap-0123456789abcdef --config job2.json");
-  CLI::App* status = app.add_subcommand("status", "show a job");
-  status->add_option("job", job_id, "the job's id (job-...)")->required();
-  status->footer("Example:\n  softid status job-0123456789abcdef");
-  CLI::App* watch = app.add_subcommand("watch", "follow a job's progress until it ends");
-  watch->add_option("job", job_id, "the job's id (job-...)")->required();
-  watch->footer("Example:\n  softid watch job-0123456789abcdef     # --json: one event per line");
+  return submit;
+}
+
+// The subcommands on one job or the list of them, after `submit`: status, watch, result, list,
+// cancel.
+void AddJobCommands(CLI::App& app, CommandArgs& args, Subcommands* commands) {
+  commands->status = app.add_subcommand("status", "show a job");
+  commands->status->add_option("job", args.job_id, "the job's id (job-...)")->required();
+  commands->status->footer("Example:\n  softid status job-0123456789abcdef");
+  commands->watch = app.add_subcommand("watch", "follow a job's progress until it ends");
+  commands->watch->add_option("job", args.job_id, "the job's id (job-...)")->required();
+  commands->watch->footer(
+      "Example:\n  softid watch job-0123456789abcdef     # --json: one event per line");
   CLI::App* result = app.add_subcommand("result", "print or save the result of a job");
-  result->add_option("job", job_id, "the job's id (job-...)")->required();
-  result->add_option("-o,--out", out_file, "also write result.json here");
-  result->add_option("--truth", truth_file,
+  result->add_option("job", args.job_id, "the job's id (job-...)")->required();
+  result->add_option("-o,--out", args.out_file, "also write result.json here");
+  result->add_option("--truth", args.truth_file,
                      "print the fitted parameters next to this truth.json (softid-lab synth)");
-  result->add_option("--report", report_dir,
+  result->add_option("--report", args.report_dir,
                      "download the job's report (PNG plots) into this new or empty folder");
   result->footer(
       "Examples:\n"
       "  softid result job-0123456789abcdef\n"
       "  softid result job-0123456789abcdef -o result.json --report report/\n"
       "  softid result job-0123456789abcdef --truth capture/truth.json");
-  CLI::App* list = app.add_subcommand("list", "list jobs");
-  list->add_option("--state", state, "QUEUED, RUNNING, SUCCEEDED, FAILED or CANCELLED");
-  list->footer("Example:\n  softid list --state RUNNING");
-  CLI::App* cancel = app.add_subcommand("cancel", "cancel a job");
-  cancel->add_option("job", job_id, "the job's id (job-...)")->required();
-  cancel->footer("Example:\n  softid cancel job-0123456789abcdef");
-  CLI::App* health = app.add_subcommand("health", "check that the server is serving");
-  health->footer("Example:\n  softid --server host:50051 --tls-ca ca.pem health");
-  CLI::App* captures = app.add_subcommand("captures", "list uploaded captures");
-  captures->footer("Example:\n  softid captures --json");
-  CLI::App* delete_job = app.add_subcommand("delete", "delete a job that is not running");
-  delete_job->add_option("job", job_id, "the job's id (job-...)")->required();
-  delete_job->footer("Example:\n  softid delete job-0123456789abcdef");
-  CLI::App* delete_capture = app.add_subcommand(
+  commands->result = result;
+  commands->list = app.add_subcommand("list", "list jobs");
+  commands->list->add_option("--state", args.state,
+                             "QUEUED, RUNNING, SUCCEEDED, FAILED or CANCELLED");
+  commands->list->footer("Example:\n  softid list --state RUNNING");
+  commands->cancel = app.add_subcommand("cancel", "cancel a job");
+  commands->cancel->add_option("job", args.job_id, "the job's id (job-...)")->required();
+  commands->cancel->footer("Example:\n  softid cancel job-0123456789abcdef");
+}
+
+// The remaining subcommands, in this order: health, captures, delete, delete-capture, download.
+void AddServerAndCaptureCommands(CLI::App& app, CommandArgs& args, Subcommands* commands) {
+  commands->health = app.add_subcommand("health", "check that the server is serving");
+  commands->health->footer("Example:\n  softid --server host:50051 --tls-ca ca.pem health");
+  commands->captures = app.add_subcommand("captures", "list uploaded captures");
+  commands->captures->footer("Example:\n  softid captures --json");
+  commands->delete_job = app.add_subcommand("delete", "delete a job that is not running");
+  commands->delete_job->add_option("job", args.job_id, "the job's id (job-...)")->required();
+  commands->delete_job->footer("Example:\n  softid delete job-0123456789abcdef");
+  commands->delete_capture = app.add_subcommand(
       "delete-capture", "delete an uploaded capture that no job uses (delete its jobs first)");
-  delete_capture->add_option("capture", capture_id, "the capture's id (cap-...)")->required();
-  delete_capture->footer("Example:\n  softid delete-capture cap-0123456789abcdef");
+  commands->delete_capture->add_option("capture", args.capture_id, "the capture's id (cap-...)")
+      ->required();
+  commands->delete_capture->footer("Example:\n  softid delete-capture cap-0123456789abcdef");
   CLI::App* download = app.add_subcommand(
       "download", "download an uploaded or derived capture's files into a new or empty folder");
-  download->add_option("capture", capture_id, "the capture's id (cap-...)")->required();
-  download->add_option("-o,--out", out_file, "folder to write (must not exist or be empty)")
+  download->add_option("capture", args.capture_id, "the capture's id (cap-...)")->required();
+  download->add_option("-o,--out", args.out_file, "folder to write (must not exist or be empty)")
       ->required();
   download->footer("Example:\n  softid download cap-0123456789abcdef -o capture/");
+  commands->download = download;
+}
+
+// `status` (GetJob) or `cancel` (CancelJob): the job the call returns, printed.
+int ShowJob(ReconstructionClient& client, const std::string& job_id, bool cancel,
+            const GlobalFlags& flags) {
+  v1::Job job;
+  grpc::Status s = cancel ? client.CancelJob(job_id, &job) : client.GetJob(job_id, &job);
+  if (!s.ok()) return Report(s, flags);
+  PrintJob(job, flags);
+  return kExitOk;
+}
+
+// `delete` (a job) or `delete-capture`.
+int Delete(ReconstructionClient& client, bool job, const CommandArgs& args,
+           const GlobalFlags& flags) {
+  const grpc::Status s =
+      job ? client.DeleteJob(args.job_id) : client.DeleteCapture(args.capture_id);
+  if (!s.ok()) return Report(s, flags);
+  if (flags.json) {
+    std::cout << nlohmann::json{{"deleted", job ? args.job_id : args.capture_id}}.dump() << "\n";
+  } else {
+    std::cout << (job ? args.job_id : args.capture_id) << " deleted\n";
+  }
+  return kExitOk;
+}
+
+// Runs the one subcommand that was parsed; an exit code.
+int RunCommand(ReconstructionClient& client, const Subcommands& commands, const CommandArgs& args,
+               const GlobalFlags& flags) {
+  if (commands.submit->parsed()) {
+    return Submit(client, args.capture_dir, args.config_file, args.request_id, args.capture_id,
+                  args.wait, flags);
+  }
+  if (commands.status->parsed()) return ShowJob(client, args.job_id, /*cancel=*/false, flags);
+  if (commands.watch->parsed()) return WatchUntilDone(client, args.job_id, flags);
+  if (commands.delete_job->parsed() || commands.delete_capture->parsed()) {
+    return Delete(client, commands.delete_job->parsed(), args, flags);
+  }
+  if (commands.result->parsed()) {
+    return ShowResult(client, args.job_id, args.out_file, args.truth_file, args.report_dir, flags);
+  }
+  if (commands.list->parsed()) return ListJobs(client, args.state, flags);
+  if (commands.cancel->parsed()) return ShowJob(client, args.job_id, /*cancel=*/true, flags);
+  if (commands.captures->parsed()) return ListCaptures(client, flags);
+  if (commands.download->parsed()) {
+    return DownloadCapture(client, args.capture_id, args.out_file, flags);
+  }
+  if (commands.health->parsed()) return Health(client, flags);
+  return kExitInvalidInput;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  GlobalFlags flags;
+  const char* env_server = std::getenv("SOFTID_SERVER");
+  flags.server = env_server != nullptr && *env_server != '\0' ? env_server : "localhost:50051";
+
+  CLI::App app{"softid: submit captures to a softid server and follow their jobs"};
+  app.require_subcommand(1);
+  AddGlobalOptions(app, flags);
+  CommandArgs args;
+  Subcommands commands;
+  commands.submit = AddSubmitCommand(app, args);
+  AddJobCommands(app, args, &commands);
+  AddServerAndCaptureCommands(app, args, &commands);
 
   try {
     app.parse(argc, argv);
@@ -598,41 +694,5 @@ int main(int argc, char** argv) {
   }
   std::optional<ReconstructionClient> made = MakeClient(flags);
   if (!made) return kExitInvalidInput;
-  ReconstructionClient& client = *made;
-
-  if (submit->parsed()) {
-    return Submit(client, capture_dir, config_file, request_id, capture_id, wait, flags);
-  }
-  if (status->parsed()) {
-    v1::Job job;
-    grpc::Status s = client.GetJob(job_id, &job);
-    if (!s.ok()) return Report(s, flags);
-    PrintJob(job, flags);
-    return kExitOk;
-  }
-  if (watch->parsed()) return WatchUntilDone(client, job_id, flags);
-  if (delete_job->parsed() || delete_capture->parsed()) {
-    const bool job = delete_job->parsed();
-    const grpc::Status s = job ? client.DeleteJob(job_id) : client.DeleteCapture(capture_id);
-    if (!s.ok()) return Report(s, flags);
-    if (flags.json) {
-      std::cout << nlohmann::json{{"deleted", job ? job_id : capture_id}}.dump() << "\n";
-    } else {
-      std::cout << (job ? job_id : capture_id) << " deleted\n";
-    }
-    return kExitOk;
-  }
-  if (result->parsed()) return ShowResult(client, job_id, out_file, truth_file, report_dir, flags);
-  if (list->parsed()) return ListJobs(client, state, flags);
-  if (cancel->parsed()) {
-    v1::Job job;
-    grpc::Status s = client.CancelJob(job_id, &job);
-    if (!s.ok()) return Report(s, flags);
-    PrintJob(job, flags);
-    return kExitOk;
-  }
-  if (captures->parsed()) return ListCaptures(client, flags);
-  if (download->parsed()) return DownloadCapture(client, capture_id, out_file, flags);
-  if (health->parsed()) return Health(client, flags);
-  return kExitInvalidInput;
+  return RunCommand(*made, commands, args, flags);
 }

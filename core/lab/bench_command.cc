@@ -114,9 +114,7 @@ int ResolutionFor(const scenes::Scene& scene, int target) {
   return n;
 }
 
-int RunBench(const BenchFlags& flags) {
-  auto scene = scenes::MakeBuiltinScene("torus-drop");
-  if (!scene.ok()) return kExitFailure;
+void PrintBenchHeader(const BenchFlags& flags) {
   std::printf(
       "softid-lab bench: torus-drop, first %.2f s, %d substeps at %.0f fps (dt = %.3g s); thr: "
       "threads of the simulation, par: share of the factor solved in parallel; timings: best of %d "
@@ -125,128 +123,172 @@ int RunBench(const BenchFlags& flags) {
   std::printf("%10s %8s %8s %4s %6s %10s %10s %8s %10s %10s %10s %8s %12s %8s %12s %12s\n", "cells",
               "nodes", "res", "thr", "par", "setup_s", "ms/step", "median", "cpu_ms/st",
               "newton/st", "gmres/st", "refacts", "fwd+adj ms", "median", "fwd+adj cpu", "adj cpu");
+}
+
+// The `repeat` runs of one size: what the scene runner reports of the last, and every run's
+// timings.
+struct SizeRuns {
+  int resolution = 0;
+  int cells = 0, nodes = 0, threads = 1;
+  double parallel_share = 0.0, setup = 0.0;
+  Result<scenes::RunSummary> summary = Status::Internal("not run");
+  std::vector<double> ms_runs, cpu_ms_runs, adjoint_ms_runs, adjoint_cpu_runs, backward_cpu_runs;
+};
+
+// Runs the scene `flags.repeat` times at the resolution nearest `target` cells, each run followed
+// by the forward+adjoint timing; false after printing why a run failed.
+bool TimeSize(const scenes::Scene& scene, int target, const BenchFlags& flags, SizeRuns* runs) {
+  const int n = ResolutionFor(scene, target);
+  runs->resolution = n;
+  scenes::RunOptions run;
+  run.simulation.cells_along_longest_side = n;
+  run.simulation.threads = flags.threads;
+  run.fps = flags.fps;
+  run.substeps_per_frame = flags.substeps;
+  run.duration = flags.seconds;
+  for (int r = 0; r < flags.repeat; ++r) {
+    const auto start = std::chrono::steady_clock::now();
+    double cpu_at_setup = 0.0;
+    runs->summary = scenes::RunScene(scene, run, [&](int frame, const fem::Simulator& sim) {
+      runs->parallel_share = sim.solver_parallel_share();
+      if (frame == 0) {
+        runs->cells = sim.hex_mesh().NumElements();
+        runs->nodes = sim.hex_mesh().NumNodes();
+        runs->threads = sim.num_threads();
+        runs->setup =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        cpu_at_setup = ProcessCpuSeconds();
+      }
+    });
+    const Result<scenes::RunSummary>& summary = runs->summary;
+    if (!summary.ok() || summary->diverged) {
+      std::printf("%10d  run failed: %s\n", target,
+                  summary.ok() ? "diverged" : summary.status().message().c_str());
+      return false;
+    }
+    const double steps = std::max(1, summary->num_steps);
+    runs->ms_runs.push_back(1e3 * summary->seconds / steps);
+    runs->cpu_ms_runs.push_back(1e3 * (ProcessCpuSeconds() - cpu_at_setup) / steps);
+    if (flags.adjoint) {
+      const ForwardAdjointTiming timing = ForwardAdjointMs(scene, n, flags);
+      runs->adjoint_ms_runs.push_back(timing.ms);
+      runs->adjoint_cpu_runs.push_back(timing.cpu_ms);
+      runs->backward_cpu_runs.push_back(timing.adjoint_cpu_ms);
+    }
+  }
+  return true;
+}
+
+// What the closing lines need of the sizes run: the log-log points of the scaling fit and the
+// timings at ~3000 cells (-1 until that size has run).
+struct BenchTotals {
   std::vector<double> log_cells, log_ms;
   double ms_at_3000 = -1.0, adjoint_ms_at_3000 = -1.0, adjoint_cpu_ms_at_3000 = -1.0;
   double median_ms_at_3000 = -1.0, median_adjoint_ms_at_3000 = -1.0;
+};
+
+// One row of the table: the best of the runs and their median; adds the size to `totals`.
+void ReportSize(const SizeRuns& runs, int target, const BenchFlags& flags, BenchTotals* totals) {
+  const Result<scenes::RunSummary>& summary = runs.summary;
+  const double steps = std::max(1, summary->num_steps);
+  const double ms = *std::min_element(runs.ms_runs.begin(), runs.ms_runs.end());
+  const double cpu_ms = *std::min_element(runs.cpu_ms_runs.begin(), runs.cpu_ms_runs.end());
+  ForwardAdjointTiming adjoint{0.0, 0.0, 0.0};
+  double adjoint_median_ms = 0.0;
+  if (flags.adjoint) {
+    adjoint.ms = *std::min_element(runs.adjoint_ms_runs.begin(), runs.adjoint_ms_runs.end());
+    adjoint.cpu_ms = *std::min_element(runs.adjoint_cpu_runs.begin(), runs.adjoint_cpu_runs.end());
+    adjoint.adjoint_cpu_ms =
+        *std::min_element(runs.backward_cpu_runs.begin(), runs.backward_cpu_runs.end());
+    adjoint_median_ms = Median(runs.adjoint_ms_runs);
+  }
+  const double adjoint_ms = adjoint.ms;
+  std::printf(
+      "%10d %8d %8d %4d %6.2f %10.2f %10.2f %8.2f %10.2f %10.2f %10.1f %8d %12.2f %8.2f %12.2f "
+      "%12.2f\n",
+      runs.cells, runs.nodes, runs.resolution, runs.threads, runs.parallel_share, runs.setup, ms,
+      Median(runs.ms_runs), cpu_ms, summary->newton_iterations / steps,
+      summary->linear_iterations / steps, summary->refactorizations, adjoint_ms, adjoint_median_ms,
+      adjoint.cpu_ms, adjoint.adjoint_cpu_ms);
+  if (target == 3000) totals->adjoint_cpu_ms_at_3000 = adjoint.cpu_ms;
+  if (target == 3000) totals->adjoint_ms_at_3000 = adjoint_ms;
+  std::fflush(stdout);
+  totals->log_cells.push_back(std::log(runs.cells));
+  totals->log_ms.push_back(std::log(ms));
+  if (target == 3000) {
+    totals->ms_at_3000 = ms;
+    totals->median_ms_at_3000 = Median(runs.ms_runs);
+    totals->median_adjoint_ms_at_3000 = adjoint_median_ms;
+  }
+}
+
+void PrintScalingExponent(const std::vector<double>& log_cells, const std::vector<double>& log_ms) {
+  if (log_cells.size() < 2) return;
+  // Least-squares slope of log(ms/step) against log(cells).
+  const double n = static_cast<double>(log_cells.size());
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  for (size_t i = 0; i < log_cells.size(); ++i) {
+    sx += log_cells[i];
+    sy += log_ms[i];
+    sxx += log_cells[i] * log_cells[i];
+    sxy += log_cells[i] * log_ms[i];
+  }
+  std::printf("scaling exponent (ms/step ~ cells^p): p = %.2f\n",
+              (n * sxy - sx * sy) / (n * sxx - sx * sx));
+}
+
+// The forward+adjoint step at ~3000 cells against its target, and the teddy-sized job it
+// projects.
+void PrintJobProjection(const BenchTotals& totals, const BenchFlags& flags) {
+  const double adjoint_ms_at_3000 = totals.adjoint_ms_at_3000;
+  const double adjoint_cpu_ms_at_3000 = totals.adjoint_cpu_ms_at_3000;
+  std::printf(
+      "at ~3000 cells: %.2f ms per forward+adjoint step = %.2fx the 40 ms target, median %.2f "
+      "(paper: ~600 ms on an RTX 2070)\n",
+      adjoint_ms_at_3000, adjoint_ms_at_3000 / 40.0, totals.median_adjoint_ms_at_3000);
+  // A teddy-sized job: 80 frames, 50 L-BFGS iterations. The paper counts 80 time steps per
+  // evaluation and one evaluation per iteration (~40 min at ~0.6 s per step); a softid job steps
+  // each 60 fps frame `substeps` times (step doubling picks 4 on torus-drop) and its Wolfe line
+  // search needs ~1.3 evaluations (forward + adjoint) per iteration.
+  constexpr int kFrames = 80, kIterations = 50;
+  constexpr double kEvaluationsPerIteration = 1.3;
+  const double paper_minutes = adjoint_ms_at_3000 * 1e-3 * kFrames * kIterations / 60.0;
+  const double minutes = adjoint_ms_at_3000 * 1e-3 * kFrames * flags.substeps * kIterations *
+                         kEvaluationsPerIteration / 60.0;
+  std::printf(
+      "teddy-sized job (3000 cells, %d frames, %d iterations): counted as the paper does (80 "
+      "steps of this size, one evaluation per iteration) %.1f min; as a softid job runs it (%d "
+      "substeps, ~%.1f evaluations per iteration) %.1f min per start = %.1fx the 3 min target "
+      "(paper: ~40 min)\n",
+      kFrames, kIterations, paper_minutes, flags.substeps, kEvaluationsPerIteration, minutes,
+      minutes / 3.0);
+  // The same from CPU time, which a busy host inflates far less than wall time.
+  const double cpu_minutes = minutes * adjoint_cpu_ms_at_3000 / adjoint_ms_at_3000;
+  std::printf("  from CPU time: %.2f ms per forward+adjoint step, projected %.1f min per start\n",
+              adjoint_cpu_ms_at_3000, cpu_minutes);
+  std::printf(
+      "  a projection: `softid-lab reproduce teddy-job` runs such a job (80 frames of one step, "
+      "4 parameters, 50 iterations) and times it\n");
+}
+
+int RunBench(const BenchFlags& flags) {
+  auto scene = scenes::MakeBuiltinScene("torus-drop");
+  if (!scene.ok()) return kExitFailure;
+  PrintBenchHeader(flags);
+  BenchTotals totals;
   for (int target : flags.target_cells) {
-    const int n = ResolutionFor(*scene, target);
-    scenes::RunOptions run;
-    run.simulation.cells_along_longest_side = n;
-    run.simulation.threads = flags.threads;
-    run.fps = flags.fps;
-    run.substeps_per_frame = flags.substeps;
-    run.duration = flags.seconds;
-    int cells = 0, nodes = 0, threads = 1;
-    double parallel_share = 0.0, setup = 0.0;
-    Result<scenes::RunSummary> summary = Status::Internal("not run");
-    std::vector<double> ms_runs, cpu_ms_runs, adjoint_ms_runs, adjoint_cpu_runs, backward_cpu_runs;
-    for (int r = 0; r < flags.repeat; ++r) {
-      const auto start = std::chrono::steady_clock::now();
-      double cpu_at_setup = 0.0;
-      summary = scenes::RunScene(*scene, run, [&](int frame, const fem::Simulator& sim) {
-        parallel_share = sim.solver_parallel_share();
-        if (frame == 0) {
-          cells = sim.hex_mesh().NumElements();
-          nodes = sim.hex_mesh().NumNodes();
-          threads = sim.num_threads();
-          setup = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-          cpu_at_setup = ProcessCpuSeconds();
-        }
-      });
-      if (!summary.ok() || summary->diverged) {
-        std::printf("%10d  run failed: %s\n", target,
-                    summary.ok() ? "diverged" : summary.status().message().c_str());
-        return kExitFailure;
-      }
-      const double steps = std::max(1, summary->num_steps);
-      ms_runs.push_back(1e3 * summary->seconds / steps);
-      cpu_ms_runs.push_back(1e3 * (ProcessCpuSeconds() - cpu_at_setup) / steps);
-      if (flags.adjoint) {
-        const ForwardAdjointTiming timing = ForwardAdjointMs(*scene, n, flags);
-        adjoint_ms_runs.push_back(timing.ms);
-        adjoint_cpu_runs.push_back(timing.cpu_ms);
-        backward_cpu_runs.push_back(timing.adjoint_cpu_ms);
-      }
-    }
-    const double steps = std::max(1, summary->num_steps);
-    const double ms = *std::min_element(ms_runs.begin(), ms_runs.end());
-    const double cpu_ms = *std::min_element(cpu_ms_runs.begin(), cpu_ms_runs.end());
-    ForwardAdjointTiming adjoint{0.0, 0.0, 0.0};
-    double adjoint_median_ms = 0.0;
-    if (flags.adjoint) {
-      adjoint.ms = *std::min_element(adjoint_ms_runs.begin(), adjoint_ms_runs.end());
-      adjoint.cpu_ms = *std::min_element(adjoint_cpu_runs.begin(), adjoint_cpu_runs.end());
-      adjoint.adjoint_cpu_ms =
-          *std::min_element(backward_cpu_runs.begin(), backward_cpu_runs.end());
-      adjoint_median_ms = Median(adjoint_ms_runs);
-    }
-    const double adjoint_ms = adjoint.ms;
-    std::printf(
-        "%10d %8d %8d %4d %6.2f %10.2f %10.2f %8.2f %10.2f %10.2f %10.1f %8d %12.2f %8.2f %12.2f "
-        "%12.2f\n",
-        cells, nodes, n, threads, parallel_share, setup, ms, Median(ms_runs), cpu_ms,
-        summary->newton_iterations / steps, summary->linear_iterations / steps,
-        summary->refactorizations, adjoint_ms, adjoint_median_ms, adjoint.cpu_ms,
-        adjoint.adjoint_cpu_ms);
-    if (target == 3000) adjoint_cpu_ms_at_3000 = adjoint.cpu_ms;
-    if (target == 3000) adjoint_ms_at_3000 = adjoint_ms;
-    std::fflush(stdout);
-    log_cells.push_back(std::log(cells));
-    log_ms.push_back(std::log(ms));
-    if (target == 3000) {
-      ms_at_3000 = ms;
-      median_ms_at_3000 = Median(ms_runs);
-      median_adjoint_ms_at_3000 = adjoint_median_ms;
-    }
+    SizeRuns runs;
+    if (!TimeSize(*scene, target, flags, &runs)) return kExitFailure;
+    ReportSize(runs, target, flags, &totals);
   }
-  if (log_cells.size() >= 2) {
-    // Least-squares slope of log(ms/step) against log(cells).
-    const double n = static_cast<double>(log_cells.size());
-    double sx = 0, sy = 0, sxx = 0, sxy = 0;
-    for (size_t i = 0; i < log_cells.size(); ++i) {
-      sx += log_cells[i];
-      sy += log_ms[i];
-      sxx += log_cells[i] * log_cells[i];
-      sxy += log_cells[i] * log_ms[i];
-    }
-    std::printf("scaling exponent (ms/step ~ cells^p): p = %.2f\n",
-                (n * sxy - sx * sy) / (n * sxx - sx * sx));
-  }
-  if (ms_at_3000 > 0.0) {
+  PrintScalingExponent(totals.log_cells, totals.log_ms);
+  if (totals.ms_at_3000 > 0.0) {
     std::printf(
         "at ~3000 cells: %.2f ms/step = %.2fx the 15 ms target, median %.2f (paper: ~300 ms on a "
         "GPU)\n",
-        ms_at_3000, ms_at_3000 / 15.0, median_ms_at_3000);
+        totals.ms_at_3000, totals.ms_at_3000 / 15.0, totals.median_ms_at_3000);
   }
-  if (adjoint_ms_at_3000 > 0.0) {
-    std::printf(
-        "at ~3000 cells: %.2f ms per forward+adjoint step = %.2fx the 40 ms target, median %.2f "
-        "(paper: ~600 ms on an RTX 2070)\n",
-        adjoint_ms_at_3000, adjoint_ms_at_3000 / 40.0, median_adjoint_ms_at_3000);
-    // A teddy-sized job: 80 frames, 50 L-BFGS iterations. The paper counts 80 time steps per
-    // evaluation and one evaluation per iteration (~40 min at ~0.6 s per step); a softid job steps
-    // each 60 fps frame `substeps` times (step doubling picks 4 on torus-drop) and its Wolfe line
-    // search needs ~1.3 evaluations (forward + adjoint) per iteration.
-    constexpr int kFrames = 80, kIterations = 50;
-    constexpr double kEvaluationsPerIteration = 1.3;
-    const double paper_minutes = adjoint_ms_at_3000 * 1e-3 * kFrames * kIterations / 60.0;
-    const double minutes = adjoint_ms_at_3000 * 1e-3 * kFrames * flags.substeps * kIterations *
-                           kEvaluationsPerIteration / 60.0;
-    std::printf(
-        "teddy-sized job (3000 cells, %d frames, %d iterations): counted as the paper does (80 "
-        "steps of this size, one evaluation per iteration) %.1f min; as a softid job runs it (%d "
-        "substeps, ~%.1f evaluations per iteration) %.1f min per start = %.1fx the 3 min target "
-        "(paper: ~40 min)\n",
-        kFrames, kIterations, paper_minutes, flags.substeps, kEvaluationsPerIteration, minutes,
-        minutes / 3.0);
-    // The same from CPU time, which a busy host inflates far less than wall time.
-    const double cpu_minutes = minutes * adjoint_cpu_ms_at_3000 / adjoint_ms_at_3000;
-    std::printf("  from CPU time: %.2f ms per forward+adjoint step, projected %.1f min per start\n",
-                adjoint_cpu_ms_at_3000, cpu_minutes);
-    std::printf(
-        "  a projection: `softid-lab reproduce teddy-job` runs such a job (80 frames of one step, "
-        "4 parameters, 50 iterations) and times it\n");
-  }
+  if (totals.adjoint_ms_at_3000 > 0.0) PrintJobProjection(totals, flags);
   return kExitOk;
 }
 

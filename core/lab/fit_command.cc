@@ -71,6 +71,48 @@ nlohmann::json ResultJsonWithUncertainty(const capture::Capture& capture,
   return inverse::ToJson(fit, &*uncertainty);
 }
 
+// One line per optimiser iteration.
+void LogFitProgress(const inverse::FitProgress& p, const std::vector<std::string>& fitted) {
+  // Continuation over the horizon: the cost is over the frames up to the stage's last one.
+  const std::string stage =
+      p.num_stages > 1
+          ? fmt::format(" [frames 0-{}, stage {}/{}]", p.horizon_frame, p.stage + 1, p.num_stages)
+          : "";
+  // Newton misses make the cost depend on the iteration path: shown when there are any.
+  const std::string misses =
+      p.unconverged_steps > 0
+          ? fmt::format(" | {} of {} steps unconverged", p.unconverged_steps, p.simulation_steps)
+          : "";
+  spdlog::info("start {}/{} it {:>3}/{} cost {:.4e}{} |g| {:.2e} {} | {:.0f} s, ~{:.0f} s left{}",
+               p.start + 1, p.num_starts, p.iteration, p.max_iterations, p.cost, stage,
+               p.gradient_norm, FormatParameters(p.parameters, fitted), p.elapsed_seconds,
+               p.remaining_seconds, misses);
+}
+
+// "diagnose": true: look for left-out physics after the fit, report next to the result.
+int DiagnoseAfterFit(const FitFlags& flags, const FitInputs& inputs,
+                     const inverse::FitResult& fit) {
+  const std::filesystem::path out(flags.out);
+  const std::filesystem::path dir = out.has_parent_path() ? out.parent_path() : ".";
+  diagnosis::DiagnoseOptions diagnose_options = DiagnoseOptionsForLab(inputs.config);
+  diagnose_options.plot_directory = dir / "diagnosis_plots";
+  Result<diagnosis::DiagnosisReport> report =
+      diagnosis::Diagnose(inputs.capture, inputs.config, diagnose_options, &fit);
+  if (!report.ok()) {
+    spdlog::error("diagnosis: {}", report.status().message());
+    return kExitFailure;
+  }
+  const std::filesystem::path report_file = dir / "diagnosis.json";
+  const Status report_written = WriteJsonFile(report_file, diagnosis::ToJson(*report));
+  if (!report_written.ok()) {
+    spdlog::error("{}", report_written.message());
+    return kExitFailure;
+  }
+  std::printf("%s", diagnosis::ToText(*report).c_str());
+  std::printf("diagnosis written to %s\n", report_file.string().c_str());
+  return kExitOk;
+}
+
 int RunFit(const FitFlags& flags) {
   std::variant<FitInputs, int> loaded = LoadFitInputs(flags.capture, flags.config);
   if (const int* exit_code = std::get_if<int>(&loaded)) return *exit_code;
@@ -81,22 +123,7 @@ int RunFit(const FitFlags& flags) {
                fmt::join(config.fit, ", "), config.solver.starts, config.solver.max_iterations);
 
   inverse::FitOptions options;
-  options.on_progress = [&](const inverse::FitProgress& p) {
-    // Continuation over the horizon: the cost is over the frames up to the stage's last one.
-    const std::string stage =
-        p.num_stages > 1
-            ? fmt::format(" [frames 0-{}, stage {}/{}]", p.horizon_frame, p.stage + 1, p.num_stages)
-            : "";
-    // Newton misses make the cost depend on the iteration path: shown when there are any.
-    const std::string misses =
-        p.unconverged_steps > 0
-            ? fmt::format(" | {} of {} steps unconverged", p.unconverged_steps, p.simulation_steps)
-            : "";
-    spdlog::info("start {}/{} it {:>3}/{} cost {:.4e}{} |g| {:.2e} {} | {:.0f} s, ~{:.0f} s left{}",
-                 p.start + 1, p.num_starts, p.iteration, p.max_iterations, p.cost, stage,
-                 p.gradient_norm, FormatParameters(p.parameters, config.fit), p.elapsed_seconds,
-                 p.remaining_seconds, misses);
-  };
+  options.on_progress = [&](const inverse::FitProgress& p) { LogFitProgress(p, config.fit); };
   Result<inverse::FitResult> result = inverse::Fit(inputs.capture, config, options);
   if (!result.ok()) {
     spdlog::error("{}", result.status().message());
@@ -113,27 +140,7 @@ int RunFit(const FitFlags& flags) {
   PrintResultTable(json, std::filesystem::path(flags.capture) / "truth.json");
   std::printf("result written to %s\n", flags.out.c_str());
   if (!config.diagnose) return kExitOk;
-
-  // "diagnose": true: look for left-out physics after the fit, report next to the result.
-  const std::filesystem::path out(flags.out);
-  const std::filesystem::path dir = out.has_parent_path() ? out.parent_path() : ".";
-  diagnosis::DiagnoseOptions diagnose_options = DiagnoseOptionsForLab(config);
-  diagnose_options.plot_directory = dir / "diagnosis_plots";
-  Result<diagnosis::DiagnosisReport> report =
-      diagnosis::Diagnose(inputs.capture, config, diagnose_options, &*result);
-  if (!report.ok()) {
-    spdlog::error("diagnosis: {}", report.status().message());
-    return kExitFailure;
-  }
-  const std::filesystem::path report_file = dir / "diagnosis.json";
-  const Status report_written = WriteJsonFile(report_file, diagnosis::ToJson(*report));
-  if (!report_written.ok()) {
-    spdlog::error("{}", report_written.message());
-    return kExitFailure;
-  }
-  std::printf("%s", diagnosis::ToText(*report).c_str());
-  std::printf("diagnosis written to %s\n", report_file.string().c_str());
-  return kExitOk;
+  return DiagnoseAfterFit(flags, inputs, *result);
 }
 
 }  // namespace

@@ -206,6 +206,69 @@ std::vector<Case> MakeCases(const ProveFlags& flags) {
   return out;
 }
 
+// The case's scene with its effect on.
+Result<scenes::ConcealedScene> MakeCaseScene(const Case& c) {
+  // Controls vary the material by seed (+-20 %) so that they are not one motion with new noise.
+  const double variation =
+      c.effect == scenes::ConcealedEffect::kNone ? 0.2 * std::sin(12.9898 * c.seed) : 0.0;
+  return scenes::MakeDiagnosisScene(c.scene, c.effect, c.strength, variation);
+}
+
+// Synthesises the case's capture into `dir` (emptied first) on the generator's grid and time
+// step, with the seed's depth noise, and reads it back.
+Result<capture::Capture> SynthesizeCaseCapture(const Case& c, const scenes::ConcealedScene& scene,
+                                               const ProveFlags& flags,
+                                               const std::filesystem::path& dir) {
+  std::filesystem::remove_all(dir);
+  scenes::SynthesisOptions synth;
+  synth.run.simulation.cells_along_longest_side = flags.generator_cells;
+  // Half the fit's time step, as the fit must not share the generator's discretisation.
+  synth.run.substeps_per_frame = 2 * flags.fit_substeps;
+  synth.cameras = scene.cameras;
+  synth.noise = capture::StructuredLightNoise(static_cast<uint64_t>(c.seed));
+  synth.depth_scale = capture::kStructuredLightDepthScale;
+  Result<scenes::SynthesisSummary> written = scenes::Synthesize(scene.scene, synth, dir);
+  if (!written.ok()) return written.status();
+  return capture::ReadCapture(dir);
+}
+
+// Diagnoses the capture with the base model (the effect off), plots into `dir`.
+Result<diagnosis::DiagnosisReport> DiagnoseCase(const Case& c, const scenes::ConcealedScene& scene,
+                                                const capture::Capture& capture,
+                                                const ProveFlags& flags,
+                                                const std::filesystem::path& dir) {
+  inverse::JobConfig config = BaseConfig(c.scene, flags);
+  FixGround(scene.scene, &config);
+  diagnosis::DiagnoseOptions options = DiagnoseOptionsForLab(config, "[" + c.name + "] ");
+  options.decision.max_refits = flags.max_refits;
+  options.plot_directory = dir / "diagnosis_plots";
+  return diagnosis::Diagnose(capture, config, options);
+}
+
+// The decision, the held-out costs and the winner's recovered value into `o`.
+void RecordDiagnosis(const diagnosis::DiagnosisReport& report, Outcome* o) {
+  o->decision = report.decision;
+  o->heldout_before = report.base_heldout;
+  o->heldout_after = report.base_heldout;
+  if (report.winner >= 0) {
+    const diagnosis::TestedCandidate& w = report.tested[report.winner];
+    o->heldout_after = w.test.heldout_after;
+    const nlohmann::json& v = w.values;
+    if (v.contains("friction_coefficient")) o->recovered = v["friction_coefficient"];
+    if (v.contains("stiffness_ratio")) o->recovered = v["stiffness_ratio"];
+    if (v.contains("drag_quadratic")) o->recovered = v["drag_quadratic"];
+  }
+  for (const auto& n : report.nuisances)
+    o->nuisances += (o->nuisances.empty() ? "" : ",") + n["nuisance"].get<std::string>();
+}
+
+// Keep the report and plots, drop the depth images.
+void DropDepthImages(const std::filesystem::path& dir) {
+  for (const auto& entry : std::filesystem::directory_iterator(dir))
+    if (entry.is_directory() && entry.path().filename().string().rfind("cam", 0) == 0)
+      std::filesystem::remove_all(entry.path());
+}
+
 Outcome RunCase(const Case& c, const ProveFlags& flags) {
   const std::filesystem::path dir = std::filesystem::path(flags.out) / c.name;
   if (flags.resume) {
@@ -217,70 +280,32 @@ Outcome RunCase(const Case& c, const ProveFlags& flags) {
   Outcome o;
   o.c = c;
   const auto begin = std::chrono::steady_clock::now();
-  // Controls vary the material by seed (+-20 %) so that they are not one motion with new noise.
-  const double variation =
-      c.effect == scenes::ConcealedEffect::kNone ? 0.2 * std::sin(12.9898 * c.seed) : 0.0;
-  Result<scenes::ConcealedScene> scene =
-      scenes::MakeDiagnosisScene(c.scene, c.effect, c.strength, variation);
+  Result<scenes::ConcealedScene> scene = MakeCaseScene(c);
   if (!scene.ok()) {
     o.error = scene.status().message();
     return o;
   }
-  std::filesystem::remove_all(dir);
-  scenes::SynthesisOptions synth;
-  synth.run.simulation.cells_along_longest_side = flags.generator_cells;
-  // Half the fit's time step, as the fit must not share the generator's discretisation.
-  synth.run.substeps_per_frame = 2 * flags.fit_substeps;
-  synth.cameras = scene->cameras;
-  synth.noise = capture::StructuredLightNoise(static_cast<uint64_t>(c.seed));
-  synth.depth_scale = capture::kStructuredLightDepthScale;
-  Result<scenes::SynthesisSummary> written = scenes::Synthesize(scene->scene, synth, dir);
-  if (!written.ok()) {
-    o.error = written.status().message();
-    return o;
-  }
-  Result<capture::Capture> capture = capture::ReadCapture(dir);
+  Result<capture::Capture> capture = SynthesizeCaseCapture(c, *scene, flags, dir);
   if (!capture.ok()) {
     o.error = capture.status().message();
     return o;
   }
-  inverse::JobConfig config = BaseConfig(c.scene, flags);
-  FixGround(scene->scene, &config);
-  diagnosis::DiagnoseOptions options = DiagnoseOptionsForLab(config, "[" + c.name + "] ");
-  options.decision.max_refits = flags.max_refits;
-  options.plot_directory = dir / "diagnosis_plots";
-  Result<diagnosis::DiagnosisReport> report = diagnosis::Diagnose(*capture, config, options);
+  Result<diagnosis::DiagnosisReport> report = DiagnoseCase(c, *scene, *capture, flags, dir);
   o.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
   if (!report.ok()) {
     o.error = report.status().message();
     return o;
   }
   (void)WriteJsonFile(dir / "diagnosis.json", diagnosis::ToJson(*report));
-  o.decision = report->decision;
-  o.heldout_before = report->base_heldout;
-  o.heldout_after = report->base_heldout;
-  if (report->winner >= 0) {
-    const diagnosis::TestedCandidate& w = report->tested[report->winner];
-    o.heldout_after = w.test.heldout_after;
-    const nlohmann::json& v = w.values;
-    if (v.contains("friction_coefficient")) o.recovered = v["friction_coefficient"];
-    if (v.contains("stiffness_ratio")) o.recovered = v["stiffness_ratio"];
-    if (v.contains("drag_quadratic")) o.recovered = v["drag_quadratic"];
-  }
-  for (const auto& n : report->nuisances)
-    o.nuisances += (o.nuisances.empty() ? "" : ",") + n["nuisance"].get<std::string>();
-  if (!flags.keep) {
-    // Keep the report and plots, drop the depth images.
-    for (const auto& entry : std::filesystem::directory_iterator(dir))
-      if (entry.is_directory() && entry.path().filename().string().rfind("cam", 0) == 0)
-        std::filesystem::remove_all(entry.path());
-  }
+  RecordDiagnosis(*report, &o);
+  if (!flags.keep) DropDepthImages(dir);
   // Written last: its presence means the case finished (what --resume looks for).
   (void)WriteJsonFile(dir / "outcome.json", OutcomeJson(o, flags));
   return o;
 }
 
-int RunProve(const ProveFlags& flags) {
+// False after logging the first --cases entry that names no kind of case.
+bool KnownCaseKinds(const ProveFlags& flags) {
   for (const std::string& name : flags.cases) {
     if (name != "friction" && name != "heterogeneous_stiffness" && name != "air_drag" &&
         name != "control" && name != "initial_spin") {
@@ -288,12 +313,14 @@ int RunProve(const ProveFlags& flags) {
           "--cases = {}: unknown (known: friction, heterogeneous_stiffness, air_drag, "
           "control, initial_spin)",
           name);
-      return kExitInvalidInput;
+      return false;
     }
   }
-  const std::vector<Case> cases = MakeCases(flags);
-  spdlog::info("prove-diagnosis: {} case(s), {} at a time, work folder {}", cases.size(),
-               flags.jobs, flags.out);
+  return true;
+}
+
+// Runs every case, `flags.jobs` at a time, logging each outcome as it comes; in case order.
+std::vector<Outcome> RunCases(const std::vector<Case>& cases, const ProveFlags& flags) {
   std::vector<Outcome> outcomes(cases.size());
   std::atomic<int> next{0};
   std::mutex log_mutex;
@@ -311,8 +338,11 @@ int RunProve(const ProveFlags& flags) {
     for (int t = 1; t < flags.jobs; ++t) pool.emplace_back(worker);
     worker();
   }
+  return outcomes;
+}
 
-  // Confusion table: true effect (rows) vs decision (columns).
+// Confusion table: true effect (rows) vs decision (columns).
+void PrintConfusionTable(const std::vector<Outcome>& outcomes) {
   const std::vector<std::string> truths = {"friction", "heterogeneous_stiffness", "air_drag",
                                            "initial_spin", "none"};
   const std::vector<std::string> decisions = {
@@ -328,67 +358,104 @@ int RunProve(const ProveFlags& flags) {
     for (const std::string& d : decisions) std::printf(" %12d", table[t][d]);
     std::printf("\n");
   }
-  std::printf("\n%-48s %-24s %8s %9s %12s %12s %7s %7s  %s\n", "case", "decision", "true",
-              "recovered", "heldout_bef", "heldout_aft", "down%", "s", "nuisances");
+}
+
+// The benchmark's scores over all cases.
+struct ProveScores {
   int effect_cases = 0, effect_correct = 0, controls = 0, false_alarms = 0;
   int value_cases = 0, value_ok = 0, heldout_cases = 0, heldout_ok = 0;
+};
+
+// Scores one case: its decision, and when it found its physical effect, the held-out cost's
+// drop (`down`, percent) and the recovered value.
+void ScoreOutcome(const Outcome& o, double down, ProveScores* scores) {
+  const std::string truth = scenes::ToString(o.c.effect);
+  const bool physics = o.c.effect != scenes::ConcealedEffect::kNone &&
+                       o.c.effect != scenes::ConcealedEffect::kInitialSpin;
+  const bool correct = physics ? o.decision == truth : o.decision == "none";
+  if (physics) {
+    ++scores->effect_cases;
+    scores->effect_correct += correct;
+  } else {
+    ++scores->controls;
+    scores->false_alarms += !correct;
+  }
+  if (physics && o.decision == truth) {
+    ++scores->heldout_cases;
+    scores->heldout_ok += down >= 30.0;
+    if (!std::isnan(o.recovered)) {
+      ++scores->value_cases;
+      if (o.c.effect == scenes::ConcealedEffect::kFriction)
+        scores->value_ok += std::abs(o.recovered - o.c.strength) <= 0.05;
+      else if (o.c.effect == scenes::ConcealedEffect::kHeterogeneousStiffness)
+        scores->value_ok += std::abs(o.recovered / o.c.strength - 1.0) <= 0.25;
+      else
+        scores->value_ok += std::abs(o.recovered / o.c.strength - 1.0) <= 0.25;
+    }
+  }
+}
+
+// A case's entry in prove_diagnosis.json.
+nlohmann::json CaseSummaryJson(const Outcome& o) {
+  return {{"case", o.c.name},
+          {"scene", o.c.scene},
+          {"truth", scenes::ToString(o.c.effect)},
+          {"strength", o.c.strength},
+          {"decision", o.decision},
+          {"recovered",
+           std::isnan(o.recovered) ? nlohmann::json(nullptr) : nlohmann::json(o.recovered)},
+          {"heldout_before", o.heldout_before},
+          {"heldout_after", o.heldout_after},
+          {"seconds", o.seconds},
+          {"nuisances", o.nuisances},
+          {"error", o.error}};
+}
+
+// A line per case, scoring each into `scores`; the cases' entries of the summary file.
+nlohmann::json PrintCaseTable(const std::vector<Outcome>& outcomes, ProveScores* scores) {
+  std::printf("\n%-48s %-24s %8s %9s %12s %12s %7s %7s  %s\n", "case", "decision", "true",
+              "recovered", "heldout_bef", "heldout_aft", "down%", "s", "nuisances");
   nlohmann::json summary = nlohmann::json::array();
   for (const Outcome& o : outcomes) {
-    const std::string truth = scenes::ToString(o.c.effect);
-    const bool physics = o.c.effect != scenes::ConcealedEffect::kNone &&
-                         o.c.effect != scenes::ConcealedEffect::kInitialSpin;
-    const bool correct = physics ? o.decision == truth : o.decision == "none";
-    if (physics) {
-      ++effect_cases;
-      effect_correct += correct;
-    } else {
-      ++controls;
-      false_alarms += !correct;
-    }
     const double down =
         o.heldout_before > 0 ? 100.0 * (1.0 - o.heldout_after / o.heldout_before) : 0.0;
-    if (physics && o.decision == truth) {
-      ++heldout_cases;
-      heldout_ok += down >= 30.0;
-      if (!std::isnan(o.recovered)) {
-        ++value_cases;
-        if (o.c.effect == scenes::ConcealedEffect::kFriction)
-          value_ok += std::abs(o.recovered - o.c.strength) <= 0.05;
-        else if (o.c.effect == scenes::ConcealedEffect::kHeterogeneousStiffness)
-          value_ok += std::abs(o.recovered / o.c.strength - 1.0) <= 0.25;
-        else
-          value_ok += std::abs(o.recovered / o.c.strength - 1.0) <= 0.25;
-      }
-    }
+    ScoreOutcome(o, down, scores);
     std::printf("%-48s %-24s %8.3g %9.3g %12.4g %12.4g %7.1f %7.0f  %s%s\n", o.c.name.c_str(),
                 o.decision.c_str(), o.c.strength, o.recovered, o.heldout_before, o.heldout_after,
                 down, o.seconds, o.nuisances.c_str(),
                 o.error.empty() ? "" : (" " + o.error).c_str());
-    summary.push_back({{"case", o.c.name},
-                       {"scene", o.c.scene},
-                       {"truth", truth},
-                       {"strength", o.c.strength},
-                       {"decision", o.decision},
-                       {"recovered", std::isnan(o.recovered) ? nlohmann::json(nullptr)
-                                                             : nlohmann::json(o.recovered)},
-                       {"heldout_before", o.heldout_before},
-                       {"heldout_after", o.heldout_after},
-                       {"seconds", o.seconds},
-                       {"nuisances", o.nuisances},
-                       {"error", o.error}});
+    summary.push_back(CaseSummaryJson(o));
   }
-  std::printf("\neffect cases correct: %d/%d (target >= 90 %%)\n", effect_correct, effect_cases);
-  std::printf("false alarms in controls (incl. spin): %d/%d (target <= 1 in 20)\n", false_alarms,
-              controls);
-  std::printf("recovered value within tolerance (mu +-0.05, ratio/drag +-25 %%): %d/%d\n", value_ok,
-              value_cases);
-  std::printf("held-out cost down >= 30 %% when found: %d/%d\n", heldout_ok, heldout_cases);
+  return summary;
+}
+
+void PrintScores(const ProveScores& s) {
+  std::printf("\neffect cases correct: %d/%d (target >= 90 %%)\n", s.effect_correct,
+              s.effect_cases);
+  std::printf("false alarms in controls (incl. spin): %d/%d (target <= 1 in 20)\n", s.false_alarms,
+              s.controls);
+  std::printf("recovered value within tolerance (mu +-0.05, ratio/drag +-25 %%): %d/%d\n",
+              s.value_ok, s.value_cases);
+  std::printf("held-out cost down >= 30 %% when found: %d/%d\n", s.heldout_ok, s.heldout_cases);
+}
+
+int RunProve(const ProveFlags& flags) {
+  if (!KnownCaseKinds(flags)) return kExitInvalidInput;
+  const std::vector<Case> cases = MakeCases(flags);
+  spdlog::info("prove-diagnosis: {} case(s), {} at a time, work folder {}", cases.size(),
+               flags.jobs, flags.out);
+  const std::vector<Outcome> outcomes = RunCases(cases, flags);
+
+  PrintConfusionTable(outcomes);
+  ProveScores scores;
+  const nlohmann::json summary = PrintCaseTable(outcomes, &scores);
+  PrintScores(scores);
   (void)WriteJsonFile(std::filesystem::path(flags.out) / "prove_diagnosis.json",
                       {{"cases", summary},
-                       {"effect_correct", effect_correct},
-                       {"effect_cases", effect_cases},
-                       {"false_alarms", false_alarms},
-                       {"controls", controls}});
+                       {"effect_correct", scores.effect_correct},
+                       {"effect_cases", scores.effect_cases},
+                       {"false_alarms", scores.false_alarms},
+                       {"controls", scores.controls}});
   return kExitOk;
 }
 

@@ -595,20 +595,35 @@ nlohmann::json SummaryRowJson(const RowSummary& summary) {
   return row_json;
 }
 
-int RunReproduce(const ReproduceFlags& flags) {
+// The run the flags ask for: the benchmark with --cells and --substeps applied, its starts per
+// row, clip length, threads and rows, and the folders.
+struct ReproducePlan {
+  Benchmark b;
+  int starts = 0;
+  double duration = 0.0;
+  int threads = 1;
+  std::vector<const Row*> rows;  // into b.rows
+  std::filesystem::path out, work;
+};
+
+// Fills `plan` (in place: its rows point into plan->b) and creates the output folder; kExitOk, or
+// the exit code after logging what is wrong.
+int PlanReproduce(const ReproduceFlags& flags, ReproducePlan* plan) {
   Result<Benchmark> made = reproduce::MakeBenchmark(flags.benchmark);
   if (!made.ok()) {
     spdlog::error("{}", made.status().message());
     return kExitInvalidInput;
   }
-  Benchmark b = *made;
+  plan->b = *made;
+  Benchmark& b = plan->b;
   if (flags.cells > 0) b.cells = flags.cells;
   if (flags.substeps > 0) b.substeps = flags.substeps;
   const int starts = flags.starts > 0 ? flags.starts : (flags.quick ? b.quick_starts : b.starts);
-  const double duration = flags.quick && b.quick_duration > 0.0 ? b.quick_duration : b.duration;
+  plan->starts = starts;
+  plan->duration = flags.quick && b.quick_duration > 0.0 ? b.quick_duration : b.duration;
   int threads =
       flags.threads > 0 ? flags.threads : static_cast<int>(std::thread::hardware_concurrency());
-  threads = std::clamp(threads, 1, std::max(1, starts));
+  plan->threads = std::clamp(threads, 1, std::max(1, starts));
   for (int number : flags.only_starts) {
     if (number < 1 || number > starts) {
       spdlog::error("--only-starts: {} is not a start of this run (1..{})", number, starts);
@@ -620,51 +635,78 @@ int RunReproduce(const ReproduceFlags& flags) {
     spdlog::error("{}", selected.status().message());
     return kExitInvalidInput;
   }
-  const std::vector<const Row*>& rows = *selected;
-  const std::filesystem::path out = flags.out;
-  const std::filesystem::path work =
-      flags.work.empty() ? out / "captures" : std::filesystem::path(flags.work);
+  plan->rows = *selected;
+  plan->out = flags.out;
+  plan->work = flags.work.empty() ? plan->out / "captures" : std::filesystem::path(flags.work);
   std::error_code ec;
-  std::filesystem::create_directories(out, ec);
+  std::filesystem::create_directories(plan->out, ec);
   if (ec) {
-    spdlog::error("--out = {}: {}", out.string(), ec.message());
+    spdlog::error("--out = {}: {}", plan->out.string(), ec.message());
     return kExitFailure;
   }
-  spdlog::info(
-      "reproduce {}: {} row(s), {} start(s) each, {} thread(s), grid {} cells, {} "
-      "substeps{}",
-      b.name, rows.size(), starts, threads, b.cells, b.substeps, flags.quick ? ", quick" : "");
+  return kExitOk;
+}
 
+// What the rows run so far give the summary.
+struct RowsDone {
   std::vector<RowSummary> summaries;
   nlohmann::json summary_rows = nlohmann::json::array();
   bool pass = true;
-  for (const Row* row : rows) {
-    Result<RowSummary> summary = RunRow(b, *row, flags, starts, threads, duration, work, out);
+};
+
+// Runs the rows in turn, printing each one's table as it ends; kExitOk, or the exit code after
+// logging the row that failed.
+int RunRows(const ReproducePlan& plan, const ReproduceFlags& flags, RowsDone* done) {
+  const Benchmark& b = plan.b;
+  for (const Row* row : plan.rows) {
+    Result<RowSummary> summary =
+        RunRow(b, *row, flags, plan.starts, plan.threads, plan.duration, plan.work, plan.out);
     if (!summary.ok()) {
       spdlog::error("{} {}: {}", b.name, row->id, summary.status().message());
       return summary.status().code() == StatusCode::kInvalidArgument ? kExitInvalidInput
                                                                      : kExitFailure;
     }
-    summaries.push_back(*summary);
-    pass = pass && summary->pass;
-    PrintRows(b, {summaries.back()});
+    done->summaries.push_back(*summary);
+    done->pass = done->pass && summary->pass;
+    PrintRows(b, {done->summaries.back()});
     std::fflush(stdout);
-    summary_rows.push_back(SummaryRowJson(*summary));
+    done->summary_rows.push_back(SummaryRowJson(*summary));
   }
+  return kExitOk;
+}
+
+// The table of every row, and the summary file.
+int WriteReproduceSummary(const ReproducePlan& plan, const ReproduceFlags& flags,
+                          const RowsDone& done) {
+  const Benchmark& b = plan.b;
   std::printf("\n== reproduce %s: %s ==", b.name.c_str(), b.description.c_str());
-  PrintRows(b, summaries);
-  const nlohmann::json summary = {
-      {"format", "softid-reproduce/1"}, {"benchmark", b.name}, {"description", b.description},
-      {"quick", flags.quick},           {"starts", starts},    {"seed", flags.seed},
-      {"rows", summary_rows},           {"pass", pass}};
-  const std::filesystem::path summary_file = out / fmt::format("{}-summary.json", b.name);
+  PrintRows(b, done.summaries);
+  const nlohmann::json summary = {{"format", "softid-reproduce/1"}, {"benchmark", b.name},
+                                  {"description", b.description},   {"quick", flags.quick},
+                                  {"starts", plan.starts},          {"seed", flags.seed},
+                                  {"rows", done.summary_rows},      {"pass", done.pass}};
+  const std::filesystem::path summary_file = plan.out / fmt::format("{}-summary.json", b.name);
   if (Status written = WriteJsonFile(summary_file, summary); !written.ok()) {
     spdlog::error("{}", written.message());
     return kExitFailure;
   }
   std::printf("%s: every row %s its target; summary written to %s\n", b.name.c_str(),
-              pass ? "meets" : "does NOT meet", summary_file.string().c_str());
+              done.pass ? "meets" : "does NOT meet", summary_file.string().c_str());
   return kExitOk;
+}
+
+int RunReproduce(const ReproduceFlags& flags) {
+  ReproducePlan plan;
+  if (const int exit_code = PlanReproduce(flags, &plan); exit_code != kExitOk) return exit_code;
+  const Benchmark& b = plan.b;
+  spdlog::info(
+      "reproduce {}: {} row(s), {} start(s) each, {} thread(s), grid {} cells, {} "
+      "substeps{}",
+      b.name, plan.rows.size(), plan.starts, plan.threads, b.cells, b.substeps,
+      flags.quick ? ", quick" : "");
+  RowsDone done;
+  if (const int exit_code = RunRows(plan, flags, &done); exit_code != kExitOk) return exit_code;
+  return WriteReproduceSummary(plan, flags, done);
 }
 
 }  // namespace

@@ -58,6 +58,15 @@ std::string FormatParameters(const fem::PhysicalParameters& p,
 }
 
 Status WriteJsonFile(const std::filesystem::path& path, const nlohmann::json& json) {
+  std::error_code error;
+  // `--out new/result.json` makes its folder, as the report beside it does.
+  if (path.has_parent_path()) {
+    std::filesystem::create_directories(path.parent_path(), error);
+    if (error) {
+      return Status::IoError(path.string() + ": cannot create its folder " +
+                             path.parent_path().string() + " (" + error.message() + ")");
+    }
+  }
   const std::filesystem::path temporary = path.string() + ".tmp";
   {
     std::ofstream out(temporary);
@@ -65,7 +74,6 @@ Status WriteJsonFile(const std::filesystem::path& path, const nlohmann::json& js
     out << json.dump(2) << "\n";
     if (!out) return Status::IoError(path.string() + ": write failed");
   }
-  std::error_code error;
   std::filesystem::rename(temporary, path, error);
   if (error) return Status::IoError(path.string() + ": " + error.message());
   return Status::Ok();

@@ -3,8 +3,8 @@
 # softid-lab as a user meets it: every subcommand answers --help with an example; bad input (an
 # unknown scene, a missing folder, a config key that does not exist, a bad flag value) is refused
 # with a non-zero exit and a message naming what was wrong; and a small synth -> fit -> diagnose
-# round trip writes its files: result.json with the fitted value, its unit and its uncertainty,
-# the report's PNGs, diagnosis.json.
+# round trip writes its files (making the output folder): result.json with the fitted value, its
+# unit and its uncertainty, the report's PNGs, diagnosis.json.
 set -euo pipefail
 
 lab=$(cd "${1:?usage: lab_commands_test.sh BUILD_DIR}" && pwd)/core/lab/softid-lab
@@ -62,8 +62,12 @@ for png in "$work"/report/*.png; do
   [ "$(head -c 4 "$png" | tail -c 3)" = "PNG" ] || fail "$png is not a PNG"
 done
 
-"$lab" diagnose "$work/capture" --config "$work/job.json" -o "$work/diagnosis.json" \
+# -o into a folder that does not exist yet: made, as the report's is.
+"$lab" diagnose "$work/capture" --config "$work/job.json" -o "$work/new/diagnosis.json" \
   >"$work/diagnose.log" 2>&1 || fail "diagnose: $(tail -5 "$work/diagnose.log")"
 python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert 'decision' in d, list(d)" \
-  "$work/diagnosis.json" || fail "diagnosis.json has no decision"
+  "$work/new/diagnosis.json" || fail "diagnosis.json has no decision"
+touch "$work/file"
+refuses "cannot create its folder $work/file/sub" fit "$work/capture" --config "$work/job.json" \
+  -o "$work/file/sub/result.json" --no-report
 echo "softid-lab commands: ok"
