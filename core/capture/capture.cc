@@ -83,6 +83,85 @@ Result<std::vector<double>> ParseFrameTimes(const JsonReader& reader, const json
   return times;
 }
 
+// "format" first, so that another version's differing fields are reported as a version mismatch.
+Status CheckFormat(const JsonReader& reader, const json& root) {
+  SOFTID_ASSIGN_OR_RETURN(const json* format, reader.Require(root, "", "format"));
+  SOFTID_ASSIGN_OR_RETURN(const std::string format_string, reader.String("format", *format));
+  if (format_string != kCaptureFormat) {
+    constexpr std::string_view kFamily = "softid-capture/";
+    if (format_string.starts_with(kFamily)) {
+      return reader.Error(
+          "format", *format,
+          fmt::format("unsupported version (this reader supports \"{}\")", kCaptureFormat));
+    }
+    return reader.Error("format", *format,
+                        fmt::format("not a softid capture (expected \"{}\")", kCaptureFormat));
+  }
+  return Status::Ok();
+}
+
+// "fixed_region": {"min": [3], "max": [3]} with min <= max in every coordinate.
+Result<Eigen::AlignedBox3d> ParseFixedRegion(const JsonReader& reader, const json& value) {
+  SOFTID_RETURN_IF_ERROR(reader.CheckObject("fixed_region", value));
+  SOFTID_ASSIGN_OR_RETURN(const json* min_json, reader.Require(value, "fixed_region", "min"));
+  SOFTID_ASSIGN_OR_RETURN(const json* max_json, reader.Require(value, "fixed_region", "max"));
+  SOFTID_ASSIGN_OR_RETURN(const Eigen::Vector3d min, reader.Vector3("fixed_region.min", *min_json));
+  SOFTID_ASSIGN_OR_RETURN(const Eigen::Vector3d max, reader.Vector3("fixed_region.max", *max_json));
+  for (int i = 0; i < 3; ++i) {
+    if (min[i] > max[i]) {
+      return reader.Error(fmt::format("fixed_region.min[{}]", i), (*min_json)[i],
+                          fmt::format("greater than fixed_region.max[{}] = {}: min must be <= "
+                                      "max in every coordinate",
+                                      i, Shown((*max_json)[i])));
+    }
+  }
+  return Eigen::AlignedBox3d(min, max);
+}
+
+// "floor": {"normal": [3] (not zero; normalised), "offset": d}.
+Result<Capture::Floor> ParseFloor(const JsonReader& reader, const json& value) {
+  SOFTID_RETURN_IF_ERROR(reader.CheckObject("floor", value));
+  SOFTID_ASSIGN_OR_RETURN(const json* normal, reader.Require(value, "floor", "normal"));
+  SOFTID_ASSIGN_OR_RETURN(const json* offset, reader.Require(value, "floor", "offset"));
+  Capture::Floor floor;
+  SOFTID_ASSIGN_OR_RETURN(floor.normal, reader.Vector3("floor.normal", *normal));
+  if (!(floor.normal.norm() > 1e-9)) {
+    return reader.Error("floor.normal", *normal, "must not be zero");
+  }
+  floor.normal.normalize();
+  SOFTID_ASSIGN_OR_RETURN(floor.offset_m, reader.Number("floor.offset", *offset));
+  return floor;
+}
+
+// "cameras": 1 to kMaxCameras cameras with distinct names and equally many frames.
+Status ParseCameras(const JsonReader& reader, const json& root,
+                    std::vector<CameraRecording>* recordings) {
+  SOFTID_ASSIGN_OR_RETURN(const json* cameras, reader.Require(root, "", "cameras"));
+  SOFTID_RETURN_IF_ERROR(reader.CheckArray("cameras", *cameras));
+  if (cameras->empty()) return reader.Error("cameras", *cameras, "must list at least one camera");
+  if (cameras->size() > static_cast<size_t>(kMaxCameras)) {
+    return reader.Error("cameras", fmt::format("{} cameras: at most {} are accepted",
+                                               cameras->size(), kMaxCameras));
+  }
+  std::set<std::string> names;
+  for (size_t i = 0; i < cameras->size(); ++i) {
+    const std::string path = IndexPath("cameras", i);
+    SOFTID_ASSIGN_OR_RETURN(CameraRecording recording, ParseCamera(reader, (*cameras)[i], path));
+    if (!names.insert(recording.camera.name).second) {
+      return reader.Error(JoinPath(path, "name"), json(recording.camera.name),
+                          "duplicate camera name");
+    }
+    if (i > 0 && recording.frames.size() != recordings->front().frames.size()) {
+      return reader.Error(JoinPath(path, "frames"),
+                          fmt::format("has {} frames but cameras[0].frames has {}: all cameras "
+                                      "must have the same number of frames",
+                                      recording.frames.size(), recordings->front().frames.size()));
+    }
+    recordings->push_back(std::move(recording));
+  }
+  return Status::Ok();
+}
+
 bool EndsWithObj(const std::string& file) {
   if (file.size() < 4) return false;
   std::string extension = file.substr(file.size() - 4);
@@ -133,20 +212,7 @@ Result<Capture> CaptureFromJson(const json& root, std::string_view source) {
   const JsonReader reader(source);
   SOFTID_RETURN_IF_ERROR(reader.CheckObject("", root));
   Capture capture;
-
-  // Format first, so that another version's differing fields are reported as a version mismatch.
-  SOFTID_ASSIGN_OR_RETURN(const json* format, reader.Require(root, "", "format"));
-  SOFTID_ASSIGN_OR_RETURN(const std::string format_string, reader.String("format", *format));
-  if (format_string != kCaptureFormat) {
-    constexpr std::string_view kFamily = "softid-capture/";
-    if (format_string.starts_with(kFamily)) {
-      return reader.Error(
-          "format", *format,
-          fmt::format("unsupported version (this reader supports \"{}\")", kCaptureFormat));
-    }
-    return reader.Error("format", *format,
-                        fmt::format("not a softid capture (expected \"{}\")", kCaptureFormat));
-  }
+  SOFTID_RETURN_IF_ERROR(CheckFormat(reader, root));
 
   SOFTID_ASSIGN_OR_RETURN(const json* mesh, reader.Require(root, "", "mesh"));
   SOFTID_ASSIGN_OR_RETURN(capture.mesh_file, reader.RelativePath("mesh", *mesh));
@@ -157,64 +223,13 @@ Result<Capture> CaptureFromJson(const json& root, std::string_view source) {
   if (const auto it = root.find("mass_kg"); it != root.end()) {
     SOFTID_ASSIGN_OR_RETURN(capture.mass_kg, reader.PositiveNumber("mass_kg", *it));
   }
-
   if (const auto it = root.find("fixed_region"); it != root.end()) {
-    SOFTID_RETURN_IF_ERROR(reader.CheckObject("fixed_region", *it));
-    SOFTID_ASSIGN_OR_RETURN(const json* min_json, reader.Require(*it, "fixed_region", "min"));
-    SOFTID_ASSIGN_OR_RETURN(const json* max_json, reader.Require(*it, "fixed_region", "max"));
-    SOFTID_ASSIGN_OR_RETURN(const Eigen::Vector3d min,
-                            reader.Vector3("fixed_region.min", *min_json));
-    SOFTID_ASSIGN_OR_RETURN(const Eigen::Vector3d max,
-                            reader.Vector3("fixed_region.max", *max_json));
-    for (int i = 0; i < 3; ++i) {
-      if (min[i] > max[i]) {
-        return reader.Error(fmt::format("fixed_region.min[{}]", i), (*min_json)[i],
-                            fmt::format("greater than fixed_region.max[{}] = {}: min must be <= "
-                                        "max in every coordinate",
-                                        i, Shown((*max_json)[i])));
-      }
-    }
-    capture.fixed_region = Eigen::AlignedBox3d(min, max);
+    SOFTID_ASSIGN_OR_RETURN(capture.fixed_region, ParseFixedRegion(reader, *it));
   }
-
   if (const auto it = root.find("floor"); it != root.end()) {
-    SOFTID_RETURN_IF_ERROR(reader.CheckObject("floor", *it));
-    SOFTID_ASSIGN_OR_RETURN(const json* normal, reader.Require(*it, "floor", "normal"));
-    SOFTID_ASSIGN_OR_RETURN(const json* offset, reader.Require(*it, "floor", "offset"));
-    Capture::Floor floor;
-    SOFTID_ASSIGN_OR_RETURN(floor.normal, reader.Vector3("floor.normal", *normal));
-    if (!(floor.normal.norm() > 1e-9)) {
-      return reader.Error("floor.normal", *normal, "must not be zero");
-    }
-    floor.normal.normalize();
-    SOFTID_ASSIGN_OR_RETURN(floor.offset_m, reader.Number("floor.offset", *offset));
-    capture.floor = floor;
+    SOFTID_ASSIGN_OR_RETURN(capture.floor, ParseFloor(reader, *it));
   }
-
-  SOFTID_ASSIGN_OR_RETURN(const json* cameras, reader.Require(root, "", "cameras"));
-  SOFTID_RETURN_IF_ERROR(reader.CheckArray("cameras", *cameras));
-  if (cameras->empty()) return reader.Error("cameras", *cameras, "must list at least one camera");
-  if (cameras->size() > static_cast<size_t>(kMaxCameras)) {
-    return reader.Error("cameras", fmt::format("{} cameras: at most {} are accepted",
-                                               cameras->size(), kMaxCameras));
-  }
-  std::set<std::string> names;
-  for (size_t i = 0; i < cameras->size(); ++i) {
-    const std::string path = IndexPath("cameras", i);
-    SOFTID_ASSIGN_OR_RETURN(CameraRecording recording, ParseCamera(reader, (*cameras)[i], path));
-    if (!names.insert(recording.camera.name).second) {
-      return reader.Error(JoinPath(path, "name"), json(recording.camera.name),
-                          "duplicate camera name");
-    }
-    if (i > 0 && recording.frames.size() != capture.cameras.front().frames.size()) {
-      return reader.Error(
-          JoinPath(path, "frames"),
-          fmt::format("has {} frames but cameras[0].frames has {}: all cameras "
-                      "must have the same number of frames",
-                      recording.frames.size(), capture.cameras.front().frames.size()));
-    }
-    capture.cameras.push_back(std::move(recording));
-  }
+  SOFTID_RETURN_IF_ERROR(ParseCameras(reader, root, &capture.cameras));
   if (const auto it = root.find("frame_times"); it != root.end()) {
     SOFTID_ASSIGN_OR_RETURN(capture.frame_times,
                             ParseFrameTimes(reader, *it, capture.NumFrames(), capture.fps));
@@ -297,10 +312,15 @@ Result<DepthImage> LoadFrame(const Capture& capture, int camera, int frame) {
                       recording.camera.width, recording.camera.height);
 }
 
-Status WriteCapture(const std::filesystem::path& directory, const Capture& capture,
-                    const geometry::TriangleMesh& mesh,
-                    const std::vector<std::vector<DepthImage>>& frames_per_camera) {
-  const std::string source = fmt::format("WriteCapture({})", directory.string());
+namespace {
+
+// `capture` as WriteCapture writes it: its directory, the mesh file (object.obj unless named) and
+// the frames' file names <camera>/%06d.png, one per image of frames_per_camera.
+// InvalidArgument (naming `source`) for a mesh file that is not OBJ, a wrong number of image
+// lists or a camera name that cannot be a folder name.
+Result<Capture> NameCaptureFiles(const std::string& source, const std::filesystem::path& directory,
+                                 const Capture& capture,
+                                 const std::vector<std::vector<DepthImage>>& frames_per_camera) {
   Capture out = capture;
   out.directory = directory;
   if (out.mesh_file.empty()) out.mesh_file = "object.obj";
@@ -328,8 +348,12 @@ Status WriteCapture(const std::filesystem::path& directory, const Capture& captu
       recording.frames.push_back(fmt::format("{}/{:06d}.png", name, k));
     }
   }
-  // The same rules a reader applies (also catches empty or unequal frame lists).
-  SOFTID_RETURN_IF_ERROR(CaptureFromJson(ToJson(out), source).status());
+  return out;
+}
+
+// InvalidArgument unless every image has its camera's size.
+Status CheckImageSizes(const std::string& source, const Capture& out,
+                       const std::vector<std::vector<DepthImage>>& frames_per_camera) {
   for (size_t i = 0; i < out.cameras.size(); ++i) {
     const PinholeCamera& camera = out.cameras[i].camera;
     for (size_t k = 0; k < frames_per_camera[i].size(); ++k) {
@@ -343,10 +367,14 @@ Status WriteCapture(const std::filesystem::path& directory, const Capture& captu
       }
     }
   }
-  if (mesh.vertices.empty() || mesh.triangles.empty()) {
-    return Status::InvalidArgument(fmt::format("{}: mesh is empty (no triangles)", source));
-  }
+  return Status::Ok();
+}
 
+// The files of a validated capture: the previous capture.json removed first, the mesh, the
+// frames, and capture.json last, atomically.
+Status WriteCaptureFiles(const std::filesystem::path& directory, const Capture& out,
+                         const geometry::TriangleMesh& mesh,
+                         const std::vector<std::vector<DepthImage>>& frames_per_camera) {
   std::error_code error;
   std::filesystem::create_directories(directory, error);
   if (error) {
@@ -376,6 +404,23 @@ Status WriteCapture(const std::filesystem::path& directory, const Capture& captu
     }
   }
   return WriteFileAtomically(json_path, ToJson(out).dump(2) + "\n");
+}
+
+}  // namespace
+
+Status WriteCapture(const std::filesystem::path& directory, const Capture& capture,
+                    const geometry::TriangleMesh& mesh,
+                    const std::vector<std::vector<DepthImage>>& frames_per_camera) {
+  const std::string source = fmt::format("WriteCapture({})", directory.string());
+  SOFTID_ASSIGN_OR_RETURN(const Capture out,
+                          NameCaptureFiles(source, directory, capture, frames_per_camera));
+  // The same rules a reader applies (also catches empty or unequal frame lists).
+  SOFTID_RETURN_IF_ERROR(CaptureFromJson(ToJson(out), source).status());
+  SOFTID_RETURN_IF_ERROR(CheckImageSizes(source, out, frames_per_camera));
+  if (mesh.vertices.empty() || mesh.triangles.empty()) {
+    return Status::InvalidArgument(fmt::format("{}: mesh is empty (no triangles)", source));
+  }
+  return WriteCaptureFiles(directory, out, mesh, frames_per_camera);
 }
 
 }  // namespace softid::capture

@@ -39,6 +39,54 @@ void ThrowOnDeviceError(RTCDevice device, const char* what) {
   }
 }
 
+void CheckTriangleIndices(const geometry::TriangleMesh& mesh_W) {
+  const int num_vertices = static_cast<int>(mesh_W.vertices.size());
+  for (const Eigen::Vector3i& t : mesh_W.triangles) {
+    SOFTID_THROW_UNLESS(t.minCoeff() >= 0 && t.maxCoeff() < num_vertices,
+                        "DepthRenderer::Render: triangle vertex index out of range");
+  }
+}
+
+// Attaches mesh_W to `scene` as one triangle geometry in the camera frame (vertices transformed in
+// double precision); with back-face culling every triangle is added with both windings.
+void AttachMeshInCameraFrame(RTCDevice device, bool backface_culling,
+                             const geometry::TriangleMesh& mesh_W, const PinholeCamera& camera,
+                             RTCScene scene) {
+  const int num_vertices = static_cast<int>(mesh_W.vertices.size());
+  RTCGeometry geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* vertices_C = static_cast<float*>(rtcSetNewGeometryBuffer(
+      geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), num_vertices));
+  const size_t num_triangles = mesh_W.triangles.size() * (backface_culling ? 2 : 1);
+  auto* indices = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
+      geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), num_triangles));
+  if (vertices_C == nullptr || indices == nullptr) {
+    rtcReleaseGeometry(geometry);
+    ThrowOnDeviceError(device, "rtcSetNewGeometryBuffer");
+    throw std::runtime_error("DepthRenderer: cannot allocate Embree buffers");
+  }
+  const Eigen::Isometry3d X_CW = camera.X_WC.inverse();
+  for (int i = 0; i < num_vertices; ++i) {
+    const Eigen::Vector3d p_C = X_CW * mesh_W.vertices[i];
+    if (!p_C.allFinite()) {
+      rtcReleaseGeometry(geometry);
+      SOFTID_THROW_UNLESS(false, "DepthRenderer::Render: vertex is not finite");
+    }
+    for (int k = 0; k < 3; ++k) vertices_C[3 * i + k] = static_cast<float>(p_C[k]);
+  }
+  size_t j = 0;
+  for (const Eigen::Vector3i& t : mesh_W.triangles) {
+    for (int k = 0; k < 3; ++k) indices[j++] = static_cast<unsigned>(t[k]);
+    if (backface_culling) {  // the reversed winding faces the other way
+      indices[j++] = static_cast<unsigned>(t[0]);
+      indices[j++] = static_cast<unsigned>(t[2]);
+      indices[j++] = static_cast<unsigned>(t[1]);
+    }
+  }
+  rtcCommitGeometry(geometry);
+  rtcAttachGeometry(scene, geometry);
+  rtcReleaseGeometry(geometry);
+}
+
 }  // namespace
 
 DepthRenderer::DepthRenderer() : impl_(std::make_unique<Impl>()) {
@@ -77,47 +125,12 @@ DepthImage DepthRenderer::RenderRays(const geometry::TriangleMesh& mesh_W,
   DepthImage image = DepthImage::Zeros(camera.width, camera.height);
   if (mesh_W.vertices.empty() || mesh_W.triangles.empty()) return image;
 
-  const int num_vertices = static_cast<int>(mesh_W.vertices.size());
-  for (const Eigen::Vector3i& t : mesh_W.triangles) {
-    SOFTID_THROW_UNLESS(t.minCoeff() >= 0 && t.maxCoeff() < num_vertices,
-                        "DepthRenderer::Render: triangle vertex index out of range");
-  }
+  CheckTriangleIndices(mesh_W);
   RTCDevice device = impl_->device;
   SceneHandle scene{rtcNewScene(device)};
   rtcSetSceneFlags(scene.scene, RTC_SCENE_FLAG_ROBUST);
   rtcSetSceneBuildQuality(scene.scene, RTC_BUILD_QUALITY_LOW);  // one build per frame
-  RTCGeometry geometry = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  auto* vertices_C = static_cast<float*>(rtcSetNewGeometryBuffer(
-      geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), num_vertices));
-  const size_t num_triangles = mesh_W.triangles.size() * (impl_->backface_culling ? 2 : 1);
-  auto* indices = static_cast<unsigned*>(rtcSetNewGeometryBuffer(
-      geometry, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(unsigned), num_triangles));
-  if (vertices_C == nullptr || indices == nullptr) {
-    rtcReleaseGeometry(geometry);
-    ThrowOnDeviceError(device, "rtcSetNewGeometryBuffer");
-    throw std::runtime_error("DepthRenderer: cannot allocate Embree buffers");
-  }
-  const Eigen::Isometry3d X_CW = camera.X_WC.inverse();
-  for (int i = 0; i < num_vertices; ++i) {
-    const Eigen::Vector3d p_C = X_CW * mesh_W.vertices[i];
-    if (!p_C.allFinite()) {
-      rtcReleaseGeometry(geometry);
-      SOFTID_THROW_UNLESS(false, "DepthRenderer::Render: vertex is not finite");
-    }
-    for (int k = 0; k < 3; ++k) vertices_C[3 * i + k] = static_cast<float>(p_C[k]);
-  }
-  size_t j = 0;
-  for (const Eigen::Vector3i& t : mesh_W.triangles) {
-    for (int k = 0; k < 3; ++k) indices[j++] = static_cast<unsigned>(t[k]);
-    if (impl_->backface_culling) {  // the reversed winding faces the other way
-      indices[j++] = static_cast<unsigned>(t[0]);
-      indices[j++] = static_cast<unsigned>(t[2]);
-      indices[j++] = static_cast<unsigned>(t[1]);
-    }
-  }
-  rtcCommitGeometry(geometry);
-  rtcAttachGeometry(scene.scene, geometry);
-  rtcReleaseGeometry(geometry);
+  AttachMeshInCameraFrame(device, impl_->backface_culling, mesh_W, camera, scene.scene);
   rtcCommitScene(scene.scene);
   ThrowOnDeviceError(device, "rtcCommitScene");
 

@@ -30,6 +30,119 @@ std::vector<char> DilateChebyshev(const std::vector<char>& mask, const Eigen::Ve
   return current;
 }
 
+// Per grid node: whether it is an FE node. *clipped: whether some FE node lies closer than
+// band_cells to the grid boundary.
+std::vector<char> MarkFeNodes(const fem::HexMesh& mesh, int band_cells, bool* clipped) {
+  const geometry::RegularGrid& grid = mesh.grid;
+  const Eigen::Vector3i n = grid.NumNodesPerAxis();
+  const int num_fe = mesh.NumNodes();
+  std::vector<char> is_fe(grid.NumNodes(), 0);
+  for (int i = 0; i < num_fe; ++i) {
+    is_fe[mesh.node_grid_index[i]] = 1;
+    const Eigen::Vector3i c = grid.NodeCoords(mesh.node_grid_index[i]);
+    for (int a = 0; a < 3; ++a) {
+      *clipped |= c[a] < band_cells || c[a] > n[a] - 1 - band_cells;
+    }
+  }
+  return is_fe;
+}
+
+// Domain numbering: FE nodes keep their index, band nodes follow in grid order.
+void NumberDomain(const fem::HexMesh& mesh, const std::vector<char>& is_fe,
+                  const std::vector<char>& in_domain, std::vector<int>* domain_grid_node,
+                  std::vector<int>* grid_to_domain) {
+  const int num_fe = mesh.NumNodes();
+  const int num_grid_nodes = mesh.grid.NumNodes();
+  *domain_grid_node = mesh.node_grid_index;
+  grid_to_domain->assign(num_grid_nodes, -1);
+  for (int i = 0; i < num_fe; ++i) (*grid_to_domain)[mesh.node_grid_index[i]] = i;
+  for (int g = 0; g < num_grid_nodes; ++g) {
+    if (in_domain[g] && !is_fe[g]) {
+      (*grid_to_domain)[g] = static_cast<int>(domain_grid_node->size());
+      domain_grid_node->push_back(g);
+    }
+  }
+}
+
+// L_BB's lower triangle (row > column, and the diagonal) as triplets, and A_BF in compressed rows:
+// the FE neighbours of band node b are (*fe_neighbours)[(*fe_offsets)[b] ..].
+std::vector<Eigen::Triplet<double, int>> AssembleBandLaplacian(
+    const geometry::RegularGrid& grid, int num_fe, const std::vector<int>& domain_grid_node,
+    const std::vector<int>& grid_to_domain, std::vector<int>* fe_offsets,
+    std::vector<int>* fe_neighbours) {
+  const Eigen::Vector3i n = grid.NumNodesPerAxis();
+  const int num_band = static_cast<int>(domain_grid_node.size()) - num_fe;
+  std::vector<Eigen::Triplet<double, int>> triplets;
+  triplets.reserve(7 * static_cast<size_t>(num_band));
+  fe_offsets->assign(1, 0);
+  fe_offsets->reserve(num_band + 1);
+  for (int b = 0; b < num_band; ++b) {
+    const int g = domain_grid_node[num_fe + b];
+    const Eigen::Vector3i c = grid.NodeCoords(g);
+    int degree = 0;
+    for (int a = 0; a < 3; ++a) {
+      for (int step : {-1, 1}) {
+        Eigen::Vector3i nc = c;
+        nc[a] += step;
+        if (nc[a] < 0 || nc[a] >= n[a]) continue;
+        const int d = grid_to_domain[grid.NodeIndex(nc.x(), nc.y(), nc.z())];
+        if (d < 0) continue;
+        ++degree;
+        if (d < num_fe) {
+          fe_neighbours->push_back(d);
+        } else if (d - num_fe > b) {  // lower triangle only, row > column
+          triplets.emplace_back(d - num_fe, b, -1.0);
+        }
+      }
+    }
+    // Every band node has a domain neighbour: the path towards its nearest FE node stays in the
+    // Chebyshev ball around that node.
+    SOFTID_DEMAND(degree > 0);
+    triplets.emplace_back(b, b, static_cast<double>(degree));
+    fe_offsets->push_back(static_cast<int>(fe_neighbours->size()));
+  }
+  return triplets;
+}
+
+// The affine fit uses the FE nodes that feed the band (its Dirichlet data): those nodes, their
+// centroid and the inverse of their second moment.
+void PrepareAffineFit(const std::vector<int>& fe_neighbours,
+                      const std::vector<Eigen::Vector3d>& rest, std::vector<int>* fit_nodes,
+                      Eigen::Vector3d* fit_centre, Eigen::Matrix3d* fit_inverse_moment) {
+  *fit_nodes = fe_neighbours;
+  std::sort(fit_nodes->begin(), fit_nodes->end());
+  fit_nodes->erase(std::unique(fit_nodes->begin(), fit_nodes->end()), fit_nodes->end());
+  fit_centre->setZero();
+  for (int i : *fit_nodes) *fit_centre += rest[i];
+  *fit_centre /= static_cast<double>(fit_nodes->size());
+  Eigen::Matrix3d moment = Eigen::Matrix3d::Zero();
+  for (int i : *fit_nodes) moment += (rest[i] - *fit_centre) * (rest[i] - *fit_centre).transpose();
+  // They are the nodes of whole grid cells, so never coplanar.
+  SOFTID_DEMAND(moment.determinant() > 0.0);
+  *fit_inverse_moment = moment.inverse();
+}
+
+// Factors L_BB = P^T L D L^T P (AMD ordering) from its lower triangle.
+void FactorBandLaplacian(int num_band, const std::vector<Eigen::Triplet<double, int>>& triplets,
+                         Eigen::SparseMatrix<double, Eigen::ColMajor, int>* factor_l,
+                         Eigen::VectorXd* inverse_d, Eigen::VectorXi* permutation) {
+  Eigen::SparseMatrix<double, Eigen::ColMajor, int> laplacian(num_band, num_band);
+  laplacian.setFromTriplets(triplets.begin(), triplets.end());
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double, Eigen::ColMajor, int>, Eigen::Lower,
+                        Eigen::AMDOrdering<int>>
+      ldlt(laplacian);
+  SOFTID_DEMAND(ldlt.info() == Eigen::Success);
+  // Keep only the factor's arrays: our own solve handles the 3 right-hand sides in one sweep and
+  // allocates nothing.
+  *factor_l = ldlt.matrixL().nestedExpression();
+  factor_l->prune([](int row, int col, double) { return row > col; });
+  factor_l->makeCompressed();
+  const Eigen::VectorXd d = ldlt.vectorD();
+  SOFTID_DEMAND((d.array() > 0.0).all());
+  *inverse_d = d.cwiseInverse();
+  *permutation = ldlt.permutationP().indices();
+}
+
 }  // namespace
 
 const char* ToString(ExtensionMode mode) {
@@ -47,95 +160,23 @@ DisplacementExtension::DisplacementExtension(const fem::HexMesh& mesh, int band_
                       "band_cells = " + std::to_string(band_cells) + ": must be >= 1");
   SOFTID_THROW_UNLESS(num_fe_ > 0, "mesh: has no FE node");
   const geometry::RegularGrid& grid = mesh.grid;
-  const Eigen::Vector3i n = grid.NumNodesPerAxis();
   const int num_grid_nodes = grid.NumNodes();
   SOFTID_DEMAND(static_cast<int>(mesh.grid_node_to_node.size()) == num_grid_nodes);
 
-  std::vector<char> is_fe(num_grid_nodes, 0);
-  for (int i = 0; i < num_fe_; ++i) {
-    is_fe[mesh.node_grid_index[i]] = 1;
-    const Eigen::Vector3i c = grid.NodeCoords(mesh.node_grid_index[i]);
-    for (int a = 0; a < 3; ++a) {
-      clipped_ |= c[a] < band_cells || c[a] > n[a] - 1 - band_cells;
-    }
-  }
-  const std::vector<char> in_domain = DilateChebyshev(is_fe, n, band_cells);
-
-  // Domain numbering: FE nodes keep their index, band nodes follow in grid order.
-  domain_grid_node_ = mesh.node_grid_index;
-  grid_to_domain_.assign(num_grid_nodes, -1);
-  for (int i = 0; i < num_fe_; ++i) grid_to_domain_[mesh.node_grid_index[i]] = i;
-  for (int g = 0; g < num_grid_nodes; ++g) {
-    if (in_domain[g] && !is_fe[g]) {
-      grid_to_domain_[g] = static_cast<int>(domain_grid_node_.size());
-      domain_grid_node_.push_back(g);
-    }
-  }
+  const std::vector<char> is_fe = MarkFeNodes(mesh, band_cells, &clipped_);
+  const std::vector<char> in_domain = DilateChebyshev(is_fe, grid.NumNodesPerAxis(), band_cells);
+  NumberDomain(mesh, is_fe, in_domain, &domain_grid_node_, &grid_to_domain_);
 
   rest_.resize(domain_grid_node_.size());
   for (size_t d = 0; d < rest_.size(); ++d) rest_[d] = grid.NodePosition(domain_grid_node_[d]);
 
   const int num_band = num_band_nodes();
-  std::vector<Eigen::Triplet<double, int>> triplets;
-  triplets.reserve(7 * static_cast<size_t>(num_band));
-  fe_offsets_.assign(1, 0);
-  fe_offsets_.reserve(num_band + 1);
-  for (int b = 0; b < num_band; ++b) {
-    const int g = domain_grid_node_[num_fe_ + b];
-    const Eigen::Vector3i c = grid.NodeCoords(g);
-    int degree = 0;
-    for (int a = 0; a < 3; ++a) {
-      for (int step : {-1, 1}) {
-        Eigen::Vector3i nc = c;
-        nc[a] += step;
-        if (nc[a] < 0 || nc[a] >= n[a]) continue;
-        const int d = grid_to_domain_[grid.NodeIndex(nc.x(), nc.y(), nc.z())];
-        if (d < 0) continue;
-        ++degree;
-        if (d < num_fe_) {
-          fe_neighbours_.push_back(d);
-        } else if (d - num_fe_ > b) {  // lower triangle only, row > column
-          triplets.emplace_back(d - num_fe_, b, -1.0);
-        }
-      }
-    }
-    // Every band node has a domain neighbour: the path towards its nearest FE node stays in the
-    // Chebyshev ball around that node.
-    SOFTID_DEMAND(degree > 0);
-    triplets.emplace_back(b, b, static_cast<double>(degree));
-    fe_offsets_.push_back(static_cast<int>(fe_neighbours_.size()));
-  }
+  const std::vector<Eigen::Triplet<double, int>> triplets = AssembleBandLaplacian(
+      grid, num_fe_, domain_grid_node_, grid_to_domain_, &fe_offsets_, &fe_neighbours_);
   if (num_band == 0) return;
 
-  // The affine fit uses the FE nodes that feed the band (its Dirichlet data).
-  fit_nodes_ = fe_neighbours_;
-  std::sort(fit_nodes_.begin(), fit_nodes_.end());
-  fit_nodes_.erase(std::unique(fit_nodes_.begin(), fit_nodes_.end()), fit_nodes_.end());
-  fit_centre_.setZero();
-  for (int i : fit_nodes_) fit_centre_ += rest_[i];
-  fit_centre_ /= static_cast<double>(fit_nodes_.size());
-  Eigen::Matrix3d moment = Eigen::Matrix3d::Zero();
-  for (int i : fit_nodes_)
-    moment += (rest_[i] - fit_centre_) * (rest_[i] - fit_centre_).transpose();
-  // They are the nodes of whole grid cells, so never coplanar.
-  SOFTID_DEMAND(moment.determinant() > 0.0);
-  fit_inverse_moment_ = moment.inverse();
-
-  Eigen::SparseMatrix<double, Eigen::ColMajor, int> laplacian(num_band, num_band);
-  laplacian.setFromTriplets(triplets.begin(), triplets.end());
-  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double, Eigen::ColMajor, int>, Eigen::Lower,
-                        Eigen::AMDOrdering<int>>
-      ldlt(laplacian);
-  SOFTID_DEMAND(ldlt.info() == Eigen::Success);
-  // Keep only the factor's arrays: our own solve handles the 3 right-hand sides in one sweep and
-  // allocates nothing.
-  factor_l_ = ldlt.matrixL().nestedExpression();
-  factor_l_.prune([](int row, int col, double) { return row > col; });
-  factor_l_.makeCompressed();
-  const Eigen::VectorXd d = ldlt.vectorD();
-  SOFTID_DEMAND((d.array() > 0.0).all());
-  inverse_d_ = d.cwiseInverse();
-  permutation_ = ldlt.permutationP().indices();
+  PrepareAffineFit(fe_neighbours_, rest_, &fit_nodes_, &fit_centre_, &fit_inverse_moment_);
+  FactorBandLaplacian(num_band, triplets, &factor_l_, &inverse_d_, &permutation_);
   scratch_.resize(3, num_band);
   permuted_.resize(3, num_band);
 }

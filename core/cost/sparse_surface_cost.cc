@@ -160,10 +160,16 @@ void SparseSurfaceCost::BuildCandidates() {
 }
 
 void SparseSurfaceCost::BuildBins() {
+  const double margin = kBoxMargin * grid_.cell_size;
+  LayOutBins(margin);
+  CountCandidatesPerBin(margin);
+  FillBins();
+}
+
+void SparseSurfaceCost::LayOutBins(double margin) {
   const double h = grid_.cell_size;
   Eigen::AlignedBox3d bounds;
   for (const Eigen::Vector3d& x : positions_) bounds.extend(x);
-  const double margin = kBoxMargin * h;
   bin_origin_ = bounds.min() - Eigen::Vector3d::Constant(margin);
   const Eigen::Vector3d extent = bounds.sizes() + Eigen::Vector3d::Constant(2 * margin);
   // Bins of one cell keep ~1-3 candidates per point; a body torn far apart by a bad u would need
@@ -178,8 +184,10 @@ void SparseSurfaceCost::BuildBins() {
     }
     bin_size_ *= std::max(1.1, std::cbrt(dims.prod() / max_bins));
   }
-  const int num_bins = bin_dims_.prod();
+}
 
+void SparseSurfaceCost::CountCandidatesPerBin(double margin) {
+  const int num_bins = bin_dims_.prod();
   bin_offsets_.assign(num_bins + 1, 0);
   overflow_.clear();
   const auto bin_coord = [&](double value, int axis) {
@@ -212,6 +220,10 @@ void SparseSurfaceCost::BuildBins() {
       }
     }
   }
+}
+
+void SparseSurfaceCost::FillBins() {
+  const int num_bins = bin_dims_.prod();
   // Counts become end offsets (the last entry stays at the total) ...
   for (int b = 1; b <= num_bins; ++b) bin_offsets_[b] += bin_offsets_[b - 1];
   bin_items_.resize(bin_offsets_[num_bins]);
@@ -280,6 +292,73 @@ void SparseSurfaceCost::TryCandidate(int i, const Eigen::Vector3d& x, Match* bes
   best->jacobian = inversion.jacobian;
 }
 
+void SparseSurfaceCost::DeformDomain(const Eigen::VectorXd& u) {
+  extension_.Extend(u, &u_domain_);
+  for (size_t d = 0; d < positions_.size(); ++d) {
+    positions_[d] = extension_.rest_position(static_cast<int>(d)) + u_domain_.segment<3>(3 * d);
+  }
+  BuildBins();
+}
+
+void SparseSurfaceCost::FindMatch(const Eigen::Vector3d& x, Match* best) const {
+  if (x.allFinite()) {
+    const Eigen::Vector3d t = (x - bin_origin_) / bin_size_;
+    if ((t.array() >= 0.0).all() && (t.array() < bin_dims_.cast<double>().array()).all()) {
+      const int bin =
+          static_cast<int>(t.x()) +
+          bin_dims_.x() * (static_cast<int>(t.y()) + bin_dims_.y() * static_cast<int>(t.z()));
+      for (int k = bin_offsets_[bin]; k < bin_offsets_[bin + 1]; ++k) {
+        TryCandidate(bin_items_[k], x, best);
+      }
+    }
+    for (int i : overflow_) TryCandidate(i, x, best);
+  }
+}
+
+Eigen::Vector3d SparseSurfaceCost::MatchPhiGradient(const Candidate& candidate, Match* best) const {
+  // kExact: the chosen match's phi is the exact distance at its material point X = corner 0 +
+  // h xi (the rest cell is an axis-aligned cube), d phi / d xi = h grad_X phi.
+  Eigen::Vector3d grad_xi = Eigen::Vector3d::Zero();
+  if (exact_distance_ != nullptr) {
+    const Eigen::Vector3d rest =
+        extension_.rest_position(candidate.nodes[0]) + grid_.cell_size * best->xi;
+    Eigen::Vector3d grad_rest;
+    best->phi = ExactDistance(rest, best->phi, &grad_rest);
+    best->rho = TukeyLoss(best->phi, phi_max_);
+    grad_xi = grid_.cell_size * grad_rest;
+  } else {
+    const std::array<Eigen::Vector3d, 8> shape_gradients = geometry::TrilinearGradients(best->xi);
+    for (int c = 0; c < 8; ++c) grad_xi += candidate.phi[c] * shape_gradients[c];
+  }
+  return grad_xi;
+}
+
+void SparseSurfaceCost::RecordMatch(const Candidate& candidate, const Match& best,
+                                    PointMatch* match) const {
+  match->matched = true;
+  match->phi = best.phi;
+  match->cost = best.rho;
+  match->cell = candidate.cell;
+  const std::array<double, 8> weights = geometry::TrilinearWeights(best.xi);
+  match->rest_position.setZero();
+  for (int c = 0; c < 8; ++c) {
+    match->rest_position += weights[c] * extension_.rest_position(candidate.nodes[c]);
+  }
+}
+
+void SparseSurfaceCost::AccumulateGradient(const Candidate& candidate, const Match& best,
+                                           const Eigen::Vector3d& grad_xi, double inverse_count) {
+  const double drho = TukeyLossDerivative(best.phi, phi_max_) * inverse_count;
+  if (drho == 0.0) return;
+  // d phi / d x_c = -N_c(xi) J^-T grad_xi(phi): x = sum_c N_c(xi) x_c is data, so moving a
+  // corner moves xi by -J^-1 N_c dx_c.
+  const std::array<double, 8> weights = geometry::TrilinearWeights(best.xi);
+  const Eigen::Vector3d grad_x = best.jacobian.transpose().inverse() * grad_xi;
+  for (int c = 0; c < 8; ++c) {
+    grad_domain_.segment<3>(3 * candidate.nodes[c]) -= (drho * weights[c]) * grad_x;
+  }
+}
+
 double SparseSurfaceCost::Evaluate(const Eigen::VectorXd& u,
                                    std::span<const Eigen::Vector3d> points,
                                    Eigen::VectorXd* gradient, std::vector<PointMatch>* matches) {
@@ -292,74 +371,25 @@ double SparseSurfaceCost::Evaluate(const Eigen::VectorXd& u,
   if (gradient != nullptr) gradient->setZero(u.size());
   if (num_points == 0) return 0.0;
 
-  extension_.Extend(u, &u_domain_);
-  for (size_t d = 0; d < positions_.size(); ++d) {
-    positions_[d] = extension_.rest_position(static_cast<int>(d)) + u_domain_.segment<3>(3 * d);
-  }
-  BuildBins();
+  DeformDomain(u);
   if (gradient != nullptr) grad_domain_.setZero();
 
   const double inverse_count = 1.0 / static_cast<double>(num_points);
   const double truncated = TukeyLoss(phi_max_, phi_max_);
   double sum = 0.0;
   for (size_t p = 0; p < num_points; ++p) {
-    const Eigen::Vector3d& x = points[p];
     Match best;
-    if (x.allFinite()) {
-      const Eigen::Vector3d t = (x - bin_origin_) / bin_size_;
-      if ((t.array() >= 0.0).all() && (t.array() < bin_dims_.cast<double>().array()).all()) {
-        const int bin =
-            static_cast<int>(t.x()) +
-            bin_dims_.x() * (static_cast<int>(t.y()) + bin_dims_.y() * static_cast<int>(t.z()));
-        for (int k = bin_offsets_[bin]; k < bin_offsets_[bin + 1]; ++k) {
-          TryCandidate(bin_items_[k], x, &best);
-        }
-      }
-      for (int i : overflow_) TryCandidate(i, x, &best);
-    }
+    FindMatch(points[p], &best);
     if (best.candidate < 0) {
       sum += truncated;
       if (matches != nullptr) (*matches)[p].cost = truncated;
       continue;
     }
     const Candidate& candidate = candidates_[best.candidate];
-    // kExact: the chosen match's phi is the exact distance at its material point X = corner 0 +
-    // h xi (the rest cell is an axis-aligned cube), d phi / d xi = h grad_X phi.
-    Eigen::Vector3d grad_xi = Eigen::Vector3d::Zero();
-    if (exact_distance_ != nullptr) {
-      const Eigen::Vector3d rest =
-          extension_.rest_position(candidate.nodes[0]) + grid_.cell_size * best.xi;
-      Eigen::Vector3d grad_rest;
-      best.phi = ExactDistance(rest, best.phi, &grad_rest);
-      best.rho = TukeyLoss(best.phi, phi_max_);
-      grad_xi = grid_.cell_size * grad_rest;
-    } else {
-      const std::array<Eigen::Vector3d, 8> shape_gradients = geometry::TrilinearGradients(best.xi);
-      for (int c = 0; c < 8; ++c) grad_xi += candidate.phi[c] * shape_gradients[c];
-    }
+    const Eigen::Vector3d grad_xi = MatchPhiGradient(candidate, &best);
     sum += best.rho;
-    if (matches != nullptr) {
-      PointMatch& match = (*matches)[p];
-      match.matched = true;
-      match.phi = best.phi;
-      match.cost = best.rho;
-      match.cell = candidate.cell;
-      const std::array<double, 8> weights = geometry::TrilinearWeights(best.xi);
-      match.rest_position.setZero();
-      for (int c = 0; c < 8; ++c) {
-        match.rest_position += weights[c] * extension_.rest_position(candidate.nodes[c]);
-      }
-    }
-    if (gradient == nullptr) continue;
-    const double drho = TukeyLossDerivative(best.phi, phi_max_) * inverse_count;
-    if (drho == 0.0) continue;
-    // d phi / d x_c = -N_c(xi) J^-T grad_xi(phi): x = sum_c N_c(xi) x_c is data, so moving a
-    // corner moves xi by -J^-1 N_c dx_c.
-    const std::array<double, 8> weights = geometry::TrilinearWeights(best.xi);
-    const Eigen::Vector3d grad_x = best.jacobian.transpose().inverse() * grad_xi;
-    for (int c = 0; c < 8; ++c) {
-      grad_domain_.segment<3>(3 * candidate.nodes[c]) -= (drho * weights[c]) * grad_x;
-    }
+    if (matches != nullptr) RecordMatch(candidate, best, &(*matches)[p]);
+    if (gradient != nullptr) AccumulateGradient(candidate, best, grad_xi, inverse_count);
   }
   if (gradient != nullptr) extension_.AccumulateAdjoint(grad_domain_, gradient);
   return sum * inverse_count;

@@ -152,7 +152,23 @@ class SparseSurfaceCost {
   };
   // Candidate cells, band edge checks and scratch sizes, from rest_sdf_.
   void BuildCandidates();
+  // Bins of the deformed candidates (positions_): LayOutBins sizes them, CountCandidatesPerBin
+  // fills boxes_, bin_ranges_, overflow_ and the per-bin counts, FillBins lists the candidates.
   void BuildBins();
+  void LayOutBins(double margin);
+  void CountCandidatesPerBin(double margin);
+  void FillBins();
+  // Deformed domain nodes (positions_) for FE displacements u, and their bins.
+  void DeformDomain(const Eigen::VectorXd& u);
+  // The best candidate containing point x (best->candidate stays -1 if none does).
+  void FindMatch(const Eigen::Vector3d& x, Match* best) const;
+  // d phi / d xi at the match; with kExact it first replaces best->phi and best->rho by the exact
+  // distance.
+  Eigen::Vector3d MatchPhiGradient(const Candidate& candidate, Match* best) const;
+  void RecordMatch(const Candidate& candidate, const Match& best, PointMatch* match) const;
+  // Adds the match's share of dC/d(domain positions) to grad_domain_.
+  void AccumulateGradient(const Candidate& candidate, const Match& best,
+                          const Eigen::Vector3d& grad_xi, double inverse_count);
   // kExact: the signed distance to the rest surface at X and its gradient d phi / d X;
   // `interpolated` is the interpolant's value there (its sign is trusted away from the surface).
   double ExactDistance(const Eigen::Vector3d& rest, double interpolated,

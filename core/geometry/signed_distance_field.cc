@@ -20,6 +20,78 @@ std::string Field(const char* name) {
   return std::string("SignedDistanceOptions.") + name;
 }
 
+// Cell size h [m]: options.cell_size, or the longest side split into cells_along_longest_side.
+Result<double> ChooseCellSize(const Eigen::Vector3d& extent, const SignedDistanceOptions& options) {
+  double h = options.cell_size;
+  if (h <= 0.0) {
+    h = extent.maxCoeff() / options.cells_along_longest_side;
+    if (!(h > 0.0)) {
+      return Status::InvalidArgument(
+          "mesh: bounds have zero extent; set SignedDistanceOptions.cell_size");
+    }
+  }
+  return h;
+}
+
+// A grid of cell size h centred on the mesh bounds (extent = bounds.sizes()), padded on every
+// side; InvalidArgument if it would have more than kMaxNodes nodes.
+Status LayOutGrid(const Eigen::AlignedBox3d& bounds, const Eigen::Vector3d& extent, double h,
+                  const SignedDistanceOptions& options, RegularGrid* grid) {
+  long long num_nodes = 1;
+  for (int a = 0; a < 3; ++a) {
+    // A tolerance keeps exact multiples of h (extent = 20 h) from gaining a cell by rounding.
+    const double cells =
+        std::max(0.0, std::ceil(extent[a] / h - 1e-9)) + 2.0 * options.padding_cells;
+    if (cells + 1 > static_cast<double>(kMaxNodes)) {
+      num_nodes = kMaxNodes + 1;
+      break;
+    }
+    grid->num_cells[a] = static_cast<int>(cells);
+    num_nodes *= grid->num_cells[a] + 1;
+  }
+  if (num_nodes > kMaxNodes) {
+    return Status::InvalidArgument("SignedDistanceOptions: cell_size h = " + std::to_string(h) +
+                                   " m gives more than 2^27 grid nodes for mesh extent " +
+                                   std::to_string(extent.maxCoeff()) + " m");
+  }
+  grid->cell_size = h;
+  grid->origin = bounds.center() - 0.5 * h * grid->num_cells.cast<double>();
+  return Status::Ok();
+}
+
+// field->phi at every grid node: the distance, negative where the winding number says inside.
+// Nodes are handed out in tasks of kNodesPerTask to num_threads threads (0 = hardware
+// concurrency), the calling thread included.
+void FillSignedDistances(const MeshDistance& distance, const WindingNumber& winding,
+                         int num_threads, SignedDistanceField* field) {
+  const int n = field->grid.NumNodes();
+  field->phi.assign(n, 0.0);
+  std::atomic<int> next_task{0};
+  auto work = [&]() {
+    while (true) {
+      const int begin = next_task.fetch_add(kNodesPerTask);
+      if (begin >= n) return;
+      const int end = std::min(n, begin + kNodesPerTask);
+      for (int node = begin; node < end; ++node) {
+        const Eigen::Vector3d p = field->grid.NodePosition(node);
+        const double d = distance.Distance(p);
+        // The coarse winding number (error < 1e-2) decides unless it is near 1/2.
+        double w = std::abs(winding.Evaluate(p, WindingNumber::kCoarseFarFactor));
+        if (std::abs(w - 0.5) < kCoarseDecisionMargin) w = std::abs(winding(p));
+        field->phi[node] = w >= 0.5 ? -d : d;
+      }
+    }
+  };
+  int threads =
+      num_threads > 0 ? num_threads : static_cast<int>(std::thread::hardware_concurrency());
+  threads = std::clamp(threads, 1, std::max(1, n / kNodesPerTask));
+  std::vector<std::thread> workers;
+  workers.reserve(threads - 1);
+  for (int t = 1; t < threads; ++t) workers.emplace_back(work);
+  work();
+  for (std::thread& worker : workers) worker.join();
+}
+
 }  // namespace
 
 Status SignedDistanceOptions::Validate() const {
@@ -60,64 +132,13 @@ Result<SignedDistanceField> ComputeSignedDistanceField(const TriangleMesh& mesh,
 
   const Eigen::AlignedBox3d bounds = mesh.Bounds();
   const Eigen::Vector3d extent = bounds.sizes();
-  double h = options.cell_size;
-  if (h <= 0.0) {
-    h = extent.maxCoeff() / options.cells_along_longest_side;
-    if (!(h > 0.0)) {
-      return Status::InvalidArgument(
-          "mesh: bounds have zero extent; set SignedDistanceOptions.cell_size");
-    }
-  }
+  SOFTID_ASSIGN_OR_RETURN(const double h, ChooseCellSize(extent, options));
   SignedDistanceField field;
-  long long num_nodes = 1;
-  for (int a = 0; a < 3; ++a) {
-    // A tolerance keeps exact multiples of h (extent = 20 h) from gaining a cell by rounding.
-    const double cells =
-        std::max(0.0, std::ceil(extent[a] / h - 1e-9)) + 2.0 * options.padding_cells;
-    if (cells + 1 > static_cast<double>(kMaxNodes)) {
-      num_nodes = kMaxNodes + 1;
-      break;
-    }
-    field.grid.num_cells[a] = static_cast<int>(cells);
-    num_nodes *= field.grid.num_cells[a] + 1;
-  }
-  if (num_nodes > kMaxNodes) {
-    return Status::InvalidArgument("SignedDistanceOptions: cell_size h = " + std::to_string(h) +
-                                   " m gives more than 2^27 grid nodes for mesh extent " +
-                                   std::to_string(extent.maxCoeff()) + " m");
-  }
-  field.grid.cell_size = h;
-  field.grid.origin = bounds.center() - 0.5 * h * field.grid.num_cells.cast<double>();
+  SOFTID_RETURN_IF_ERROR(LayOutGrid(bounds, extent, h, options, &field.grid));
 
   SOFTID_ASSIGN_OR_RETURN(const MeshDistance distance, MeshDistance::Create(mesh));
   const WindingNumber winding(mesh);
-
-  const int n = field.grid.NumNodes();
-  field.phi.assign(n, 0.0);
-  std::atomic<int> next_task{0};
-  auto work = [&]() {
-    while (true) {
-      const int begin = next_task.fetch_add(kNodesPerTask);
-      if (begin >= n) return;
-      const int end = std::min(n, begin + kNodesPerTask);
-      for (int node = begin; node < end; ++node) {
-        const Eigen::Vector3d p = field.grid.NodePosition(node);
-        const double d = distance.Distance(p);
-        // The coarse winding number (error < 1e-2) decides unless it is near 1/2.
-        double w = std::abs(winding.Evaluate(p, WindingNumber::kCoarseFarFactor));
-        if (std::abs(w - 0.5) < kCoarseDecisionMargin) w = std::abs(winding(p));
-        field.phi[node] = w >= 0.5 ? -d : d;
-      }
-    }
-  };
-  int threads = options.num_threads > 0 ? options.num_threads
-                                        : static_cast<int>(std::thread::hardware_concurrency());
-  threads = std::clamp(threads, 1, std::max(1, n / kNodesPerTask));
-  std::vector<std::thread> workers;
-  workers.reserve(threads - 1);
-  for (int t = 1; t < threads; ++t) workers.emplace_back(work);
-  work();
-  for (std::thread& worker : workers) worker.join();
+  FillSignedDistances(distance, winding, options.num_threads, &field);
   return field;
 }
 

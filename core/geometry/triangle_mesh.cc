@@ -76,16 +76,8 @@ double TriangleArea(const TriangleMesh& mesh, const Eigen::Vector3i& t) {
   return 0.5 * (mesh.vertices[t[1]] - a).cross(mesh.vertices[t[2]] - a).norm();
 }
 
-}  // namespace
-
-Eigen::AlignedBox3d TriangleMesh::Bounds() const {
-  Eigen::AlignedBox3d box;  // empty
-  for (const Eigen::Vector3d& v : vertices) box.extend(v);
-  return box;
-}
-
-Result<TriangleMesh> ReadTriangleMesh(const std::filesystem::path& path,
-                                      const std::filesystem::path& confine_to) {
+// The file checks that give a clearer message than the importer's.
+Status CheckMeshFile(const std::filesystem::path& path) {
   std::error_code ec;
   if (!std::filesystem::exists(path, ec)) {
     return Status::NotFound(Quoted(path) + ": mesh file does not exist");
@@ -96,13 +88,19 @@ Result<TriangleMesh> ReadTriangleMesh(const std::filesystem::path& path,
   if (std::filesystem::file_size(path, ec) == 0) {
     return Status::InvalidArgument(Quoted(path) + ": file is empty");
   }
+  return Status::Ok();
+}
 
-  Assimp::Importer importer;
+// Reads `path` with `importer`, which owns the returned scene; files the mesh refers to are read
+// only from confine_to (default: the mesh's folder).
+Result<const aiScene*> ImportScene(const std::filesystem::path& path,
+                                   const std::filesystem::path& confine_to,
+                                   Assimp::Importer* importer) {
   // The importer owns and deletes its IO handler.
   auto* files = new ConfinedIOSystem(confine_to.empty() ? path.parent_path() : confine_to);
-  importer.SetIOHandler(files);
+  importer->SetIOHandler(files);
   const aiScene* scene =
-      importer.ReadFile(path.string(), aiProcess_Triangulate | aiProcess_PreTransformVertices);
+      importer->ReadFile(path.string(), aiProcess_Triangulate | aiProcess_PreTransformVertices);
   if (files->refused_any()) {
     // One message whatever the file was and whether it exists: no oracle for paths elsewhere.
     return Status::InvalidArgument(
@@ -112,47 +110,139 @@ Result<TriangleMesh> ReadTriangleMesh(const std::filesystem::path& path,
   }
   if (scene == nullptr) {
     return Status::InvalidArgument(Quoted(path) +
-                                   ": cannot read mesh: " + importer.GetErrorString());
+                                   ": cannot read mesh: " + importer->GetErrorString());
   }
+  return scene;
+}
 
-  TriangleMesh mesh;
-  std::unordered_map<PositionKey, int, PositionKeyHash> index_of;
-  std::vector<int> remap;
-  for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
-    const aiMesh* in = scene->mMeshes[m];
-    remap.assign(in->mNumVertices, -1);
-    for (unsigned f = 0; f < in->mNumFaces; ++f) {
-      const aiFace& face = in->mFaces[f];
-      if (face.mNumIndices != 3) continue;  // points and lines
-      Eigen::Vector3i tri;
-      for (int c = 0; c < 3; ++c) {
-        const unsigned vi = face.mIndices[c];
-        if (vi >= in->mNumVertices) {
-          return Status::InvalidArgument(Quoted(path) + ": face " + std::to_string(f) +
-                                         " references vertex " + std::to_string(vi) + " of " +
-                                         std::to_string(in->mNumVertices));
-        }
-        if (remap[vi] < 0) {
-          const aiVector3D& v = in->mVertices[vi];
-          if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z)) {
-            return Status::InvalidArgument(Quoted(path) + ": vertex " + std::to_string(vi) +
-                                           " has non-finite coordinates");
-          }
-          const auto [it, inserted] =
-              index_of.try_emplace(MakeKey(v), static_cast<int>(mesh.vertices.size()));
-          if (inserted) mesh.vertices.emplace_back(v.x, v.y, v.z);
-          remap[vi] = it->second;
-        }
-        tri[c] = remap[vi];
+// Vertices already in the merged mesh, by exact position.
+using MergedIndex = std::unordered_map<PositionKey, int, PositionKeyHash>;
+
+// Appends the triangles of `in` to `mesh`, merging vertices through `index_of`; skips points,
+// lines and collapsed triangles. `remap` is scratch (input vertex -> merged vertex).
+Status AppendMeshTriangles(const aiMesh& in, const std::filesystem::path& path,
+                           MergedIndex* index_of, std::vector<int>* remap, TriangleMesh* mesh) {
+  remap->assign(in.mNumVertices, -1);
+  for (unsigned f = 0; f < in.mNumFaces; ++f) {
+    const aiFace& face = in.mFaces[f];
+    if (face.mNumIndices != 3) continue;  // points and lines
+    Eigen::Vector3i tri;
+    for (int c = 0; c < 3; ++c) {
+      const unsigned vi = face.mIndices[c];
+      if (vi >= in.mNumVertices) {
+        return Status::InvalidArgument(Quoted(path) + ": face " + std::to_string(f) +
+                                       " references vertex " + std::to_string(vi) + " of " +
+                                       std::to_string(in.mNumVertices));
       }
-      if (tri[0] == tri[1] || tri[1] == tri[2] || tri[2] == tri[0]) continue;  // collapsed
-      mesh.triangles.push_back(tri);
+      if ((*remap)[vi] < 0) {
+        const aiVector3D& v = in.mVertices[vi];
+        if (!std::isfinite(v.x) || !std::isfinite(v.y) || !std::isfinite(v.z)) {
+          return Status::InvalidArgument(Quoted(path) + ": vertex " + std::to_string(vi) +
+                                         " has non-finite coordinates");
+        }
+        const auto [it, inserted] =
+            index_of->try_emplace(MakeKey(v), static_cast<int>(mesh->vertices.size()));
+        if (inserted) mesh->vertices.emplace_back(v.x, v.y, v.z);
+        (*remap)[vi] = it->second;
+      }
+      tri[c] = (*remap)[vi];
     }
+    if (tri[0] == tri[1] || tri[1] == tri[2] || tri[2] == tri[0]) continue;  // collapsed
+    mesh->triangles.push_back(tri);
+  }
+  return Status::Ok();
+}
+
+// All triangles of the scene's meshes in one mesh.
+Result<TriangleMesh> MergeSceneMeshes(const aiScene& scene, const std::filesystem::path& path) {
+  TriangleMesh mesh;
+  MergedIndex index_of;
+  std::vector<int> remap;
+  for (unsigned m = 0; m < scene.mNumMeshes; ++m) {
+    SOFTID_RETURN_IF_ERROR(AppendMeshTriangles(*scene.mMeshes[m], path, &index_of, &remap, &mesh));
   }
   if (mesh.triangles.empty()) {
     return Status::InvalidArgument(Quoted(path) + ": mesh has no triangles");
   }
   return mesh;
+}
+
+// Order-independent key of the edge (a, b).
+std::uint64_t EdgeKey(int a, int b) {
+  return (static_cast<std::uint64_t>(std::min(a, b)) << 32) |
+         static_cast<std::uint32_t>(std::max(a, b));
+}
+
+// Appends the pieces of triangle t to next, given the midpoints m of its edges (t0, t1), (t1, t2),
+// (t2, t0) (-1 where the edge is not split); midpoints must already be in next->vertices.
+void AppendSplitTriangle(const Eigen::Vector3i& t, const std::array<int, 3>& m,
+                         TriangleMesh* next) {
+  const int marked = (m[0] >= 0) + (m[1] >= 0) + (m[2] >= 0);
+  if (marked == 0) {
+    next->triangles.push_back(t);
+  } else if (marked == 3) {
+    next->triangles.emplace_back(t[0], m[0], m[2]);
+    next->triangles.emplace_back(m[0], t[1], m[1]);
+    next->triangles.emplace_back(m[2], m[1], t[2]);
+    next->triangles.emplace_back(m[0], m[1], m[2]);
+  } else if (marked == 1) {
+    // Rotate so the split edge is (v0, v1); keep the orientation.
+    const int r = m[0] >= 0 ? 0 : (m[1] >= 0 ? 1 : 2);
+    const int v0 = t[r], v1 = t[(r + 1) % 3], v2 = t[(r + 2) % 3], mid = m[r];
+    next->triangles.emplace_back(v0, mid, v2);
+    next->triangles.emplace_back(mid, v1, v2);
+  } else {
+    // Rotate so the unsplit edge is (v0, v1): corner triangle at v2, quad split by the shorter
+    // diagonal.
+    const int r = m[0] < 0 ? 0 : (m[1] < 0 ? 1 : 2);
+    const int v0 = t[r], v1 = t[(r + 1) % 3], v2 = t[(r + 2) % 3];
+    const int m12 = m[(r + 1) % 3], m20 = m[(r + 2) % 3];
+    next->triangles.emplace_back(m12, v2, m20);
+    const auto& x = next->vertices;
+    if ((x[v0] - x[m12]).squaredNorm() <= (x[v1] - x[m20]).squaredNorm()) {
+      next->triangles.emplace_back(v0, v1, m12);
+      next->triangles.emplace_back(v0, m12, m20);
+    } else {
+      next->triangles.emplace_back(v0, v1, m20);
+      next->triangles.emplace_back(v1, m12, m20);
+    }
+  }
+}
+
+// One refinement pass into the empty mesh *next: every edge longer than sqrt(max_sq) [m] is split
+// at its midpoint. Returns false, with *next incomplete, when no edge was long.
+bool SplitLongEdges(const TriangleMesh& current, double max_sq, TriangleMesh* next) {
+  next->vertices = current.vertices;
+  std::unordered_map<std::uint64_t, int> midpoint_of;
+  auto split = [&](int a, int b) -> int {  // midpoint index, or -1 when the edge is short
+    if ((current.vertices[a] - current.vertices[b]).squaredNorm() <= max_sq) return -1;
+    const auto [it, inserted] =
+        midpoint_of.try_emplace(EdgeKey(a, b), static_cast<int>(next->vertices.size()));
+    if (inserted) next->vertices.push_back(0.5 * (current.vertices[a] + current.vertices[b]));
+    return it->second;
+  };
+  next->triangles.reserve(current.triangles.size() * 2);
+  for (const Eigen::Vector3i& t : current.triangles) {
+    const std::array<int, 3> m = {split(t[0], t[1]), split(t[1], t[2]), split(t[2], t[0])};
+    AppendSplitTriangle(t, m, next);
+  }
+  return !midpoint_of.empty();
+}
+
+}  // namespace
+
+Eigen::AlignedBox3d TriangleMesh::Bounds() const {
+  Eigen::AlignedBox3d box;  // empty
+  for (const Eigen::Vector3d& v : vertices) box.extend(v);
+  return box;
+}
+
+Result<TriangleMesh> ReadTriangleMesh(const std::filesystem::path& path,
+                                      const std::filesystem::path& confine_to) {
+  SOFTID_RETURN_IF_ERROR(CheckMeshFile(path));
+  Assimp::Importer importer;  // owns the scene
+  SOFTID_ASSIGN_OR_RETURN(const aiScene* scene, ImportScene(path, confine_to, &importer));
+  return MergeSceneMeshes(*scene, path);
 }
 
 Status WriteTriangleMeshObj(const std::filesystem::path& path, const TriangleMesh& mesh) {
@@ -228,56 +318,9 @@ TriangleMesh SubdivideToEdgeLength(const TriangleMesh& mesh, double max_edge_len
   // of a shared edge agree, so the result stays watertight.
   const double max_sq = max_edge_length * max_edge_length;
   TriangleMesh current = mesh;
-  auto key_of = [](int a, int b) {
-    return (static_cast<std::uint64_t>(std::min(a, b)) << 32) |
-           static_cast<std::uint32_t>(std::max(a, b));
-  };
   while (true) {
     TriangleMesh next;
-    next.vertices = current.vertices;
-    std::unordered_map<std::uint64_t, int> midpoint_of;
-    auto split = [&](int a, int b) -> int {  // midpoint index, or -1 when the edge is short
-      if ((current.vertices[a] - current.vertices[b]).squaredNorm() <= max_sq) return -1;
-      const auto [it, inserted] =
-          midpoint_of.try_emplace(key_of(a, b), static_cast<int>(next.vertices.size()));
-      if (inserted) next.vertices.push_back(0.5 * (current.vertices[a] + current.vertices[b]));
-      return it->second;
-    };
-    next.triangles.reserve(current.triangles.size() * 2);
-    for (const Eigen::Vector3i& t : current.triangles) {
-      const int m[3] = {split(t[0], t[1]), split(t[1], t[2]), split(t[2], t[0])};
-      const int marked = (m[0] >= 0) + (m[1] >= 0) + (m[2] >= 0);
-      if (marked == 0) {
-        next.triangles.push_back(t);
-      } else if (marked == 3) {
-        next.triangles.emplace_back(t[0], m[0], m[2]);
-        next.triangles.emplace_back(m[0], t[1], m[1]);
-        next.triangles.emplace_back(m[2], m[1], t[2]);
-        next.triangles.emplace_back(m[0], m[1], m[2]);
-      } else if (marked == 1) {
-        // Rotate so the split edge is (v0, v1); keep the orientation.
-        const int r = m[0] >= 0 ? 0 : (m[1] >= 0 ? 1 : 2);
-        const int v0 = t[r], v1 = t[(r + 1) % 3], v2 = t[(r + 2) % 3], mid = m[r];
-        next.triangles.emplace_back(v0, mid, v2);
-        next.triangles.emplace_back(mid, v1, v2);
-      } else {
-        // Rotate so the unsplit edge is (v0, v1): corner triangle at v2, quad split by the shorter
-        // diagonal.
-        const int r = m[0] < 0 ? 0 : (m[1] < 0 ? 1 : 2);
-        const int v0 = t[r], v1 = t[(r + 1) % 3], v2 = t[(r + 2) % 3];
-        const int m12 = m[(r + 1) % 3], m20 = m[(r + 2) % 3];
-        next.triangles.emplace_back(m12, v2, m20);
-        const auto& x = next.vertices;
-        if ((x[v0] - x[m12]).squaredNorm() <= (x[v1] - x[m20]).squaredNorm()) {
-          next.triangles.emplace_back(v0, v1, m12);
-          next.triangles.emplace_back(v0, m12, m20);
-        } else {
-          next.triangles.emplace_back(v0, v1, m20);
-          next.triangles.emplace_back(v1, m12, m20);
-        }
-      }
-    }
-    if (midpoint_of.empty()) return current;
+    if (!SplitLongEdges(current, max_sq, &next)) return current;
     current = std::move(next);
   }
 }

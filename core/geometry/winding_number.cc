@@ -48,6 +48,103 @@ int CubicMonomial(int j, int k, int l) {
   return kSlot[e[0]][e[1]];
 }
 
+// Zeroth and first moments of a cluster: where its expansion is centred, and its dipole term.
+struct ClusterCenter {
+  Eigen::Vector3d center;            // area-weighted centroid (plain mean if area is 0) [m]
+  Eigen::Vector3d dipole;            // sum a_i n_i [m^2]
+  Eigen::AlignedBox3d centroid_box;  // of the triangle centroids, for the split axis [m]
+};
+
+// Moments of the triangles order[begin, end).
+ClusterCenter CenterCluster(const TriangleMesh& mesh, const std::vector<int>& order, int begin,
+                            int end, const std::vector<Eigen::Vector3d>& centroids) {
+  double area = 0.0;
+  Eigen::Vector3d weighted = Eigen::Vector3d::Zero(), mean = Eigen::Vector3d::Zero();
+  ClusterCenter cluster;
+  cluster.dipole = Eigen::Vector3d::Zero();
+  for (int i = begin; i < end; ++i) {
+    const int t = order[i];
+    const Eigen::Vector3i& tri = mesh.triangles[t];
+    const Eigen::Vector3d area_normal = AreaNormal(mesh, tri);
+    const double a = area_normal.norm();
+    area += a;
+    weighted += a * centroids[t];
+    mean += centroids[t];
+    cluster.dipole += area_normal;
+    cluster.centroid_box.extend(centroids[t]);
+  }
+  cluster.center =
+      area > 0.0 ? Eigen::Vector3d(weighted / area) : Eigen::Vector3d(mean / double(end - begin));
+  return cluster;
+}
+
+// Higher moments of a cluster about its center (see WindingNumber::Node).
+struct ClusterMoments {
+  Eigen::Matrix3d second;                // M2 [m^3]
+  std::array<Eigen::Matrix3d, 3> third;  // third[j](k, l) = T_jkl [m^4]
+  double radius_sq = 0.0;                // (max |corner - center|)^2 [m^2]
+};
+
+ClusterMoments MomentsAboutCenter(const TriangleMesh& mesh, const std::vector<int>& order,
+                                  int begin, int end, const std::vector<Eigen::Vector3d>& centroids,
+                                  const Eigen::Vector3d& center) {
+  ClusterMoments moments;
+  Eigen::Matrix3d& second = moments.second;
+  std::array<Eigen::Matrix3d, 3>& third = moments.third;
+  second.setZero();
+  for (Eigen::Matrix3d& m : third) m.setZero();
+  double& radius_sq = moments.radius_sq;
+  for (int i = begin; i < end; ++i) {
+    const int t = order[i];
+    const Eigen::Vector3i& tri = mesh.triangles[t];
+    const Eigen::Vector3d area_normal = AreaNormal(mesh, tri);
+    second += (centroids[t] - center) * area_normal.transpose();
+    // Mean of (x - c)(x - c)^T over the triangle: (sum u_i u_i^T + s s^T) / 12, u_i = corner - c.
+    const Eigen::Vector3d u0 = mesh.vertices[tri[0]] - center, u1 = mesh.vertices[tri[1]] - center,
+                          u2 = mesh.vertices[tri[2]] - center;
+    const Eigen::Vector3d sum = u0 + u1 + u2;
+    const Eigen::Matrix3d moment =
+        (u0 * u0.transpose() + u1 * u1.transpose() + u2 * u2.transpose() + sum * sum.transpose()) /
+        12.0;
+    for (int j = 0; j < 3; ++j) third[j] += area_normal[j] * moment;
+    for (int c = 0; c < 3; ++c) {
+      radius_sq = std::max(radius_sq, (mesh.vertices[tri[c]] - center).squaredNorm());
+    }
+  }
+  return moments;
+}
+
+// Q2 coefficients of xx, yy, zz, xy, yz, zx.
+std::array<double, 6> QuadraticCoefficients(const Eigen::Matrix3d& second) {
+  return {second(0, 0),
+          second(1, 1),
+          second(2, 2),
+          second(0, 1) + second(1, 0),
+          second(1, 2) + second(2, 1),
+          second(2, 0) + second(0, 2)};
+}
+
+// third_linear_l = 2 sum_j T_jjl + sum_k T_lkk.
+Eigen::Vector3d ThirdLinearCoefficients(const std::array<Eigen::Matrix3d, 3>& third) {
+  Eigen::Vector3d third_linear;
+  for (int l = 0; l < 3; ++l) {
+    third_linear[l] = 2.0 * (third[0](0, l) + third[1](1, l) + third[2](2, l)) + third[l].trace();
+  }
+  return third_linear;
+}
+
+// C3 coefficients: T_jkl summed into the slot of its monomial.
+std::array<double, 10> CubicCoefficients(const std::array<Eigen::Matrix3d, 3>& third) {
+  std::array<double, 10> cubic;
+  cubic.fill(0.0);
+  for (int j = 0; j < 3; ++j) {
+    for (int k = 0; k < 3; ++k) {
+      for (int l = 0; l < 3; ++l) cubic[CubicMonomial(j, k, l)] += third[j](k, l);
+    }
+  }
+  return cubic;
+}
+
 }  // namespace
 
 WindingNumber::WindingNumber(const TriangleMesh& mesh) {
@@ -76,71 +173,22 @@ int WindingNumber::Build(int begin, int end, std::vector<int>* order,
                          const std::vector<Eigen::Vector3d>& centroids, const TriangleMesh& mesh) {
   const int index = static_cast<int>(nodes_.size());
   nodes_.emplace_back();
-  // Moments of the cluster.
-  double area = 0.0;
-  Eigen::Vector3d weighted = Eigen::Vector3d::Zero(), mean = Eigen::Vector3d::Zero();
-  Eigen::Vector3d dipole = Eigen::Vector3d::Zero();
-  Eigen::AlignedBox3d centroid_box;
-  for (int i = begin; i < end; ++i) {
-    const int t = (*order)[i];
-    const Eigen::Vector3i& tri = mesh.triangles[t];
-    const Eigen::Vector3d area_normal = AreaNormal(mesh, tri);
-    const double a = area_normal.norm();
-    area += a;
-    weighted += a * centroids[t];
-    mean += centroids[t];
-    dipole += area_normal;
-    centroid_box.extend(centroids[t]);
-  }
-  const Eigen::Vector3d center =
-      area > 0.0 ? Eigen::Vector3d(weighted / area) : Eigen::Vector3d(mean / double(end - begin));
-  Eigen::Matrix3d second = Eigen::Matrix3d::Zero();
-  std::array<Eigen::Matrix3d, 3> third;  // third[j](k, l) = T_jkl
-  for (Eigen::Matrix3d& m : third) m.setZero();
-  double radius_sq = 0.0;
-  for (int i = begin; i < end; ++i) {
-    const int t = (*order)[i];
-    const Eigen::Vector3i& tri = mesh.triangles[t];
-    const Eigen::Vector3d area_normal = AreaNormal(mesh, tri);
-    second += (centroids[t] - center) * area_normal.transpose();
-    // Mean of (x - c)(x - c)^T over the triangle: (sum u_i u_i^T + s s^T) / 12, u_i = corner - c.
-    const Eigen::Vector3d u0 = mesh.vertices[tri[0]] - center, u1 = mesh.vertices[tri[1]] - center,
-                          u2 = mesh.vertices[tri[2]] - center;
-    const Eigen::Vector3d sum = u0 + u1 + u2;
-    const Eigen::Matrix3d moment =
-        (u0 * u0.transpose() + u1 * u1.transpose() + u2 * u2.transpose() + sum * sum.transpose()) /
-        12.0;
-    for (int j = 0; j < 3; ++j) third[j] += area_normal[j] * moment;
-    for (int c = 0; c < 3; ++c) {
-      radius_sq = std::max(radius_sq, (mesh.vertices[tri[c]] - center).squaredNorm());
-    }
-  }
+  const ClusterCenter cluster = CenterCluster(mesh, *order, begin, end, centroids);
+  const ClusterMoments moments =
+      MomentsAboutCenter(mesh, *order, begin, end, centroids, cluster.center);
   Node& node = nodes_[index];
-  node.center = center;
-  node.radius_sq = radius_sq;
-  node.dipole = dipole;
-  node.second_trace = second.trace();
-  node.quadratic = {second(0, 0),
-                    second(1, 1),
-                    second(2, 2),
-                    second(0, 1) + second(1, 0),
-                    second(1, 2) + second(2, 1),
-                    second(2, 0) + second(0, 2)};
-  for (int l = 0; l < 3; ++l) {
-    node.third_linear[l] =
-        2.0 * (third[0](0, l) + third[1](1, l) + third[2](2, l)) + third[l].trace();
-  }
-  node.cubic.fill(0.0);
-  for (int j = 0; j < 3; ++j) {
-    for (int k = 0; k < 3; ++k) {
-      for (int l = 0; l < 3; ++l) node.cubic[CubicMonomial(j, k, l)] += third[j](k, l);
-    }
-  }
+  node.center = cluster.center;
+  node.radius_sq = moments.radius_sq;
+  node.dipole = cluster.dipole;
+  node.second_trace = moments.second.trace();
+  node.quadratic = QuadraticCoefficients(moments.second);
+  node.third_linear = ThirdLinearCoefficients(moments.third);
+  node.cubic = CubicCoefficients(moments.third);
   node.begin = begin;
   node.end = end;
   if (end - begin <= kLeafSize) return index;
   int axis;
-  centroid_box.sizes().maxCoeff(&axis);
+  cluster.centroid_box.sizes().maxCoeff(&axis);
   const int mid = begin + (end - begin) / 2;
   std::nth_element(order->begin() + begin, order->begin() + mid, order->begin() + end,
                    [&](int a, int b) { return centroids[a][axis] < centroids[b][axis]; });

@@ -88,6 +88,80 @@ Scene LightThrow() {
   return s;
 }
 
+// Sets *scene to the scene called `name` and returns the effect it carries (for light-throw, the
+// one `effect` asks for); InvalidArgument for an unknown name.
+Result<ConcealedEffect> BaseScene(const std::string& name, ConcealedEffect effect, Scene* scene) {
+  ConcealedEffect carried;
+  if (name == "ramp-block") {
+    *scene = RampBlock();
+    carried = ConcealedEffect::kFriction;
+  } else if (name == "halves-drop") {
+    *scene = HalvesDrop();
+    carried = ConcealedEffect::kHeterogeneousStiffness;
+  } else if (name == "light-throw") {
+    *scene = LightThrow();
+    carried = effect == ConcealedEffect::kInitialSpin ? ConcealedEffect::kInitialSpin
+                                                      : ConcealedEffect::kAirDrag;
+  } else {
+    return json::Invalid("scene", name, "unknown (known: ramp-block, halves-drop, light-throw)");
+  }
+  return carried;
+}
+
+// Puts `effect` at strength s into p; InvalidArgument naming "strength" when s is out of the
+// effect's range. `mesh` is where the halves of kHeterogeneousStiffness are split.
+Status ApplyConcealedEffect(ConcealedEffect effect, double s, const geometry::TriangleMesh& mesh,
+                            fem::PhysicalParameters* p) {
+  auto in_range = [&](double lo, double hi) -> Status {
+    if (!(s >= lo && s <= hi)) {
+      return json::Invalid("strength", s,
+                           "must lie in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+                               "] for " + ToString(effect));
+    }
+    return Status::Ok();
+  };
+  switch (effect) {
+    case ConcealedEffect::kNone: break;
+    case ConcealedEffect::kFriction:
+      SOFTID_RETURN_IF_ERROR(in_range(0.0, 2.0));
+      p->friction_coefficient = s;
+      break;
+    case ConcealedEffect::kHeterogeneousStiffness: {
+      if (!(s > 0.0 && s <= 100.0)) return json::Invalid("strength", s, "must lie in (0, 100]");
+      const Eigen::AlignedBox3d bounds = mesh.Bounds();
+      int axis = 0;
+      bounds.sizes().maxCoeff(&axis);
+      Eigen::Vector3d lo = bounds.min() - Eigen::Vector3d::Ones();
+      Eigen::Vector3d hi = bounds.max() + Eigen::Vector3d::Ones();
+      hi[axis] = bounds.center()[axis];
+      // E stays the mean modulus in log terms, so the ratio is the only change.
+      p->youngs_modulus /= std::sqrt(s);
+      p->stiffness_field.kind = fem::StiffnessField::Kind::kRegions;
+      p->stiffness_field.regions = {{Eigen::AlignedBox3d(lo, hi), s}};
+      break;
+    }
+    case ConcealedEffect::kAirDrag:
+      SOFTID_RETURN_IF_ERROR(in_range(0.0, 10.0));
+      p->drag_quadratic = s;
+      break;
+    case ConcealedEffect::kInitialSpin:
+      SOFTID_RETURN_IF_ERROR(in_range(0.0, 50.0));
+      // About the horizontal axis across the throw (a tumbling board).
+      p->initial_angular_velocity = Eigen::Vector3d(0.0, s, 0.0);
+      break;
+  }
+  return Status::Ok();
+}
+
+void SetDiagnosisCameras(const std::string& name, CameraRigOptions* cameras) {
+  cameras->count = 2;
+  // The throw spans ~1.5 m: more pixels keep ~100 points per camera on the cube.
+  cameras->width = name == "light-throw" ? 128 : 80;
+  cameras->height = name == "light-throw" ? 96 : 64;
+  cameras->elevation = 25.0;
+  cameras->azimuth = -90.0;
+}
+
 }  // namespace
 
 const char* ToString(ConcealedEffect effect) {
@@ -119,20 +193,7 @@ std::vector<std::string> DiagnosisSceneNames() {
 Result<ConcealedScene> MakeDiagnosisScene(const std::string& name, ConcealedEffect effect,
                                           double strength, double variation) {
   ConcealedScene out;
-  ConcealedEffect carried;
-  if (name == "ramp-block") {
-    out.scene = RampBlock();
-    carried = ConcealedEffect::kFriction;
-  } else if (name == "halves-drop") {
-    out.scene = HalvesDrop();
-    carried = ConcealedEffect::kHeterogeneousStiffness;
-  } else if (name == "light-throw") {
-    out.scene = LightThrow();
-    carried = effect == ConcealedEffect::kInitialSpin ? ConcealedEffect::kInitialSpin
-                                                      : ConcealedEffect::kAirDrag;
-  } else {
-    return json::Invalid("scene", name, "unknown (known: ramp-block, halves-drop, light-throw)");
-  }
+  SOFTID_ASSIGN_OR_RETURN(const ConcealedEffect carried, BaseScene(name, effect, &out.scene));
   if (effect != ConcealedEffect::kNone && effect != carried) {
     return json::Invalid(
         "effect", ToString(effect),
@@ -145,52 +206,9 @@ Result<ConcealedScene> MakeDiagnosisScene(const std::string& name, ConcealedEffe
   out.strength = effect == ConcealedEffect::kNone ? 0.0 : strength;
   fem::PhysicalParameters& p = out.scene.parameters;
   p.youngs_modulus *= 1.0 + variation;
-  const double s = out.strength;
-  auto in_range = [&](double lo, double hi) -> Status {
-    if (!(s >= lo && s <= hi)) {
-      return json::Invalid("strength", s,
-                           "must lie in [" + std::to_string(lo) + ", " + std::to_string(hi) +
-                               "] for " + ToString(effect));
-    }
-    return Status::Ok();
-  };
-  switch (effect) {
-    case ConcealedEffect::kNone: break;
-    case ConcealedEffect::kFriction:
-      SOFTID_RETURN_IF_ERROR(in_range(0.0, 2.0));
-      p.friction_coefficient = s;
-      break;
-    case ConcealedEffect::kHeterogeneousStiffness: {
-      if (!(s > 0.0 && s <= 100.0)) return json::Invalid("strength", s, "must lie in (0, 100]");
-      const Eigen::AlignedBox3d bounds = out.scene.mesh.Bounds();
-      int axis = 0;
-      bounds.sizes().maxCoeff(&axis);
-      Eigen::Vector3d lo = bounds.min() - Eigen::Vector3d::Ones();
-      Eigen::Vector3d hi = bounds.max() + Eigen::Vector3d::Ones();
-      hi[axis] = bounds.center()[axis];
-      // E stays the mean modulus in log terms, so the ratio is the only change.
-      p.youngs_modulus /= std::sqrt(s);
-      p.stiffness_field.kind = fem::StiffnessField::Kind::kRegions;
-      p.stiffness_field.regions = {{Eigen::AlignedBox3d(lo, hi), s}};
-      break;
-    }
-    case ConcealedEffect::kAirDrag:
-      SOFTID_RETURN_IF_ERROR(in_range(0.0, 10.0));
-      p.drag_quadratic = s;
-      break;
-    case ConcealedEffect::kInitialSpin:
-      SOFTID_RETURN_IF_ERROR(in_range(0.0, 50.0));
-      // About the horizontal axis across the throw (a tumbling board).
-      p.initial_angular_velocity = Eigen::Vector3d(0.0, s, 0.0);
-      break;
-  }
+  SOFTID_RETURN_IF_ERROR(ApplyConcealedEffect(effect, out.strength, out.scene.mesh, &p));
   SOFTID_RETURN_IF_ERROR(p.Validate());
-  out.cameras.count = 2;
-  // The throw spans ~1.5 m: more pixels keep ~100 points per camera on the cube.
-  out.cameras.width = name == "light-throw" ? 128 : 80;
-  out.cameras.height = name == "light-throw" ? 96 : 64;
-  out.cameras.elevation = 25.0;
-  out.cameras.azimuth = -90.0;
+  SetDiagnosisCameras(name, &out.cameras);
   return out;
 }
 

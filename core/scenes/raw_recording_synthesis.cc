@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <fstream>
 #include <map>
@@ -143,14 +144,11 @@ struct Room {
   geometry::TriangleMesh mesh;
 };
 
-// lo, hi: the motion's extent, cam_lo, cam_hi: the cameras', in floor coordinates [m].
-Room BuildRoom(const FloorFrame& floor, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
-               const Eigen::Vector3d& cam_lo, const Eigen::Vector3d& cam_hi,
-               const std::vector<capture::PinholeCamera>& cameras,
-               const capture::DistortionCoefficients& distortion, double view_radius) {
-  const double size = view_radius;
-  const double gap = 0.03 + 0.1 * size;
-  const double clutter_side = std::clamp(0.35 * size, 0.03, 0.25);
+// The clutter box beside the motion (lo, hi in floor coordinates [m]): the first of the candidate
+// places the camera sees whole, else the last. *side: the clutter's side along e2 (+1 / -1).
+FloorBox PlaceClutter(const FloorFrame& floor, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
+                      double gap, double clutter_side, const capture::PinholeCamera& camera,
+                      const capture::DistortionCoefficients& distortion, int* side) {
   const Eigen::Vector3d mid = 0.5 * (lo + hi);
   FloorBox clutter;
   clutter.size = Eigen::Vector3d(clutter_side, clutter_side, 1.4 * clutter_side);
@@ -160,17 +158,30 @@ Room BuildRoom(const FloorFrame& floor, const Eigen::Vector3d& lo, const Eigen::
       {mid.x(), lo.y() - gap - half, z},
       {hi.x() + gap + half, mid.y(), z},
   };
-  int side = 1;  // side of the clutter along e2 (+1 / -1); the side wall goes to the other
   clutter.center_F = candidates[2];
   for (size_t i = 0; i < candidates.size(); ++i) {
     FloorBox trial = clutter;
     trial.center_F = candidates[i];
-    if (BoxInView(floor, trial, cameras[0], distortion)) {
+    if (BoxInView(floor, trial, camera, distortion)) {
       clutter = trial;
-      side = i == 1 ? -1 : 1;
+      *side = i == 1 ? -1 : 1;
       break;
     }
   }
+  return clutter;
+}
+
+// lo, hi: the motion's extent, cam_lo, cam_hi: the cameras', in floor coordinates [m].
+Room BuildRoom(const FloorFrame& floor, const Eigen::Vector3d& lo, const Eigen::Vector3d& hi,
+               const Eigen::Vector3d& cam_lo, const Eigen::Vector3d& cam_hi,
+               const std::vector<capture::PinholeCamera>& cameras,
+               const capture::DistortionCoefficients& distortion, double view_radius) {
+  const double size = view_radius;
+  const double gap = 0.03 + 0.1 * size;
+  const double clutter_side = std::clamp(0.35 * size, 0.03, 0.25);
+  const double half = 0.5 * clutter_side;
+  int side = 1;  // side of the clutter along e2 (+1 / -1); the side wall goes to the other
+  FloorBox clutter = PlaceClutter(floor, lo, hi, gap, clutter_side, cameras[0], distortion, &side);
   const double wall_thickness = 0.05;
   const double wall_height = std::max(1.5, 2.0 * cam_hi.z());
   const double back = std::max({hi.x() + gap + 0.1 + 0.3 * size, clutter.center_F.x() + half + gap,
@@ -223,6 +234,436 @@ std::vector<int> KeptFrames(int num_ideal, double drop_fraction, std::mt19937_64
   return kept;
 }
 
+// The random draws of a recording, all from one generator (seeded by options.seed), in this order:
+// the clock's offset, jitter and dropped frames (DrawFrameClock), then the scanner's pose.
+struct RandomDraws {
+  std::mt19937_64& rng;
+  std::normal_distribution<double>& gaussian;
+  std::uniform_real_distribution<double>& uniform;
+};
+
+// The device's clock: the ideal frames k / fps, their jittered true times, the frames it keeps.
+struct FrameClock {
+  int num_ideal = 0;               // frames of the ideal clock
+  RunOptions fine;                 // Synthesize's time step: one RunScene frame per step
+  int num_steps = 0;               // simulation states, step 0 at rest
+  double h = 0.0;                  // time step [s]
+  double time_offset = 0.0;        // device-clock time of t = 0 [s]
+  std::vector<double> true_times;  // per ideal frame [s]
+  std::vector<int> kept;           // the ideal frames the recording holds
+};
+
+FrameClock DrawFrameClock(const Scene& scene, const RawSynthesisOptions& options,
+                          const RandomDraws& draws) {
+  FrameClock clock;
+  clock.num_ideal = options.run.NumFrames(scene);
+  clock.fine = options.run;
+  clock.fine.fps = options.run.fps * options.run.substeps_per_frame;
+  clock.fine.substeps_per_frame = 1;
+  clock.num_steps = clock.fine.NumFrames(scene);
+  clock.h = 1.0 / clock.fine.fps;
+  const double t_end = (clock.num_steps - 1) * clock.h;
+  clock.time_offset = 1000.0 + 100.0 * draws.uniform(draws.rng);
+  clock.true_times.resize(clock.num_ideal);
+  for (int k = 0; k < clock.num_ideal; ++k) {
+    const double jitter = std::clamp(draws.gaussian(draws.rng), -2.0, 2.0) * options.time_jitter_s;
+    clock.true_times[k] = std::clamp(k / options.run.fps + jitter, 0.0, t_end);
+  }
+  clock.kept = KeptFrames(clock.num_ideal, options.drop_fraction, draws.rng);
+  return clock;
+}
+
+// A recorded frame's surface: step's, moved by `weight` towards step + 1's.
+struct FrameSample {
+  int step = 0;
+  double weight = 0.0;  // of step + 1
+};
+
+// Steps whose surfaces are needed: the two around each kept frame's true time (the keys of
+// *surfaces, their meshes still empty).
+void PlanFrameSamples(const FrameClock& clock, std::vector<FrameSample>* samples,
+                      std::map<int, geometry::TriangleMesh>* surfaces) {
+  for (int k : clock.kept) {
+    FrameSample s;
+    if (clock.num_steps >= 2) {
+      s.step = std::clamp(static_cast<int>(std::floor(clock.true_times[k] / clock.h)), 0,
+                          clock.num_steps - 2);
+      s.weight = std::clamp(clock.true_times[k] / clock.h - s.step, 0.0, 1.0);
+      (*surfaces)[s.step + 1];
+    }
+    (*surfaces)[s.step];
+    samples->push_back(s);
+  }
+}
+
+// The floor frame, aimed along the first camera's horizontal view direction.
+FloorFrame AimFloorFrame(const Scene& scene, const CameraRigOptions& camera_options) {
+  const fem::PhysicalParameters& p = scene.parameters;
+  FloorFrame floor;
+  const Eigen::Vector3d up = p.ground                 ? p.ground->normal.normalized()
+                             : p.gravity.norm() > 0.0 ? Eigen::Vector3d(-p.gravity.normalized())
+                                                      : Eigen::Vector3d::UnitZ();
+  floor.n = up;
+  floor.origin = scene.view_target;
+  if (p.ground) {
+    floor.origin -= (up.dot(scene.view_target) - p.ground->offset) * up;
+  }
+  const std::vector<capture::PinholeCamera> probe =
+      MakeCameraRing(camera_options, scene.view_target, scene.view_radius);
+  Eigen::Vector3d forward = probe[0].X_WC.linear().col(2);
+  forward -= forward.dot(up) * up;
+  if (forward.norm() < 1e-6) forward = up.unitOrthogonal();
+  floor.e1 = forward.normalized();
+  floor.e2 = up.cross(floor.e1);
+  return floor;
+}
+
+// Where the object went: lo, hi in floor coordinates [m]; reach: the largest distance of a
+// surface vertex from the view target, at least the view radius [m].
+struct MotionExtent {
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = Eigen::Vector3d::Constant(-1e300);
+  double reach = 0.0;
+};
+
+// Simulates at the fine step (Synthesize's time step), keeping the surfaces needed (the keys of
+// *surfaces) and the object's extent in the floor frame and around the view target.
+Status SimulateMotion(const Scene& scene, const FrameClock& clock, const FloorFrame& floor,
+                      const std::function<void(int, int)>& progress,
+                      std::map<int, geometry::TriangleMesh>* surfaces, MotionExtent* extent,
+                      RawSynthesisSummary* summary) {
+  Eigen::Vector3d& lo = extent->lo;
+  Eigen::Vector3d& hi = extent->hi;
+  double& reach = extent->reach;
+  reach = scene.view_radius;
+  const int num_steps = clock.num_steps;
+  // The real object is closed where its scan has holes: the cameras see the caps, not through.
+  geometry::HoleLoops holes;  // found on the first state's surface
+  const auto record_step = [&](int step, const fem::Simulator& sim) {
+    if (step == 0) {
+      summary->num_elements = sim.hex_mesh().NumElements();
+      summary->num_nodes = sim.hex_mesh().NumNodes();
+      summary->mass = sim.total_mass();
+      holes = geometry::FindHoleLoops(sim.DeformedSurface());
+    }
+    geometry::TriangleMesh surface = geometry::WithHolesCapped(sim.DeformedSurface(), holes);
+    for (const auto& v : surface.vertices) {
+      const Eigen::Vector3d f = floor.ToFloor(v);
+      lo = lo.cwiseMin(f);
+      hi = hi.cwiseMax(f);
+      reach = std::max(reach, (v - scene.view_target).norm());
+    }
+    auto it = surfaces->find(step);
+    if (it != surfaces->end()) it->second = std::move(surface);
+    if (progress) progress(step, num_steps);
+  };
+  SOFTID_ASSIGN_OR_RETURN(summary->run, RunSceneToEnd(scene, clock.fine, record_step, "steps"));
+  return Status::Ok();
+}
+
+// Without a ground plane (free flight, clamped objects) the floor lies below the motion: moves the
+// floor (and the extent, in floor coordinates) there. Returns the floor's offset d (n . x = d).
+double SettleFloor(const Scene& scene, FloorFrame* floor, MotionExtent* extent) {
+  const fem::PhysicalParameters& p = scene.parameters;
+  if (p.ground) return p.ground->offset;
+  const double shift = extent->lo.z() - 0.1 * scene.view_radius - 0.02;
+  floor->origin += shift * floor->n;
+  extent->lo.z() -= shift;
+  extent->hi.z() -= shift;
+  return floor->n.dot(floor->origin);
+}
+
+// The cameras' extent in floor coordinates [m].
+void CameraExtent(const std::vector<capture::PinholeCamera>& cameras, const FloorFrame& floor,
+                  Eigen::Vector3d* cam_lo, Eigen::Vector3d* cam_hi) {
+  *cam_lo = Eigen::Vector3d::Constant(1e300);
+  *cam_hi = Eigen::Vector3d::Constant(-1e300);
+  for (const auto& camera : cameras) {
+    const Eigen::Vector3d f = floor.ToFloor(camera.X_WC.translation());
+    *cam_lo = cam_lo->cwiseMin(f);
+    *cam_hi = cam_hi->cwiseMax(f);
+  }
+}
+
+// What the cameras recorded, per camera and recorded frame (masks only with write_true_masks).
+struct RenderedImages {
+  std::vector<std::vector<capture::DepthImage>> frames;
+  std::vector<std::vector<std::vector<uint8_t>>> masks;
+  std::vector<std::vector<capture::DepthImage>> backgrounds;  // per camera, background_frames
+  long long valid_pixels = 0, object_pixels = 0;
+};
+
+// The static room once per camera, with each camera's lens rays for the frames.
+Status RenderRoom(const capture::DepthRenderer& renderer, const geometry::TriangleMesh& room,
+                  const std::vector<capture::PinholeCamera>& cameras,
+                  const capture::DistortionCoefficients& distortion,
+                  std::vector<capture::PixelRays>* rays,
+                  std::vector<capture::DepthImage>* room_depth) {
+  for (const auto& camera : cameras) {
+    SOFTID_ASSIGN_OR_RETURN(capture::PixelRays r, capture::ComputePixelRays(camera, distortion));
+    room_depth->push_back(renderer.Render(room, camera, r));
+    rays->push_back(std::move(r));
+  }
+  return Status::Ok();
+}
+
+// The object's surface at a recorded frame, interpolated between the steps around it.
+geometry::TriangleMesh SampledSurface(const std::map<int, geometry::TriangleMesh>& surfaces,
+                                      const FrameSample& s) {
+  geometry::TriangleMesh surface = surfaces.at(s.step);
+  if (s.weight > 0.0) {
+    const geometry::TriangleMesh& next = surfaces.at(s.step + 1);
+    for (size_t v = 0; v < surface.vertices.size(); ++v) {
+      surface.vertices[v] += s.weight * (next.vertices[v] - surface.vertices[v]);
+    }
+  }
+  return surface;
+}
+
+// One camera's image of ideal frame `frame_index`: the object over the room (the nearer surface
+// wins), then the sensor's noise and range; appended to out's frames (and masks).
+void RecordImage(const capture::DepthImage& object, const capture::DepthImage& room_depth,
+                 int frame_index, int c, const RawSynthesisOptions& options, RenderedImages* out) {
+  capture::DepthImage image = room_depth;
+  std::vector<uint8_t> mask(image.depth.size(), 0);
+  for (size_t px = 0; px < image.depth.size(); ++px) {
+    const float zo = object.depth[px];
+    if (zo > 0.0f && (image.depth[px] <= 0.0f || zo <= image.depth[px])) {
+      image.depth[px] = zo;
+      mask[px] = 255;
+      ++out->object_pixels;
+    }
+  }
+  capture::ApplyDepthNoise(options.noise, frame_index, c, &image);
+  ClampToRange(options.depth_scale, &image);
+  // A pixel the sensor dropped shows nothing, the object neither.
+  for (size_t px = 0; px < mask.size(); ++px) {
+    if (image.depth[px] <= 0.0f) mask[px] = 0;
+  }
+  out->valid_pixels += image.NumValid();
+  out->frames[c].push_back(std::move(image));
+  if (options.write_true_masks) out->masks[c].push_back(std::move(mask));
+}
+
+// Frames of the empty room per camera, with noise of their own.
+std::vector<std::vector<capture::DepthImage>> RenderBackgrounds(
+    const std::vector<capture::DepthImage>& room_depth, const RawSynthesisOptions& options) {
+  std::vector<std::vector<capture::DepthImage>> backgrounds;
+  if (options.background_frames > 0) {
+    const int num_cameras = static_cast<int>(room_depth.size());
+    backgrounds.resize(num_cameras);
+    for (int c = 0; c < num_cameras; ++c) {
+      for (int b = 0; b < options.background_frames; ++b) {
+        capture::DepthImage image = room_depth[c];
+        // Noise indices apart from the frames' (frame indices stay below 1e6).
+        capture::ApplyDepthNoise(options.noise, 1000000 + b, c, &image);
+        ClampToRange(options.depth_scale, &image);
+        backgrounds[c].push_back(std::move(image));
+      }
+    }
+  }
+  return backgrounds;
+}
+
+// Render: the static room once per camera, the object per frame; the nearer surface wins.
+Result<RenderedImages> RenderImages(const geometry::TriangleMesh& room,
+                                    const std::vector<capture::PinholeCamera>& cameras,
+                                    const std::vector<FrameSample>& samples,
+                                    const std::map<int, geometry::TriangleMesh>& surfaces,
+                                    const std::vector<int>& kept,
+                                    const RawSynthesisOptions& options) {
+  capture::DepthRenderer renderer;
+  const int num_cameras = static_cast<int>(cameras.size());
+  const int num_frames = static_cast<int>(kept.size());
+  std::vector<capture::PixelRays> rays;
+  std::vector<capture::DepthImage> room_depth;
+  SOFTID_RETURN_IF_ERROR(
+      RenderRoom(renderer, room, cameras, options.distortion, &rays, &room_depth));
+  RenderedImages out;
+  out.frames.resize(num_cameras);
+  out.masks.resize(num_cameras);
+  for (int i = 0; i < num_frames; ++i) {
+    const geometry::TriangleMesh surface = SampledSurface(surfaces, samples[i]);
+    for (int c = 0; c < num_cameras; ++c) {
+      const capture::DepthImage object = renderer.Render(surface, cameras[c], rays[c]);
+      RecordImage(object, room_depth[c], kept[i], c, options, &out);
+    }
+  }
+  out.backgrounds = RenderBackgrounds(room_depth, options);
+  return out;
+}
+
+// The scanner's frame: a random rigid pose of the rest mesh.
+Eigen::Isometry3d DrawScannerPose(const RandomDraws& draws) {
+  std::mt19937_64& rng = draws.rng;
+  std::normal_distribution<double>& gaussian = draws.gaussian;
+  std::uniform_real_distribution<double>& uniform = draws.uniform;
+  Eigen::Isometry3d world_from_scanner = Eigen::Isometry3d::Identity();
+  // Drawn one by one, last component first: C++ leaves the order in which a call's arguments are
+  // evaluated unspecified, and drawing inside the argument list made the pose depend on the
+  // compiler. Last first is the order GCC took, so the seeds keep their recordings.
+  const auto draw_reversed = [&](auto* values, int count) {
+    for (int i = count - 1; i >= 0; --i) values[i] = gaussian(rng);
+  };
+  std::array<double, 4> wxyz;
+  draw_reversed(wxyz.data(), 4);
+  Eigen::Quaterniond q(wxyz[0], wxyz[1], wxyz[2], wxyz[3]);
+  q.normalize();
+  Eigen::Vector3d direction;
+  draw_reversed(direction.data(), 3);
+  direction.normalize();
+  world_from_scanner.linear() = q.toRotationMatrix();
+  world_from_scanner.translation() = (0.1 + 0.9 * uniform(rng)) * direction;
+  return world_from_scanner;
+}
+
+// recording.json's contents: the scan, the cameras (their poses only with several), the frames
+// with their device-clock times and the background frames.
+recording::Recording MakeRecording(const Scene& scene, const RawSynthesisOptions& options,
+                                   const std::vector<capture::PinholeCamera>& cameras,
+                                   const FrameClock& clock) {
+  const int num_cameras = static_cast<int>(cameras.size());
+  const int num_frames = static_cast<int>(clock.kept.size());
+  recording::Recording rec;
+  rec.mesh_file = "scan.ply";
+  rec.mesh_unit =
+      options.mesh_in_mm ? recording::MeshUnit::kMillimetre : recording::MeshUnit::kMetre;
+  if (options.write_mass) {
+    rec.mass_kg = scene.parameters.density * std::abs(geometry::SignedVolume(scene.mesh));
+  }
+  for (int c = 0; c < num_cameras; ++c) {
+    recording::RecordingCamera cam;
+    cam.camera = cameras[c];
+    cam.has_world_from_camera = num_cameras > 1;
+    if (!cam.has_world_from_camera) cam.camera.X_WC = Eigen::Isometry3d::Identity();
+    cam.distortion = options.distortion;
+    cam.depth_scale = options.depth_scale;
+    for (int i = 0; i < num_frames; ++i) {
+      cam.frames.push_back({fmt::format("{}/{:06d}.png", cameras[c].name, i),
+                            clock.time_offset + clock.true_times[clock.kept[i]]});
+    }
+    for (int b = 0; b < options.background_frames; ++b) {
+      cam.background.push_back(fmt::format("{}/bg_{:03d}.png", cameras[c].name, b));
+    }
+    rec.cameras.push_back(std::move(cam));
+  }
+  return rec;
+}
+
+// The room and cameras a recording was made in, in the floor frame (floor_offset: d of n . x = d).
+struct RecordingSetup {
+  FloorFrame floor;
+  double floor_offset = 0.0;
+  std::vector<capture::PinholeCamera> cameras;
+  Room room;
+};
+
+// truth.json: Synthesize's truth plus "raw", what ingest has to recover.
+nlohmann::json RawTruthJson(const Scene& scene, const RawSynthesisOptions& options,
+                            const RawSynthesisSummary& summary, const FrameClock& clock,
+                            const RecordingSetup& setup,
+                            const Eigen::Isometry3d& world_from_scanner,
+                            recording::MeshUnit mesh_unit) {
+  const FloorFrame& floor = setup.floor;
+  nlohmann::json truth = SynthesisTruthJson(scene, options.run, options.noise, options.depth_scale,
+                                            summary.num_elements, summary.mass);
+  nlohmann::json truth_cameras = nlohmann::json::array();
+  for (const auto& camera : setup.cameras) {
+    truth_cameras.push_back(
+        {{"name", camera.name}, {"world_from_camera", MatrixJson(camera.X_WC)}});
+  }
+  nlohmann::json frame_times = nlohmann::json::array(), frame_indices = nlohmann::json::array();
+  for (int k : clock.kept) {
+    frame_times.push_back(clock.true_times[k]);
+    frame_indices.push_back(k);
+  }
+  truth["raw"] = {
+      {"world_from_scanner", MatrixJson(world_from_scanner)},
+      {"floor", {{"normal", VectorJson(floor.n)}, {"offset", setup.floor_offset}}},
+      {"time_offset_s", clock.time_offset},
+      {"time_jitter_s", options.time_jitter_s},
+      {"frame_times_s", frame_times},
+      {"frame_indices", frame_indices},
+      {"fps", options.run.fps},
+      {"cameras", truth_cameras},
+      {"distortion", options.distortion},
+      {"mesh_unit", std::string(recording::ToString(mesh_unit))},
+      {"clutter", BoxJson(floor, setup.room.clutter)},
+      {"walls", {BoxJson(floor, setup.room.back_wall), BoxJson(floor, setup.room.side_wall)}},
+      {"floor_slab", BoxJson(floor, setup.room.floor_slab)},
+      {"seed", options.seed},
+  };
+  return truth;
+}
+
+// truth_masks/<camera>/%06d.png per recorded frame.
+Status WriteTrueMasks(const std::filesystem::path& directory,
+                      const std::vector<capture::PinholeCamera>& cameras,
+                      const std::vector<std::vector<std::vector<uint8_t>>>& masks, int num_frames) {
+  for (size_t c = 0; c < cameras.size(); ++c) {
+    for (int i = 0; i < num_frames; ++i) {
+      SOFTID_RETURN_IF_ERROR(
+          WriteMask(directory / kTrueMasksFolder / cameras[c].name / fmt::format("{:06d}.png", i),
+                    masks[c][i], cameras[c].width, cameras[c].height));
+    }
+  }
+  return Status::Ok();
+}
+
+// The ring of cameras around the view target, far enough to keep the whole motion in view, and
+// the room around the motion and the cameras.
+void PlaceCamerasAndRoom(const Scene& scene, const RawSynthesisOptions& options,
+                         const MotionExtent& motion, RecordingSetup* setup) {
+  // Cameras: the ring around the view target, far enough to keep the whole motion in view.
+  setup->cameras = MakeCameraRing(options.cameras, scene.view_target, motion.reach);
+  Eigen::Vector3d cam_lo, cam_hi;
+  CameraExtent(setup->cameras, setup->floor, &cam_lo, &cam_hi);
+  // The room: clutter beside the motion where the first camera sees it, walls behind.
+  setup->room = BuildRoom(setup->floor, motion.lo, motion.hi, cam_lo, cam_hi, setup->cameras,
+                          options.distortion, scene.view_radius);
+}
+
+// The rest mesh as the scanner delivered it: in the scanner's frame.
+geometry::TriangleMesh ScanInScannerFrame(const geometry::TriangleMesh& mesh,
+                                          const Eigen::Isometry3d& world_from_scanner) {
+  geometry::TriangleMesh scan = mesh;
+  const Eigen::Isometry3d scanner_from_world = world_from_scanner.inverse();
+  for (auto& v : scan.vertices) v = scanner_from_world * v;
+  return scan;
+}
+
+Status WriteTruthFile(const std::filesystem::path& directory, const nlohmann::json& truth) {
+  std::ofstream file(directory / kTruthFileName);
+  file << truth.dump(2) << "\n";
+  if (!file) return Status::IoError("cannot write " + (directory / kTruthFileName).string());
+  return Status::Ok();
+}
+
+// The summary's counts of what was recorded (the simulation's part is filled in by SimulateMotion).
+void CompleteSummary(const FrameClock& clock, const RenderedImages& images, int num_cameras,
+                     const Eigen::Isometry3d& world_from_scanner, RawSynthesisSummary* summary) {
+  const int num_frames = static_cast<int>(clock.kept.size());
+  summary->num_cameras = num_cameras;
+  summary->num_frames = num_frames;
+  summary->num_dropped = clock.num_ideal - num_frames;
+  summary->time_offset_s = clock.time_offset;
+  summary->world_from_scanner = world_from_scanner;
+  const double image_count = static_cast<double>(num_frames) * num_cameras;
+  summary->mean_valid_pixels = images.valid_pixels / image_count;
+  summary->mean_object_pixels = images.object_pixels / image_count;
+}
+
+// FailedPrecondition if `directory` already holds a recording or a capture.
+Status CheckNoRecordingIn(const std::filesystem::path& directory) {
+  for (const std::string& name :
+       {std::string(recording::kRecordingFileName), std::string(capture::kCaptureFileName)}) {
+    if (std::filesystem::exists(directory / name)) {
+      return Status::FailedPrecondition("out = " + directory.string() + ": already holds " + name +
+                                        "; choose an empty folder");
+    }
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 RawSynthesisOptions::RawSynthesisOptions() {
@@ -254,227 +695,39 @@ Status RawSynthesisOptions::Validate() const {
   }
   return Status::Ok();
 }
-
 Result<RawSynthesisSummary> SynthesizeRawRecording(const Scene& scene,
                                                    const RawSynthesisOptions& options,
                                                    const std::filesystem::path& directory,
                                                    const std::function<void(int, int)>& progress) {
   SOFTID_RETURN_IF_ERROR(options.Validate());
-  for (const std::string& name :
-       {std::string(recording::kRecordingFileName), std::string(capture::kCaptureFileName)}) {
-    if (std::filesystem::exists(directory / name)) {
-      return Status::FailedPrecondition("out = " + directory.string() + ": already holds " + name +
-                                        "; choose an empty folder");
-    }
-  }
+  SOFTID_RETURN_IF_ERROR(CheckNoRecordingIn(directory));
   std::mt19937_64 rng(options.seed);
   std::normal_distribution<double> gaussian(0.0, 1.0);
   std::uniform_real_distribution<double> uniform(0.0, 1.0);
+  const RandomDraws draws{rng, gaussian, uniform};
 
   // The ideal clock k / fps, jittered true times, dropped frames.
-  const int num_ideal = options.run.NumFrames(scene);
-  RunOptions fine = options.run;
-  fine.fps = options.run.fps * options.run.substeps_per_frame;
-  fine.substeps_per_frame = 1;
-  const int num_steps = fine.NumFrames(scene);  // simulation states, step 0 at rest
-  const double h = 1.0 / fine.fps;
-  const double t_end = (num_steps - 1) * h;
-  const double time_offset = 1000.0 + 100.0 * uniform(rng);
-  std::vector<double> true_times(num_ideal);
-  for (int k = 0; k < num_ideal; ++k) {
-    const double jitter = std::clamp(gaussian(rng), -2.0, 2.0) * options.time_jitter_s;
-    true_times[k] = std::clamp(k / options.run.fps + jitter, 0.0, t_end);
-  }
-  const std::vector<int> kept = KeptFrames(num_ideal, options.drop_fraction, rng);
-  // Steps whose surfaces are needed: the two around each kept frame's true time.
-  struct Sample {
-    int step = 0;
-    double weight = 0.0;  // of step + 1
-  };
-  std::vector<Sample> samples;
+  const FrameClock clock = DrawFrameClock(scene, options, draws);
+  std::vector<FrameSample> samples;
   std::map<int, geometry::TriangleMesh> surfaces;
-  for (int k : kept) {
-    Sample s;
-    if (num_steps >= 2) {
-      s.step = std::clamp(static_cast<int>(std::floor(true_times[k] / h)), 0, num_steps - 2);
-      s.weight = std::clamp(true_times[k] / h - s.step, 0.0, 1.0);
-      surfaces[s.step + 1];
-    }
-    surfaces[s.step];
-    samples.push_back(s);
-  }
+  PlanFrameSamples(clock, &samples, &surfaces);
 
-  // The floor frame, aimed along the first camera's horizontal view direction.
-  const fem::PhysicalParameters& p = scene.parameters;
-  FloorFrame floor;
-  double floor_offset = 0.0;
-  {
-    const Eigen::Vector3d up = p.ground                 ? p.ground->normal.normalized()
-                               : p.gravity.norm() > 0.0 ? Eigen::Vector3d(-p.gravity.normalized())
-                                                        : Eigen::Vector3d::UnitZ();
-    floor.n = up;
-    floor.origin = scene.view_target;
-    if (p.ground) {
-      floor.origin -= (up.dot(scene.view_target) - p.ground->offset) * up;
-    }
-    const std::vector<capture::PinholeCamera> probe =
-        MakeCameraRing(options.cameras, scene.view_target, scene.view_radius);
-    Eigen::Vector3d forward = probe[0].X_WC.linear().col(2);
-    forward -= forward.dot(up) * up;
-    if (forward.norm() < 1e-6) forward = up.unitOrthogonal();
-    floor.e1 = forward.normalized();
-    floor.e2 = up.cross(floor.e1);
-  }
-
-  // Simulate at the fine step (Synthesize's time step), keeping the surfaces needed and the
-  // object's extent in the floor frame and around the view target.
+  RecordingSetup setup;
+  setup.floor = AimFloorFrame(scene, options.cameras);
   RawSynthesisSummary summary;
-  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = Eigen::Vector3d::Constant(-1e300);
-  double reach = scene.view_radius;
-  // The real object is closed where its scan has holes: the cameras see the caps, not through.
-  geometry::HoleLoops holes;  // found on the first state's surface
-  const auto record_step = [&](int step, const fem::Simulator& sim) {
-    if (step == 0) {
-      summary.num_elements = sim.hex_mesh().NumElements();
-      summary.num_nodes = sim.hex_mesh().NumNodes();
-      summary.mass = sim.total_mass();
-      holes = geometry::FindHoleLoops(sim.DeformedSurface());
-    }
-    geometry::TriangleMesh surface = geometry::WithHolesCapped(sim.DeformedSurface(), holes);
-    for (const auto& v : surface.vertices) {
-      const Eigen::Vector3d f = floor.ToFloor(v);
-      lo = lo.cwiseMin(f);
-      hi = hi.cwiseMax(f);
-      reach = std::max(reach, (v - scene.view_target).norm());
-    }
-    auto it = surfaces.find(step);
-    if (it != surfaces.end()) it->second = std::move(surface);
-    if (progress) progress(step, num_steps);
-  };
-  SOFTID_ASSIGN_OR_RETURN(summary.run, RunSceneToEnd(scene, fine, record_step, "steps"));
-  // Without a ground plane (free flight, clamped objects) the floor lies below the motion.
-  if (p.ground) {
-    floor_offset = p.ground->offset;
-  } else {
-    const double shift = lo.z() - 0.1 * scene.view_radius - 0.02;
-    floor.origin += shift * floor.n;
-    lo.z() -= shift;
-    hi.z() -= shift;
-    floor_offset = floor.n.dot(floor.origin);
-  }
+  MotionExtent motion;
+  SOFTID_RETURN_IF_ERROR(
+      SimulateMotion(scene, clock, setup.floor, progress, &surfaces, &motion, &summary));
+  setup.floor_offset = SettleFloor(scene, &setup.floor, &motion);
+  PlaceCamerasAndRoom(scene, options, motion, &setup);
+  const std::vector<capture::PinholeCamera>& cameras = setup.cameras;
+  SOFTID_ASSIGN_OR_RETURN(
+      const RenderedImages images,
+      RenderImages(setup.room.mesh, cameras, samples, surfaces, clock.kept, options));
 
-  // Cameras: the ring around the view target, far enough to keep the whole motion in view.
-  const std::vector<capture::PinholeCamera> cameras =
-      MakeCameraRing(options.cameras, scene.view_target, reach);
-  Eigen::Vector3d cam_lo = Eigen::Vector3d::Constant(1e300);
-  Eigen::Vector3d cam_hi = Eigen::Vector3d::Constant(-1e300);
-  for (const auto& camera : cameras) {
-    const Eigen::Vector3d f = floor.ToFloor(camera.X_WC.translation());
-    cam_lo = cam_lo.cwiseMin(f);
-    cam_hi = cam_hi.cwiseMax(f);
-  }
-
-  // The room: clutter beside the motion where the first camera sees it, walls behind.
-  const Room room_parts =
-      BuildRoom(floor, lo, hi, cam_lo, cam_hi, cameras, options.distortion, scene.view_radius);
-  const geometry::TriangleMesh& room = room_parts.mesh;
-
-  // Render: the static room once per camera, the object per frame; the nearer surface wins.
-  capture::DepthRenderer renderer;
-  const int num_cameras = static_cast<int>(cameras.size());
-  const int num_frames = static_cast<int>(kept.size());
-  std::vector<capture::PixelRays> rays;
-  std::vector<capture::DepthImage> room_depth;
-  for (const auto& camera : cameras) {
-    SOFTID_ASSIGN_OR_RETURN(capture::PixelRays r,
-                            capture::ComputePixelRays(camera, options.distortion));
-    room_depth.push_back(renderer.Render(room, camera, r));
-    rays.push_back(std::move(r));
-  }
-  std::vector<std::vector<capture::DepthImage>> frames(num_cameras);
-  std::vector<std::vector<std::vector<uint8_t>>> masks(num_cameras);
-  long long valid_pixels = 0, object_pixels = 0;
-  for (int i = 0; i < num_frames; ++i) {
-    const Sample& s = samples[i];
-    geometry::TriangleMesh surface = surfaces.at(s.step);
-    if (s.weight > 0.0) {
-      const geometry::TriangleMesh& next = surfaces.at(s.step + 1);
-      for (size_t v = 0; v < surface.vertices.size(); ++v) {
-        surface.vertices[v] += s.weight * (next.vertices[v] - surface.vertices[v]);
-      }
-    }
-    for (int c = 0; c < num_cameras; ++c) {
-      const capture::DepthImage object = renderer.Render(surface, cameras[c], rays[c]);
-      capture::DepthImage image = room_depth[c];
-      std::vector<uint8_t> mask(image.depth.size(), 0);
-      for (size_t px = 0; px < image.depth.size(); ++px) {
-        const float zo = object.depth[px];
-        if (zo > 0.0f && (image.depth[px] <= 0.0f || zo <= image.depth[px])) {
-          image.depth[px] = zo;
-          mask[px] = 255;
-          ++object_pixels;
-        }
-      }
-      capture::ApplyDepthNoise(options.noise, kept[i], c, &image);
-      ClampToRange(options.depth_scale, &image);
-      // A pixel the sensor dropped shows nothing, the object neither.
-      for (size_t px = 0; px < mask.size(); ++px) {
-        if (image.depth[px] <= 0.0f) mask[px] = 0;
-      }
-      valid_pixels += image.NumValid();
-      frames[c].push_back(std::move(image));
-      if (options.write_true_masks) masks[c].push_back(std::move(mask));
-    }
-  }
-  std::vector<std::vector<capture::DepthImage>> backgrounds;
-  if (options.background_frames > 0) {
-    backgrounds.resize(num_cameras);
-    for (int c = 0; c < num_cameras; ++c) {
-      for (int b = 0; b < options.background_frames; ++b) {
-        capture::DepthImage image = room_depth[c];
-        // Noise indices apart from the frames' (frame indices stay below 1e6).
-        capture::ApplyDepthNoise(options.noise, 1000000 + b, c, &image);
-        ClampToRange(options.depth_scale, &image);
-        backgrounds[c].push_back(std::move(image));
-      }
-    }
-  }
-
-  // The scanner's frame: a random rigid pose of the rest mesh.
-  Eigen::Isometry3d world_from_scanner = Eigen::Isometry3d::Identity();
-  {
-    Eigen::Quaterniond q(gaussian(rng), gaussian(rng), gaussian(rng), gaussian(rng));
-    q.normalize();
-    Eigen::Vector3d direction(gaussian(rng), gaussian(rng), gaussian(rng));
-    direction.normalize();
-    world_from_scanner.linear() = q.toRotationMatrix();
-    world_from_scanner.translation() = (0.1 + 0.9 * uniform(rng)) * direction;
-  }
-  geometry::TriangleMesh scan = scene.mesh;
-  const Eigen::Isometry3d scanner_from_world = world_from_scanner.inverse();
-  for (auto& v : scan.vertices) v = scanner_from_world * v;
-
-  recording::Recording rec;
-  rec.mesh_file = "scan.ply";
-  rec.mesh_unit =
-      options.mesh_in_mm ? recording::MeshUnit::kMillimetre : recording::MeshUnit::kMetre;
-  if (options.write_mass) rec.mass_kg = p.density * std::abs(geometry::SignedVolume(scene.mesh));
-  for (int c = 0; c < num_cameras; ++c) {
-    recording::RecordingCamera cam;
-    cam.camera = cameras[c];
-    cam.has_world_from_camera = num_cameras > 1;
-    if (!cam.has_world_from_camera) cam.camera.X_WC = Eigen::Isometry3d::Identity();
-    cam.distortion = options.distortion;
-    cam.depth_scale = options.depth_scale;
-    for (int i = 0; i < num_frames; ++i) {
-      cam.frames.push_back(
-          {fmt::format("{}/{:06d}.png", cameras[c].name, i), time_offset + true_times[kept[i]]});
-    }
-    for (int b = 0; b < options.background_frames; ++b) {
-      cam.background.push_back(fmt::format("{}/bg_{:03d}.png", cameras[c].name, b));
-    }
-    rec.cameras.push_back(std::move(cam));
-  }
+  const Eigen::Isometry3d world_from_scanner = DrawScannerPose(draws);
+  const geometry::TriangleMesh scan = ScanInScannerFrame(scene.mesh, world_from_scanner);
+  const recording::Recording rec = MakeRecording(scene, options, cameras, clock);
   // Validate before writing anything (WriteRecording checks again).
   SOFTID_RETURN_IF_ERROR(recording::RecordingFromJson(recording::ToJson(rec)).status());
 
@@ -483,58 +736,18 @@ Result<RawSynthesisSummary> SynthesizeRawRecording(const Scene& scene,
   if (ec) return Status::IoError("out = " + directory.string() + ": " + ec.message());
 
   // truth.json and the masks first: recording.json is written last.
-  nlohmann::json truth = SynthesisTruthJson(scene, options.run, options.noise, options.depth_scale,
-                                            summary.num_elements, summary.mass);
-  nlohmann::json truth_cameras = nlohmann::json::array();
-  for (const auto& camera : cameras) {
-    truth_cameras.push_back(
-        {{"name", camera.name}, {"world_from_camera", MatrixJson(camera.X_WC)}});
-  }
-  nlohmann::json frame_times = nlohmann::json::array(), frame_indices = nlohmann::json::array();
-  for (int k : kept) {
-    frame_times.push_back(true_times[k]);
-    frame_indices.push_back(k);
-  }
-  truth["raw"] = {
-      {"world_from_scanner", MatrixJson(world_from_scanner)},
-      {"floor", {{"normal", VectorJson(floor.n)}, {"offset", floor_offset}}},
-      {"time_offset_s", time_offset},
-      {"time_jitter_s", options.time_jitter_s},
-      {"frame_times_s", frame_times},
-      {"frame_indices", frame_indices},
-      {"fps", options.run.fps},
-      {"cameras", truth_cameras},
-      {"distortion", options.distortion},
-      {"mesh_unit", std::string(recording::ToString(rec.mesh_unit))},
-      {"clutter", BoxJson(floor, room_parts.clutter)},
-      {"walls", {BoxJson(floor, room_parts.back_wall), BoxJson(floor, room_parts.side_wall)}},
-      {"floor_slab", BoxJson(floor, room_parts.floor_slab)},
-      {"seed", options.seed},
-  };
-  {
-    std::ofstream file(directory / kTruthFileName);
-    file << truth.dump(2) << "\n";
-    if (!file) return Status::IoError("cannot write " + (directory / kTruthFileName).string());
-  }
+  SOFTID_RETURN_IF_ERROR(WriteTruthFile(
+      directory,
+      RawTruthJson(scene, options, summary, clock, setup, world_from_scanner, rec.mesh_unit)));
+  const int num_cameras = static_cast<int>(cameras.size());
+  const int num_frames = static_cast<int>(clock.kept.size());
   if (options.write_true_masks) {
-    for (int c = 0; c < num_cameras; ++c) {
-      for (int i = 0; i < num_frames; ++i) {
-        SOFTID_RETURN_IF_ERROR(
-            WriteMask(directory / kTrueMasksFolder / cameras[c].name / fmt::format("{:06d}.png", i),
-                      masks[c][i], cameras[c].width, cameras[c].height));
-      }
-    }
+    SOFTID_RETURN_IF_ERROR(WriteTrueMasks(directory, cameras, images.masks, num_frames));
   }
-  SOFTID_RETURN_IF_ERROR(recording::WriteRecording(directory, rec, scan, frames, backgrounds));
+  SOFTID_RETURN_IF_ERROR(
+      recording::WriteRecording(directory, rec, scan, images.frames, images.backgrounds));
 
-  summary.num_cameras = num_cameras;
-  summary.num_frames = num_frames;
-  summary.num_dropped = num_ideal - num_frames;
-  summary.time_offset_s = time_offset;
-  summary.world_from_scanner = world_from_scanner;
-  const double images = static_cast<double>(num_frames) * num_cameras;
-  summary.mean_valid_pixels = valid_pixels / images;
-  summary.mean_object_pixels = object_pixels / images;
+  CompleteSummary(clock, images, num_cameras, world_from_scanner, &summary);
   return summary;
 }
 

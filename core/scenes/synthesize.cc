@@ -47,19 +47,16 @@ nlohmann::json SynthesisTruthJson(const Scene& scene, const RunOptions& run,
   };
 }
 
-Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& options,
-                                    const std::filesystem::path& out,
-                                    const std::function<void(int, int)>& progress) {
-  SOFTID_RETURN_IF_ERROR(options.Validate());
-  if (std::filesystem::exists(out / capture::kCaptureFileName)) {
-    return Status::FailedPrecondition("out = " + out.string() +
-                                      ": already holds a capture; choose an empty folder");
-  }
-  const std::vector<capture::PinholeCamera> cameras =
-      MakeCameraRing(options.cameras, scene.view_target, scene.view_radius);
+namespace {
+
+// Simulates the scene and renders every frame from every camera with seeded depth noise into
+// *frames (per camera); fills *summary's simulation and image statistics.
+Status SimulateAndRender(const Scene& scene, const SynthesisOptions& options,
+                         const std::vector<capture::PinholeCamera>& cameras,
+                         const std::function<void(int, int)>& progress,
+                         std::vector<std::vector<capture::DepthImage>>* frames,
+                         SynthesisSummary* summary) {
   capture::DepthRenderer renderer;
-  std::vector<std::vector<capture::DepthImage>> frames(cameras.size());
-  SynthesisSummary summary;
   const int num_frames = options.run.NumFrames(scene);
   long long valid_pixels = 0;
   // The real object is closed where its scan has holes: the cameras see the caps, not through.
@@ -67,9 +64,9 @@ Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& 
 
   const auto record_frame = [&](int frame, const fem::Simulator& sim) {
     if (frame == 0) {
-      summary.num_elements = sim.hex_mesh().NumElements();
-      summary.num_nodes = sim.hex_mesh().NumNodes();
-      summary.mass = sim.total_mass();
+      summary->num_elements = sim.hex_mesh().NumElements();
+      summary->num_nodes = sim.hex_mesh().NumNodes();
+      summary->mass = sim.total_mass();
       holes = geometry::FindHoleLoops(sim.DeformedSurface());
     }
     const geometry::TriangleMesh surface = geometry::WithHolesCapped(sim.DeformedSurface(), holes);
@@ -77,15 +74,20 @@ Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& 
       capture::DepthImage image = renderer.Render(surface, cameras[c]);
       capture::ApplyDepthNoise(options.noise, frame, static_cast<int>(c), &image);
       valid_pixels += image.NumValid();
-      frames[c].push_back(std::move(image));
+      (*frames)[c].push_back(std::move(image));
     }
     if (progress) progress(frame, num_frames);
   };
-  SOFTID_ASSIGN_OR_RETURN(summary.run, RunSceneToEnd(scene, options.run, record_frame));
-  summary.num_cameras = static_cast<int>(cameras.size());
-  summary.mean_valid_pixels =
+  SOFTID_ASSIGN_OR_RETURN(summary->run, RunSceneToEnd(scene, options.run, record_frame));
+  summary->num_cameras = static_cast<int>(cameras.size());
+  summary->mean_valid_pixels =
       static_cast<double>(valid_pixels) / (static_cast<double>(num_frames) * cameras.size());
+  return Status::Ok();
+}
 
+// capture.json's contents (the frames' file names are WriteCapture's).
+capture::Capture MakeCapture(const Scene& scene, const SynthesisOptions& options,
+                             const std::vector<capture::PinholeCamera>& cameras) {
   capture::Capture cap;
   cap.fps = options.run.fps;
   if (options.write_mass) {
@@ -98,6 +100,26 @@ Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& 
     recording.depth_scale = options.depth_scale;
     cap.cameras.push_back(recording);
   }
+  return cap;
+}
+
+}  // namespace
+
+Result<SynthesisSummary> Synthesize(const Scene& scene, const SynthesisOptions& options,
+                                    const std::filesystem::path& out,
+                                    const std::function<void(int, int)>& progress) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  if (std::filesystem::exists(out / capture::kCaptureFileName)) {
+    return Status::FailedPrecondition("out = " + out.string() +
+                                      ": already holds a capture; choose an empty folder");
+  }
+  const std::vector<capture::PinholeCamera> cameras =
+      MakeCameraRing(options.cameras, scene.view_target, scene.view_radius);
+  std::vector<std::vector<capture::DepthImage>> frames(cameras.size());
+  SynthesisSummary summary;
+  SOFTID_RETURN_IF_ERROR(SimulateAndRender(scene, options, cameras, progress, &frames, &summary));
+
+  const capture::Capture cap = MakeCapture(scene, options, cameras);
   std::error_code ec;
   std::filesystem::create_directories(out, ec);
   if (ec) return Status::IoError("out = " + out.string() + ": " + ec.message());

@@ -40,5 +40,12 @@ TEST(DepthPreview, RejectsNoFrames) {
   EXPECT_NE(s.message().find("/tmp/nothing.png"), std::string::npos);
 }
 
+// An empty first frame (no pixels) is an error naming its size, not a division by zero.
+TEST(DepthPreview, RejectsAnEmptyFrame) {
+  const Status s = WriteDepthPreview("/tmp/empty.png", {DepthImage{}});
+  ASSERT_FALSE(s.ok());
+  EXPECT_NE(s.message().find("frame 0 is 0 x 0 pixels"), std::string::npos) << s.message();
+}
+
 }  // namespace
 }  // namespace softid::capture
