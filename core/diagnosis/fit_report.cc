@@ -80,6 +80,84 @@ Eigen::Vector3d FrontDirection(const capture::Capture& capture, const Eigen::Vec
   return level.norm() > 1e-6 ? level.normalized() : up.unitOrthogonal();
 }
 
+// The cost per iteration of every start that did not fail: cost_per_iteration.png.
+Status WriteCostPlot(const inverse::FitResult& fit, const std::filesystem::path& dir,
+                     FitReport* report) {
+  std::vector<Series> series;
+  for (size_t i = 0; i < fit.starts.size(); ++i) {
+    if (!fit.starts[i].failed)
+      series.push_back(StartCostSeries(fit.starts[i], static_cast<int>(i), fit.best == int(i)));
+  }
+  SOFTID_RETURN_IF_ERROR(WriteCostHistoryPlot(dir / "cost_per_iteration.png", series));
+  report->files.push_back("cost_per_iteration.png");
+  return Status::Ok();
+}
+
+// The objective of the fitted parameters over the observed frames.
+Result<std::unique_ptr<inverse::TrajectoryObjective>> MakeObjective(
+    const capture::Capture& capture, const inverse::JobConfig& config,
+    const geometry::TriangleMesh& mesh, const Observations& observations,
+    const fem::PhysicalParameters& p) {
+  try {
+    return std::make_unique<inverse::TrajectoryObjective>(
+        mesh, capture.fixed_region, p, inverse::SimulationOptionsFor(config.solver),
+        inverse::CostOptionsFor(config.solver),
+        std::make_shared<const std::vector<inverse::ObservedFrame>>(observations.frames),
+        capture.fps, config.solver.substeps);
+  } catch (const std::invalid_argument& e) {
+    return Status::InvalidArgument(e.what());
+  }
+}
+
+// The misfit of every frame in noise floors, over the motion phases: residual_per_frame.png.
+Status WriteMisfitPlot(fem::Simulator& sim, const fem::PhysicalParameters& p,
+                       const ResidualMap& map, const NoiseFloor& floor,
+                       const FitReportOptions& options, const std::filesystem::path& dir,
+                       FitReport* report) {
+  std::vector<FrameAt> times;
+  std::vector<int> frames;
+  std::vector<double> normalised;
+  for (const FrameResiduals& f : map.frames) {
+    times.push_back({f.frame, f.time});
+    frames.push_back(f.frame);
+    normalised.push_back(f.misfit / floor.sigma);
+  }
+  SOFTID_ASSIGN_OR_RETURN(const std::vector<FrameMotion> motion,
+                          SplitMotionPhases(sim, p, times, options.phases));
+  SOFTID_RETURN_IF_ERROR(WriteFrameMisfitPlot(dir / "residual_per_frame.png", frames, normalised,
+                                              {}, motion, options.misfit_threshold,
+                                              "fitted simulation"));
+  report->files.push_back("residual_per_frame.png");
+  return Status::Ok();
+}
+
+// The simulated surface over the observed points at a few frames, the worst-fitting among them:
+// surface_overlay.png.
+Status WriteSnapshots(const capture::Capture& capture, fem::Simulator& sim,
+                      const fem::PhysicalParameters& p, const Observations& observations,
+                      const ResidualMap& map, const NoiseFloor& floor, const Eigen::Vector3d& up,
+                      const FitReportOptions& options, const std::filesystem::path& dir,
+                      FitReport* report) {
+  const std::vector<int> wanted = SnapshotIndices(map, options.snapshots);
+  SOFTID_ASSIGN_OR_RETURN(std::vector<geometry::TriangleMesh> surfaces,
+                          SurfacesAt(sim, p, observations, wanted));
+  std::vector<SurfaceSnapshot> snapshots;
+  for (size_t i = 0; i < wanted.size(); ++i) {
+    const FrameResiduals& f = map.frames[wanted[i]];
+    snapshots.push_back({f.frame, f.time, std::move(surfaces[i]),
+                         observations.frames[wanted[i]].points, f.phi, f.matched});
+    report->snapshot_frames.push_back(f.frame);
+  }
+  SurfaceOverlayView view;
+  view.up_W = up;
+  view.front_W = FrontDirection(capture, up);
+  view.noise_floor_m = floor.sigma;
+  view.ground = p.ground;
+  SOFTID_RETURN_IF_ERROR(WriteSurfaceOverlay(dir / "surface_overlay.png", snapshots, view));
+  report->files.push_back("surface_overlay.png");
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status FitReportOptions::Validate() const {
@@ -101,29 +179,14 @@ Result<FitReport> WriteFitReport(const capture::Capture& capture,
   const inverse::JobConfig config = inverse::WithFitDiscretisation(config_in, fit);
   const fem::PhysicalParameters& p = fit.Best().final;
   FitReport report;
-
-  std::vector<Series> series;
-  for (size_t i = 0; i < fit.starts.size(); ++i) {
-    if (!fit.starts[i].failed)
-      series.push_back(StartCostSeries(fit.starts[i], static_cast<int>(i), fit.best == int(i)));
-  }
-  SOFTID_RETURN_IF_ERROR(WriteCostHistoryPlot(dir / "cost_per_iteration.png", series));
-  report.files.push_back("cost_per_iteration.png");
+  SOFTID_RETURN_IF_ERROR(WriteCostPlot(fit, dir, &report));
 
   SOFTID_ASSIGN_OR_RETURN(geometry::TriangleMesh mesh, capture::LoadCaptureMesh(capture));
   SOFTID_ASSIGN_OR_RETURN(
       Observations observations,
       LoadObservations(capture, config.frames.first, config.frames.last, config.heldout_every));
-  std::unique_ptr<inverse::TrajectoryObjective> objective;
-  try {
-    objective = std::make_unique<inverse::TrajectoryObjective>(
-        mesh, capture.fixed_region, p, inverse::SimulationOptionsFor(config.solver),
-        inverse::CostOptionsFor(config.solver),
-        std::make_shared<const std::vector<inverse::ObservedFrame>>(observations.frames),
-        capture.fps, config.solver.substeps);
-  } catch (const std::invalid_argument& e) {
-    return Status::InvalidArgument(e.what());
-  }
+  SOFTID_ASSIGN_OR_RETURN(std::unique_ptr<inverse::TrajectoryObjective> objective,
+                          MakeObjective(capture, config, mesh, observations, p));
   objective->SetCancelFlag(options.cancel);
   SOFTID_ASSIGN_OR_RETURN(auto matches, objective->MatchPoints(p));
   fem::Simulator& sim = objective->simulator();
@@ -134,38 +197,9 @@ Result<FitReport> WriteFitReport(const capture::Capture& capture,
   SOFTID_ASSIGN_OR_RETURN(const NoiseFloor floor, EstimateNoiseFloor(map, options.noise_floor));
   report.noise_floor_m = floor.sigma;
 
-  std::vector<FrameAt> times;
-  std::vector<int> frames;
-  std::vector<double> normalised;
-  for (const FrameResiduals& f : map.frames) {
-    times.push_back({f.frame, f.time});
-    frames.push_back(f.frame);
-    normalised.push_back(f.misfit / floor.sigma);
-  }
-  SOFTID_ASSIGN_OR_RETURN(const std::vector<FrameMotion> motion,
-                          SplitMotionPhases(sim, p, times, options.phases));
-  SOFTID_RETURN_IF_ERROR(WriteFrameMisfitPlot(dir / "residual_per_frame.png", frames, normalised,
-                                              {}, motion, options.misfit_threshold,
-                                              "fitted simulation"));
-  report.files.push_back("residual_per_frame.png");
-
-  const std::vector<int> wanted = SnapshotIndices(map, options.snapshots);
-  SOFTID_ASSIGN_OR_RETURN(std::vector<geometry::TriangleMesh> surfaces,
-                          SurfacesAt(sim, p, observations, wanted));
-  std::vector<SurfaceSnapshot> snapshots;
-  for (size_t i = 0; i < wanted.size(); ++i) {
-    const FrameResiduals& f = map.frames[wanted[i]];
-    snapshots.push_back({f.frame, f.time, std::move(surfaces[i]),
-                         observations.frames[wanted[i]].points, f.phi, f.matched});
-    report.snapshot_frames.push_back(f.frame);
-  }
-  SurfaceOverlayView view;
-  view.up_W = up;
-  view.front_W = FrontDirection(capture, up);
-  view.noise_floor_m = floor.sigma;
-  view.ground = p.ground;
-  SOFTID_RETURN_IF_ERROR(WriteSurfaceOverlay(dir / "surface_overlay.png", snapshots, view));
-  report.files.push_back("surface_overlay.png");
+  SOFTID_RETURN_IF_ERROR(WriteMisfitPlot(sim, p, map, floor, options, dir, &report));
+  SOFTID_RETURN_IF_ERROR(
+      WriteSnapshots(capture, sim, p, observations, map, floor, up, options, dir, &report));
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
   return report;
 }

@@ -82,32 +82,27 @@ std::string Join(const std::vector<std::string>& v) {
   return out.empty() ? "-" : out;
 }
 
-}  // namespace
+// The missing physics the diagnosis found, with where the base model missed.
+nlohmann::json FindingJson(const DiagnosisReport& r, const TestedCandidate& w) {
+  return {{"physics", ToString(w.test.extension)},
+          {"parameters", w.values},
+          {"uncertainty", w.uncertainty},
+          {"profile", w.profile},
+          {"cost_before", w.test.cost_before},
+          {"cost_after", w.test.cost_after},
+          {"heldout_before", w.test.heldout_before},
+          {"heldout_after", w.test.heldout_after},
+          {"base_cost", r.base_cost},
+          {"base_heldout", r.base_heldout},
+          {"given", ConditionalJson(w.test)},
+          {"onset_frame", r.before.onset_frame},
+          {"phases", r.before.FlaggedPhaseNames()},
+          {"regions", r.before.FlaggedPatchLabels()},
+          {"test", ToJson(w.test)}};
+}
 
-nlohmann::json ToJson(const DiagnosisReport& r) {
-  nlohmann::json out;
-  out["format"] = kDiagnosisFormat;
-  out["decision"] = r.decision;
-  out["findings"] = nlohmann::json::array();
-  if (r.winner >= 0 && !r.tested[r.winner].test.nuisance) {
-    const TestedCandidate& w = r.tested[r.winner];
-    out["findings"].push_back({{"physics", ToString(w.test.extension)},
-                               {"parameters", w.values},
-                               {"uncertainty", w.uncertainty},
-                               {"profile", w.profile},
-                               {"cost_before", w.test.cost_before},
-                               {"cost_after", w.test.cost_after},
-                               {"heldout_before", w.test.heldout_before},
-                               {"heldout_after", w.test.heldout_after},
-                               {"base_cost", r.base_cost},
-                               {"base_heldout", r.base_heldout},
-                               {"given", ConditionalJson(w.test)},
-                               {"onset_frame", r.before.onset_frame},
-                               {"phases", r.before.FlaggedPhaseNames()},
-                               {"regions", r.before.FlaggedPatchLabels()},
-                               {"test", ToJson(w.test)}});
-  }
-  out["nuisances"] = r.nuisances;
+// Per observed frame: its phase and misfit before and after the winning refit.
+nlohmann::json FramesJson(const DiagnosisReport& r) {
   nlohmann::json frames = nlohmann::json::array();
   for (size_t k = 0; k < r.frames.size(); ++k) {
     frames.push_back({{"frame", r.frames[k]},
@@ -117,8 +112,106 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
                       {"before", r.before.frame_normalised.at(k)},
                       {"after", r.after.frame_normalised.at(k)}});
   }
+  return frames;
+}
+
+nlohmann::json ScreenedJson(const ScreenedCandidate& s) {
+  return {{"extension", ToString(s.extension)},
+          {"axis",
+           s.axis >= 0 ? nlohmann::json(std::string(1, "xyz"[s.axis])) : nlohmann::json(nullptr)},
+          {"applicable", s.applicable},
+          {"note", s.note},
+          {"gradient", s.gradient},
+          {"curvature", s.curvature},
+          {"efficient_curvature", s.efficient_curvature},
+          {"start_theta", s.theta},
+          {"start_cost", Number(s.start_cost)},
+          {"predicted_lr", s.predicted_lr},
+          {"signature_share", s.signature_share},
+          {"score", s.score}};
+}
+
+nlohmann::json CandidateJson(const TestedCandidate& t) {
+  return {{"extension", ToString(t.test.extension)},
+          {"nuisance", t.test.nuisance},
+          {"parameters", t.values},
+          {"uncertainty", t.uncertainty},
+          {"profile", t.profile},
+          {"cost_before", t.test.cost_before},
+          {"cost_after", t.test.cost_after},
+          {"heldout_before", t.test.heldout_before},
+          {"heldout_after", t.test.heldout_after},
+          {"refit_error", t.test.refit_error},
+          {"null_refit", t.null_refit},
+          {"given", ConditionalJson(t.test)},
+          {"nuisance_parameters", t.nuisance_values},
+          {"starts", t.starts},
+          {"fit", t.fit},
+          {"test", ToJson(t.test)},
+          {"residual_after", ToJson(t.after)}};
+}
+
+// Where the base model misses: the onset, the worst frame and each phase's misfit.
+void WriteMismatchText(const Localization& b, std::ostream& out) {
+  if (!b.flagged) {
+    out << "the base model fits to the noise level: no phase or patch above " << b.threshold
+        << " x the floor (worst frame " << b.worst_frame << ")\n";
+  } else {
+    out << "mismatch: begins at frame " << b.onset_frame << ", worst at frame " << b.worst_frame
+        << "; phases " << Join(b.FlaggedPhaseNames()) << "; patches "
+        << Join(b.FlaggedPatchLabels()) << "\n";
+    for (const PhaseMisfit& p : b.phases) {
+      out << "  " << ToString(p.phase) << " (frames " << p.first_frame << "-" << p.last_frame
+          << "): " << Fixed(p.normalised) << " x floor" << (p.flagged ? "  <-" : "") << "\n";
+    }
+  }
+}
+
+void WriteScreenedText(const ScreenedCandidate& s, std::ostream& out) {
+  out << "  screened " << ToString(s.extension)
+      << (s.axis >= 0 ? std::string(" (") + "xyz"[s.axis] + ")" : std::string()) << ": "
+      << (s.applicable ? "score " + Fixed(s.score) + ", predicted LR " + Fixed(s.predicted_lr) +
+                             ", signature " + Fixed(s.signature_share, 2)
+                       : "not applicable")
+      << (s.note.empty() ? "" : " (" + s.note + ")") << "\n";
+}
+
+// A refit with a candidate: its values, costs and test, and what a conditional nuisance added.
+void WriteRefitText(const TestedCandidate& t, std::ostream& out) {
+  out << "  refit " << ToString(t.test.extension)
+      << (t.test.conditional ? std::string(" given ") + ToString(t.test.given) : std::string())
+      << ": " << t.values.dump();
+  if (!t.uncertainty.is_null()) out << " +- " << t.uncertainty.dump();
+  if (t.profile.is_object() && t.profile.value("relative_uncertainty", -1.0) > 0.0)
+    out << " (profile: +- " << Fixed(100.0 * t.profile["relative_uncertainty"].get<double>(), 2)
+        << " %)";
+  out << "\n    cost " << Fixed(t.test.cost_before) << " -> " << Fixed(t.test.cost_after)
+      << " m^2, held-out " << Fixed(t.test.heldout_before) << " -> " << Fixed(t.test.heldout_after)
+      << " m^2, LR " << Fixed(t.test.lr) << " (critical " << Fixed(t.test.critical_value) << ")"
+      << (t.test.accepted ? ": accepted" : ": rejected: " + t.test.Reason()) << "\n";
+  if (t.test.conditional) {
+    out << "    " << ToString(t.test.given) << " given " << ToString(t.test.extension) << ": "
+        << t.nuisance_values.dump() << ", cost " << Fixed(t.test.physics_cost) << " -> "
+        << Fixed(t.test.cost_after) << " m^2, held-out " << Fixed(t.test.physics_heldout) << " -> "
+        << Fixed(t.test.heldout_after) << " m^2, LR " << Fixed(t.test.nuisance_lr) << " (critical "
+        << Fixed(t.test.nuisance_critical_value)
+        << "): " << (t.test.nuisance_needed ? "still needed" : "adds nothing") << "\n";
+  }
+}
+
+}  // namespace
+
+nlohmann::json ToJson(const DiagnosisReport& r) {
+  nlohmann::json out;
+  out["format"] = kDiagnosisFormat;
+  out["decision"] = r.decision;
+  out["findings"] = nlohmann::json::array();
+  if (r.winner >= 0 && !r.tested[r.winner].test.nuisance) {
+    out["findings"].push_back(FindingJson(r, r.tested[r.winner]));
+  }
+  out["nuisances"] = r.nuisances;
   out["mismatch"] = ToJson(r.before);
-  out["mismatch"]["frames"] = frames;
+  out["mismatch"]["frames"] = FramesJson(r);
   out["residual_after"] = ToJson(r.after);
   out["noise_floor"] = {{"sigma", r.noise_floor.sigma},
                         {"method", r.noise_floor.method},
@@ -127,41 +220,9 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
                         {"frame0_excess", r.noise_floor.frame0_excess}};
   out["base"] = {{"cost", r.base_cost}, {"heldout", r.base_heldout}, {"n_eff", r.n_eff}};
   out["screening"] = nlohmann::json::array();
-  for (const ScreenedCandidate& s : r.screening) {
-    out["screening"].push_back({{"extension", ToString(s.extension)},
-                                {"axis", s.axis >= 0 ? nlohmann::json(std::string(1, "xyz"[s.axis]))
-                                                     : nlohmann::json(nullptr)},
-                                {"applicable", s.applicable},
-                                {"note", s.note},
-                                {"gradient", s.gradient},
-                                {"curvature", s.curvature},
-                                {"efficient_curvature", s.efficient_curvature},
-                                {"start_theta", s.theta},
-                                {"start_cost", Number(s.start_cost)},
-                                {"predicted_lr", s.predicted_lr},
-                                {"signature_share", s.signature_share},
-                                {"score", s.score}});
-  }
+  for (const ScreenedCandidate& s : r.screening) out["screening"].push_back(ScreenedJson(s));
   out["candidates"] = nlohmann::json::array();
-  for (const TestedCandidate& t : r.tested) {
-    out["candidates"].push_back({{"extension", ToString(t.test.extension)},
-                                 {"nuisance", t.test.nuisance},
-                                 {"parameters", t.values},
-                                 {"uncertainty", t.uncertainty},
-                                 {"profile", t.profile},
-                                 {"cost_before", t.test.cost_before},
-                                 {"cost_after", t.test.cost_after},
-                                 {"heldout_before", t.test.heldout_before},
-                                 {"heldout_after", t.test.heldout_after},
-                                 {"refit_error", t.test.refit_error},
-                                 {"null_refit", t.null_refit},
-                                 {"given", ConditionalJson(t.test)},
-                                 {"nuisance_parameters", t.nuisance_values},
-                                 {"starts", t.starts},
-                                 {"fit", t.fit},
-                                 {"test", ToJson(t.test)},
-                                 {"residual_after", ToJson(t.after)}});
-  }
+  for (const TestedCandidate& t : r.tested) out["candidates"].push_back(CandidateJson(t));
   out["base_restarts"] = r.base_restarts;
   out["base_fit"] = r.base_fit;
   out["final_fit"] = r.final_fit;
@@ -177,50 +238,9 @@ std::string ToText(const DiagnosisReport& r) {
   out << "noise floor: " << Fixed(1e3 * r.noise_floor.sigma) << " mm (" << r.noise_floor.method
       << "); base cost " << Fixed(r.base_cost) << " m^2, held-out " << Fixed(r.base_heldout)
       << " m^2, n_eff " << Fixed(r.n_eff) << "\n";
-  const Localization& b = r.before;
-  if (!b.flagged) {
-    out << "the base model fits to the noise level: no phase or patch above " << b.threshold
-        << " x the floor (worst frame " << b.worst_frame << ")\n";
-  } else {
-    out << "mismatch: begins at frame " << b.onset_frame << ", worst at frame " << b.worst_frame
-        << "; phases " << Join(b.FlaggedPhaseNames()) << "; patches "
-        << Join(b.FlaggedPatchLabels()) << "\n";
-    for (const PhaseMisfit& p : b.phases) {
-      out << "  " << ToString(p.phase) << " (frames " << p.first_frame << "-" << p.last_frame
-          << "): " << Fixed(p.normalised) << " x floor" << (p.flagged ? "  <-" : "") << "\n";
-    }
-  }
-  for (const ScreenedCandidate& s : r.screening) {
-    out << "  screened " << ToString(s.extension)
-        << (s.axis >= 0 ? std::string(" (") + "xyz"[s.axis] + ")" : std::string()) << ": "
-        << (s.applicable ? "score " + Fixed(s.score) + ", predicted LR " + Fixed(s.predicted_lr) +
-                               ", signature " + Fixed(s.signature_share, 2)
-                         : "not applicable")
-        << (s.note.empty() ? "" : " (" + s.note + ")") << "\n";
-  }
-  for (size_t i = 0; i < r.tested.size(); ++i) {
-    const TestedCandidate& t = r.tested[i];
-    out << "  refit " << ToString(t.test.extension)
-        << (t.test.conditional ? std::string(" given ") + ToString(t.test.given) : std::string())
-        << ": " << t.values.dump();
-    if (!t.uncertainty.is_null()) out << " +- " << t.uncertainty.dump();
-    if (t.profile.is_object() && t.profile.value("relative_uncertainty", -1.0) > 0.0)
-      out << " (profile: +- " << Fixed(100.0 * t.profile["relative_uncertainty"].get<double>(), 2)
-          << " %)";
-    out << "\n    cost " << Fixed(t.test.cost_before) << " -> " << Fixed(t.test.cost_after)
-        << " m^2, held-out " << Fixed(t.test.heldout_before) << " -> "
-        << Fixed(t.test.heldout_after) << " m^2, LR " << Fixed(t.test.lr) << " (critical "
-        << Fixed(t.test.critical_value) << ")"
-        << (t.test.accepted ? ": accepted" : ": rejected: " + t.test.Reason()) << "\n";
-    if (t.test.conditional) {
-      out << "    " << ToString(t.test.given) << " given " << ToString(t.test.extension) << ": "
-          << t.nuisance_values.dump() << ", cost " << Fixed(t.test.physics_cost) << " -> "
-          << Fixed(t.test.cost_after) << " m^2, held-out " << Fixed(t.test.physics_heldout)
-          << " -> " << Fixed(t.test.heldout_after) << " m^2, LR " << Fixed(t.test.nuisance_lr)
-          << " (critical " << Fixed(t.test.nuisance_critical_value)
-          << "): " << (t.test.nuisance_needed ? "still needed" : "adds nothing") << "\n";
-    }
-  }
+  WriteMismatchText(r.before, out);
+  for (const ScreenedCandidate& s : r.screening) WriteScreenedText(s, out);
+  for (size_t i = 0; i < r.tested.size(); ++i) WriteRefitText(r.tested[i], out);
   if (r.winner >= 0 && !r.tested[r.winner].test.nuisance) {
     const TestedCandidate& w = r.tested[r.winner];
     out << "missing physics: " << ToString(w.test.extension) << " " << w.values.dump()

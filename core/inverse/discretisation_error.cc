@@ -115,6 +115,66 @@ ParameterDiscretisationError ParameterError(const std::string& name,
   return entry;
 }
 
+// Estimates one level's shift of the optimum: a Newton step onto a finer discretisation.
+struct ShiftEstimator {
+  const FitSetting& setting;
+  const capture::Capture& capture;
+  const JobConfig& config;
+  const ParameterSpace& space;
+  const fem::PhysicalParameters& optimum;
+  const IdentifiabilityReport& report;
+
+  // Fills shift's error factor and variables (or error) from a run with the finer simulation
+  // options or substeps; shift->ratio is set.
+  void operator()(DiscretisationShift* shift, const fem::SimulationOptions& finer_simulation,
+                  int finer_substeps) const {
+    // Richardson: x_h - x_exact ~ (x_h - x_{h/r}) r^p / (r^p - 1).
+    const double gain = std::pow(shift->ratio, kOrder);
+    shift->error_factor = gain / (gain - 1.0);
+    Result<Eigen::VectorXd> gradient =
+        GradientAt(setting, capture, config, finer_simulation, finer_substeps, space, optimum);
+    if (!gradient.ok()) {
+      shift->error = std::string(gradient.status().message());
+      return;
+    }
+    shift->variables = NewtonShift(report, *gradient);
+  }
+};
+
+// The grid 1.5 x finer: sets grid's levels and ratio, returns the finer grid's options.
+fem::SimulationOptions FinerGrid(const JobConfig& config, const fem::SimulationOptions& simulation,
+                                 DiscretisationShift* grid) {
+  grid->chosen = config.solver.cell_size_m > 0.0 ? 0 : config.solver.cells;
+  fem::SimulationOptions finer_grid = simulation;
+  if (config.solver.cell_size_m > 0.0) {
+    finer_grid.cell_size = config.solver.cell_size_m / kGridRatio;
+    grid->ratio = kGridRatio;
+  } else {
+    grid->compared = static_cast<int>(std::lround(config.solver.cells * kGridRatio));
+    finer_grid.cells_along_longest_side = grid->compared;
+    grid->ratio = static_cast<double>(grid->compared) / config.solver.cells;
+  }
+  return finer_grid;
+}
+
+// The per-parameter estimates of both levels' shifts, in the order of `fitted`.
+std::vector<ParameterDiscretisationError> ParameterErrors(const std::vector<std::string>& fitted,
+                                                          const ParameterSpace& space,
+                                                          const fem::PhysicalParameters& optimum,
+                                                          const DiscretisationShift& grid,
+                                                          const DiscretisationShift& time) {
+  std::vector<ParameterDiscretisationError> out;
+  const std::vector<double> x = space.ToVariables(optimum);
+  for (const std::string& name : fitted) {
+    const Eigen::MatrixXd jacobian = PublicJacobian(space, x, optimum, name);
+    const std::vector<double> value = PublicNumbers(ParameterValueJson(optimum, name));
+    ParameterDiscretisationError entry = ParameterError(
+        name, value, PublicCorrection(jacobian, grid), PublicCorrection(jacobian, time));
+    out.push_back(std::move(entry));
+  }
+  return out;
+}
+
 }  // namespace
 
 Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& capture,
@@ -142,33 +202,10 @@ Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& 
                         : static_cast<int>(std::thread::hardware_concurrency());
   simulation.threads = std::max(1, cores / 2);
   DiscretisationError out;
+  const ShiftEstimator estimate{setting, capture, config, space, optimum, report};
 
-  auto estimate = [&](DiscretisationShift* shift, const fem::SimulationOptions& finer_simulation,
-                      int finer_substeps) {
-    // Richardson: x_h - x_exact ~ (x_h - x_{h/r}) r^p / (r^p - 1).
-    const double gain = std::pow(shift->ratio, kOrder);
-    shift->error_factor = gain / (gain - 1.0);
-    Result<Eigen::VectorXd> gradient =
-        GradientAt(setting, capture, config, finer_simulation, finer_substeps, space, optimum);
-    if (!gradient.ok()) {
-      shift->error = std::string(gradient.status().message());
-      return;
-    }
-    shift->variables = NewtonShift(report, *gradient);
-  };
-
-  // The grid 1.5 x finer.
   DiscretisationShift& grid = out.grid;
-  grid.chosen = config.solver.cell_size_m > 0.0 ? 0 : config.solver.cells;
-  fem::SimulationOptions finer_grid = simulation;
-  if (config.solver.cell_size_m > 0.0) {
-    finer_grid.cell_size = config.solver.cell_size_m / kGridRatio;
-    grid.ratio = kGridRatio;
-  } else {
-    grid.compared = static_cast<int>(std::lround(config.solver.cells * kGridRatio));
-    finer_grid.cells_along_longest_side = grid.compared;
-    grid.ratio = static_cast<double>(grid.compared) / config.solver.cells;
-  }
+  const fem::SimulationOptions finer_grid = FinerGrid(config, simulation, &grid);
   // Twice the time steps.
   DiscretisationShift& time = out.time_step;
   time.chosen = config.solver.substeps;
@@ -184,14 +221,7 @@ Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& 
     estimate(&grid, finer_grid, config.solver.substeps);
   }
 
-  const std::vector<double> x = space.ToVariables(optimum);
-  for (const std::string& name : fit.fitted) {
-    const Eigen::MatrixXd jacobian = PublicJacobian(space, x, optimum, name);
-    const std::vector<double> value = PublicNumbers(ParameterValueJson(optimum, name));
-    ParameterDiscretisationError entry = ParameterError(
-        name, value, PublicCorrection(jacobian, grid), PublicCorrection(jacobian, time));
-    out.parameters.push_back(std::move(entry));
-  }
+  out.parameters = ParameterErrors(fit.fitted, space, optimum, grid, time);
   out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
   spdlog::info("discretisation error: grid {} vs {} cells, time step {} vs {} substeps, {:.1f} s",
                grid.chosen, grid.compared, time.chosen, time.compared, out.seconds);

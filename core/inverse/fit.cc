@@ -263,124 +263,175 @@ constexpr double kStageBudgetFraction = 0.5;
 // spin 3.1 rad/s instead of 0.6 and 4.0. One variable: the same either way.
 constexpr bool kScaleLbfgsByCurvature = false;
 
-void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjective& objective,
-              const ParameterSpace& space, const fem::PhysicalParameters& base,
-              const JobConfig& config, const FitOptions& options, ProgressBoard& board,
-              StartResult* result) {
-  const auto begin = Clock::now();
-  result->index = index;
-  result->initial = start;
-  const double h = objective.simulator().hex_mesh().CellSize();
-  const double phi_max = config.solver.cost.truncation_cells * h;
-  const double scale = phi_max * phi_max;
-  std::vector<double> x = space.ToVariables(start);
-  result->initial = space.ToParameters(x.data(), base);
-  const std::vector<ObservedFrame>& frames = objective.frames();
-  const int all_frames = static_cast<int>(frames.size());
+// One start's run: what its stages share. `x` holds the optimiser's variables, updated in place.
+struct StartRun {
+  int index;
+  TrajectoryObjective& objective;
+  const ParameterSpace& space;
+  const fem::PhysicalParameters& base;
+  const JobConfig& config;
+  const FitOptions& options;
+  ProgressBoard& board;
+  StartResult* result;
+  double scale;  // phi_max^2 [m^2]: cost / scale is what the optimiser minimises
+  std::vector<double> x;
+  const std::vector<ObservedFrame>& frames;
 
-  // The stages, from the frame costs at the start (a start that cannot be simulated gets one
-  // stage, whose solver reports the failure).
+  bool Cancelled() const { return options.cancel != nullptr && options.cancel->load(); }
+};
+
+// The stages, from the frame costs at the start (a start that cannot be simulated gets one
+// stage, whose solver reports the failure). Sets *full_initial_cost when it evaluated the start.
+std::vector<int> PlanHorizonStages(StartRun& run, std::optional<double>* full_initial_cost) {
+  const int all_frames = static_cast<int>(run.frames.size());
   std::vector<int> stages = {all_frames};
-  std::optional<double> full_initial_cost;
-  if (config.solver.continuation) {
-    objective.SetActiveFrames(all_frames);
-    Result<ObjectiveEvaluation> at_start = objective.Evaluate(result->initial, false);
+  if (run.config.solver.continuation) {
+    run.objective.SetActiveFrames(all_frames);
+    Result<ObjectiveEvaluation> at_start = run.objective.Evaluate(run.result->initial, false);
     if (at_start.ok() && !at_start->diverged) {
-      full_initial_cost = at_start->cost;
+      *full_initial_cost = at_start->cost;
       // Frames matching to 1 % of the truncation distance are matching, however noise-free.
-      stages = HorizonStages(frames, at_start->frame_costs, 1e-4 * scale);
+      stages = HorizonStages(run.frames, at_start->frame_costs, 1e-4 * run.scale);
     }
   }
+  return stages;
+}
 
-  ceres::GradientProblemSolver::Summary summary;
+// L-BFGS settings of one stage: the last gets the iterations left and the job's tolerance.
+ceres::GradientProblemSolver::Options StageSolverOptions(const JobConfig& config, bool last,
+                                                         int used_iterations, int stage_budget) {
+  ceres::GradientProblemSolver::Options solver;
+  solver.line_search_direction_type = ceres::LBFGS;
+  solver.line_search_type = ceres::WOLFE;
+  solver.use_approximate_eigenvalue_bfgs_scaling = kScaleLbfgsByCurvature;
+  solver.max_num_iterations = last ? std::max(1, config.solver.max_iterations - used_iterations)
+                                   : stage_budget - used_iterations;
+  solver.function_tolerance =
+      last ? config.solver.function_tolerance
+           : std::max(config.solver.function_tolerance, kStageFunctionTolerance);
+  solver.gradient_tolerance = config.solver.gradient_tolerance;
+  solver.parameter_tolerance = config.solver.parameter_tolerance;
+  solver.logging_type = ceres::SILENT;
+  solver.update_state_every_iteration = true;
+  return solver;
+}
+
+// Solves stage `stage` by L-BFGS from run.x, records it in run.result->stages and returns its
+// iterations.
+int SolveStage(StartRun& run, const std::vector<int>& stages, size_t stage, int used_iterations,
+               int stage_budget, ceres::GradientProblemSolver::Summary* summary) {
+  const bool last = stage + 1 == stages.size();
+  StartResult* result = run.result;
+  run.objective.SetActiveFrames(stages[stage]);
+  auto* function =
+      new CeresObjective(&run.objective, &run.space, &run.base, &run.config, run.scale, result);
+  ceres::GradientProblem problem(function);  // takes ownership
+  StageInfo info{static_cast<int>(stage), static_cast<int>(stages.size()),
+                 run.frames[stages[stage] - 1].frame, used_iterations, result->stages.empty()};
+  IterationReporter reporter(run.index, run.x.data(), &run.space, &run.base, run.scale, &run.board,
+                             run.options.cancel, info, result);
+  ceres::GradientProblemSolver::Options solver =
+      StageSolverOptions(run.config, last, used_iterations, stage_budget);
+  solver.callbacks.push_back(&reporter);
+  ceres::Solve(solver, problem, run.x.data(), summary);
+  const int iterations = std::max(0, static_cast<int>(summary->iterations.size()) - 1);
+  result->stages.push_back({info.last_frame, iterations, summary->initial_cost * run.scale,
+                            summary->final_cost * run.scale, summary->message});
+  return iterations;
+}
+
+// The continuation over the horizon: solves the stages in turn, intermediate ones only while
+// their budget lasts. *summary is the last solved stage's; returns the iterations used.
+int SolveStages(StartRun& run, const std::vector<int>& stages,
+                ceres::GradientProblemSolver::Summary* summary) {
   int used_iterations = 0;
-  const int stage_budget = static_cast<int>(kStageBudgetFraction * config.solver.max_iterations);
+  const int stage_budget =
+      static_cast<int>(kStageBudgetFraction * run.config.solver.max_iterations);
   for (size_t stage = 0; stage < stages.size(); ++stage) {
     const bool last = stage + 1 == stages.size();
     if (!last && used_iterations >= stage_budget) continue;
-    objective.SetActiveFrames(stages[stage]);
-    auto* function = new CeresObjective(&objective, &space, &base, &config, scale, result);
-    ceres::GradientProblem problem(function);  // takes ownership
-    StageInfo info{static_cast<int>(stage), static_cast<int>(stages.size()),
-                   frames[stages[stage] - 1].frame, used_iterations, result->stages.empty()};
-    IterationReporter reporter(index, x.data(), &space, &base, scale, &board, options.cancel, info,
-                               result);
-    ceres::GradientProblemSolver::Options solver;
-    solver.line_search_direction_type = ceres::LBFGS;
-    solver.line_search_type = ceres::WOLFE;
-    solver.use_approximate_eigenvalue_bfgs_scaling = kScaleLbfgsByCurvature;
-    solver.max_num_iterations = last ? std::max(1, config.solver.max_iterations - used_iterations)
-                                     : stage_budget - used_iterations;
-    solver.function_tolerance =
-        last ? config.solver.function_tolerance
-             : std::max(config.solver.function_tolerance, kStageFunctionTolerance);
-    solver.gradient_tolerance = config.solver.gradient_tolerance;
-    solver.parameter_tolerance = config.solver.parameter_tolerance;
-    solver.logging_type = ceres::SILENT;
-    solver.update_state_every_iteration = true;
-    solver.callbacks.push_back(&reporter);
-    ceres::Solve(solver, problem, x.data(), &summary);
-    const int iterations = std::max(0, static_cast<int>(summary.iterations.size()) - 1);
-    used_iterations += iterations;
-    result->stages.push_back({info.last_frame, iterations, summary.initial_cost * scale,
-                              summary.final_cost * scale, summary.message});
-    if (options.cancel != nullptr && options.cancel->load()) break;
+    used_iterations += SolveStage(run, stages, stage, used_iterations, stage_budget, summary);
+    if (run.Cancelled()) break;
   }
-  objective.SetActiveFrames(all_frames);
+  run.objective.SetActiveFrames(static_cast<int>(run.frames.size()));
+  return used_iterations;
+}
 
+void RecordLbfgsOutcome(const ceres::GradientProblemSolver::Summary& summary, int used_iterations,
+                        StartResult* result) {
   result->iterations = used_iterations;
   result->converged = summary.termination_type == ceres::CONVERGENCE;
   result->termination = summary.message;
   result->failed = summary.iterations.empty() || !std::isfinite(summary.initial_cost) ||
                    summary.termination_type == ceres::FAILURE;
-  const bool cancelled = options.cancel != nullptr && options.cancel->load();
-  if (config.solver.refine_iterations > 0 && !result->failed && !cancelled) {
-    RefinementOptions refine;
-    refine.max_iterations = config.solver.refine_iterations;
-    refine.function_tolerance = config.solver.function_tolerance;
-    refine.gradient_tolerance = config.solver.gradient_tolerance;
-    refine.parameter_tolerance = config.solver.parameter_tolerance;
-    refine.cancel = options.cancel;
-    const int stage_count = static_cast<int>(stages.size());
-    refine.on_iteration = [&](int iteration, double cost, double gradient_norm) {
-      result->cost_history.push_back(cost);
-      result->cost_history_last_frame.push_back(frames.back().frame);
-      board.Report(index, used_iterations + iteration, cost, gradient_norm,
-                   space.ToParameters(x.data(), base), stage_count, stage_count + 1,
-                   frames.back().frame, result->steps, result->unconverged_steps);
-    };
-    const std::vector<double> before = x;
-    Result<RefinementSummary> refined =
-        RefineByLevenbergMarquardt({&objective}, space, base, scale, &x, refine);
-    RefinementResult record;
-    if (refined.ok()) {
-      record.iterations = refined->iterations;
-      record.initial_cost = refined->initial_cost;
-      record.final_cost = refined->final_cost;
-      record.converged = refined->converged;
-      record.termination = refined->termination;
-      record.evaluations = refined->evaluations;
-      record.failed_evaluations = refined->failed_evaluations;
-      result->evaluations += refined->evaluations;
-      result->failed_evaluations += refined->failed_evaluations;
-      result->steps += refined->steps;
-      result->unconverged_steps += refined->unconverged_steps;
-      result->forward_seconds += refined->forward_seconds;
-      // Ceres keeps the best point it accepted; a refinement that found nothing keeps L-BFGS's.
-      if (refined->final_cost <= summary.final_cost * scale) {
-        summary.final_cost = refined->final_cost / scale;
-        result->converged = refined->converged || result->converged;
-      } else {
-        x = before;
-      }
-    } else {
-      record.termination = refined.status().message();
-      x = before;
-    }
-    result->refinement = std::move(record);
-  }
+}
 
-  result->final = space.ToParameters(x.data(), base);
+RefinementOptions RefinementOptionsFor(const JobConfig& config, const FitOptions& options) {
+  RefinementOptions refine;
+  refine.max_iterations = config.solver.refine_iterations;
+  refine.function_tolerance = config.solver.function_tolerance;
+  refine.gradient_tolerance = config.solver.gradient_tolerance;
+  refine.parameter_tolerance = config.solver.parameter_tolerance;
+  refine.cancel = options.cancel;
+  return refine;
+}
+
+// The refinement's record, its counts added to the start's.
+RefinementResult RecordRefinement(const RefinementSummary& refined, StartResult* result) {
+  RefinementResult record;
+  record.iterations = refined.iterations;
+  record.initial_cost = refined.initial_cost;
+  record.final_cost = refined.final_cost;
+  record.converged = refined.converged;
+  record.termination = refined.termination;
+  record.evaluations = refined.evaluations;
+  record.failed_evaluations = refined.failed_evaluations;
+  result->evaluations += refined.evaluations;
+  result->failed_evaluations += refined.failed_evaluations;
+  result->steps += refined.steps;
+  result->unconverged_steps += refined.unconverged_steps;
+  result->forward_seconds += refined.forward_seconds;
+  return record;
+}
+
+// Levenberg-Marquardt after L-BFGS over every frame: keeps its point (and final cost in *summary)
+// only where it did better.
+void RefineStart(StartRun& run, int stage_count, int used_iterations,
+                 ceres::GradientProblemSolver::Summary* summary) {
+  StartResult* result = run.result;
+  RefinementOptions refine = RefinementOptionsFor(run.config, run.options);
+  refine.on_iteration = [&](int iteration, double cost, double gradient_norm) {
+    result->cost_history.push_back(cost);
+    result->cost_history_last_frame.push_back(run.frames.back().frame);
+    run.board.Report(run.index, used_iterations + iteration, cost, gradient_norm,
+                     run.space.ToParameters(run.x.data(), run.base), stage_count, stage_count + 1,
+                     run.frames.back().frame, result->steps, result->unconverged_steps);
+  };
+  const std::vector<double> before = run.x;
+  Result<RefinementSummary> refined =
+      RefineByLevenbergMarquardt({&run.objective}, run.space, run.base, run.scale, &run.x, refine);
+  RefinementResult record;
+  if (refined.ok()) {
+    record = RecordRefinement(*refined, result);
+    // Ceres keeps the best point it accepted; a refinement that found nothing keeps L-BFGS's.
+    if (refined->final_cost <= summary->final_cost * run.scale) {
+      summary->final_cost = refined->final_cost / run.scale;
+      result->converged = refined->converged || result->converged;
+    } else {
+      run.x = before;
+    }
+  } else {
+    record.termination = refined.status().message();
+    run.x = before;
+  }
+  result->refinement = std::move(record);
+}
+
+// The start's final parameters and costs over every frame.
+void RecordFinalState(const StartRun& run, const ceres::GradientProblemSolver::Summary& summary,
+                      size_t num_stages, const std::optional<double>& full_initial_cost) {
+  StartResult* result = run.result;
+  result->final = run.space.ToParameters(run.x.data(), run.base);
   // Converged without a single step: the gradient vanished at the start, i.e. nothing in the
   // fitted frames responds to the fitted parameters there (typically the simulated object misses
   // the observations, e.g. falls through where the recording shows a floor). Not a result.
@@ -392,18 +443,58 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
         "): the fitted frames show nothing these parameters move; if the object touches a floor, "
         "give ground_plane in \"fixed\" or fit it";
   }
-  result->initial_cost = full_initial_cost.value_or(summary.initial_cost * scale);
-  if (stages.size() == 1) result->initial_cost = summary.initial_cost * scale;
-  result->final_cost = summary.final_cost * scale;
-  // Held-out frames: the costs they did not help to fit.
-  const bool any_heldout =
-      std::any_of(frames.begin(), frames.end(), [](const ObservedFrame& f) { return f.heldout; });
+  result->initial_cost = full_initial_cost.value_or(summary.initial_cost * run.scale);
+  if (num_stages == 1) result->initial_cost = summary.initial_cost * run.scale;
+  result->final_cost = summary.final_cost * run.scale;
+}
+
+// Held-out frames: the costs they did not help to fit.
+void RecordHeldoutCosts(StartRun& run) {
+  StartResult* result = run.result;
+  const bool any_heldout = std::any_of(run.frames.begin(), run.frames.end(),
+                                       [](const ObservedFrame& f) { return f.heldout; });
   if (any_heldout && !result->failed) {
-    Result<ObjectiveEvaluation> before = objective.Evaluate(result->initial, false);
-    Result<ObjectiveEvaluation> after = objective.Evaluate(result->final, false);
+    Result<ObjectiveEvaluation> before = run.objective.Evaluate(result->initial, false);
+    Result<ObjectiveEvaluation> after = run.objective.Evaluate(result->final, false);
     if (before.ok() && !before->diverged) result->initial_heldout_cost = before->heldout_cost;
     if (after.ok() && !after->diverged) result->final_heldout_cost = after->heldout_cost;
   }
+}
+
+void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjective& objective,
+              const ParameterSpace& space, const fem::PhysicalParameters& base,
+              const JobConfig& config, const FitOptions& options, ProgressBoard& board,
+              StartResult* result) {
+  const auto begin = Clock::now();
+  result->index = index;
+  result->initial = start;
+  const double h = objective.simulator().hex_mesh().CellSize();
+  const double phi_max = config.solver.cost.truncation_cells * h;
+  const double scale = phi_max * phi_max;
+  StartRun run{.index = index,
+               .objective = objective,
+               .space = space,
+               .base = base,
+               .config = config,
+               .options = options,
+               .board = board,
+               .result = result,
+               .scale = scale,
+               .x = space.ToVariables(start),
+               .frames = objective.frames()};
+  result->initial = space.ToParameters(run.x.data(), base);
+
+  std::optional<double> full_initial_cost;
+  const std::vector<int> stages = PlanHorizonStages(run, &full_initial_cost);
+  ceres::GradientProblemSolver::Summary summary;
+  const int used_iterations = SolveStages(run, stages, &summary);
+  RecordLbfgsOutcome(summary, used_iterations, result);
+  const bool cancelled = run.Cancelled();
+  if (config.solver.refine_iterations > 0 && !result->failed && !cancelled) {
+    RefineStart(run, static_cast<int>(stages.size()), used_iterations, &summary);
+  }
+  RecordFinalState(run, summary, stages.size(), full_initial_cost);
+  RecordHeldoutCosts(run);
   result->seconds = SecondsSince(begin);
 }
 
@@ -640,6 +731,92 @@ Result<FitSetup> SetUpFit(const capture::Capture& capture, const JobConfig& conf
   return setup;
 }
 
+// The grid and time step of the fit: those of the checkpoint resumed from, else chosen afresh.
+Status DiscretiseFit(const capture::Capture& capture, const JobConfig& config,
+                     const FitOptions& options, FitSetup* setup, FitResult* result) {
+  const int num_starts = static_cast<int>(setup->starts.size());
+  if (options.resume_from != nullptr) {
+    return TakeDiscretisation(*options.resume_from, config, num_starts, &setup->simulation, result);
+  }
+  return ChooseDiscretisation(capture, setup->mesh, config, *setup->frames, options.cancel,
+                              &setup->simulation, result);
+}
+
+// The fit's checkpoint with the starts a resumed checkpoint finished, which also go into
+// result->starts.
+FitCheckpoint ResumedCheckpoint(const FitOptions& options, int num_starts, FitResult* result) {
+  FitCheckpoint checkpoint = CheckpointOf(*result, num_starts);
+  if (options.resume_from != nullptr) {
+    for (const StartResult& finished : options.resume_from->finished) {
+      result->starts[finished.index] = finished;
+      checkpoint.finished.push_back(finished);
+    }
+  }
+  return checkpoint;
+}
+
+// Runs the starts to_run on up to setup.threads threads (this one among them), each with its own
+// objective, into result->starts; every start that finishes joins *checkpoint and is reported.
+Status RunStarts(const capture::Capture& capture, const JobConfig& config,
+                 const FitOptions& options, const FitSetup& setup,
+                 const cost::SurfaceCostOptions& cost_options, const std::vector<int>& to_run,
+                 FitCheckpoint* checkpoint, FitResult* result) {
+  const std::vector<fem::PhysicalParameters>& starts = setup.starts;
+  std::mutex checkpoint_mutex;
+  auto finished = [&](const StartResult& start) {
+    std::lock_guard lock(checkpoint_mutex);
+    checkpoint->finished.push_back(start);
+    if (options.on_checkpoint) options.on_checkpoint(*checkpoint);
+  };
+
+  ProgressBoard board(options, config, static_cast<int>(starts.size()), setup.threads);
+  for (size_t i = 0; i < starts.size() - to_run.size(); ++i) board.StartBegins();
+  std::atomic<int> next_start{0};
+  std::mutex error_mutex;
+  Status error;
+  auto worker = [&]() {
+    std::unique_ptr<TrajectoryObjective> objective;
+    try {
+      objective = std::make_unique<TrajectoryObjective>(
+          setup.mesh, capture.fixed_region, starts[0], setup.simulation, cost_options, setup.frames,
+          capture.fps, result->substeps);
+    } catch (const std::invalid_argument& e) {
+      std::lock_guard lock(error_mutex);
+      error = Status::InvalidArgument(e.what());
+      return;
+    }
+    objective->SetCancelFlag(options.cancel);
+    for (int next = next_start++; next < static_cast<int>(to_run.size()); next = next_start++) {
+      if (options.cancel != nullptr && options.cancel->load()) break;
+      const int s = to_run[next];
+      board.StartBegins();
+      RunStart(s, starts[s], *objective, *setup.space, result->base, config, options, board,
+               &result->starts[s]);
+      // A start stopped by a cancel did not finish: a resumed fit runs it again.
+      if (options.cancel == nullptr || !options.cancel->load()) finished(result->starts[s]);
+    }
+  };
+  if (!to_run.empty()) {
+    // The simulations keep the thread count of the whole fit (above), so that a resumed fit
+    // computes exactly what the uninterrupted one would have.
+    const int pool_threads = std::min(setup.threads, static_cast<int>(to_run.size()));
+    std::vector<std::jthread> pool;
+    for (int t = 1; t < pool_threads; ++t) pool.emplace_back(worker);
+    worker();
+  }
+  return error;
+}
+
+// Sets result->best to the start of least final cost among those that ran and did not fail.
+void ChooseBestStart(FitResult* result) {
+  for (size_t s = 0; s < result->starts.size(); ++s) {
+    const StartResult& start = result->starts[s];
+    if (start.failed || start.evaluations == 0) continue;
+    if (result->best < 0 || start.final_cost < result->starts[result->best].final_cost)
+      result->best = static_cast<int>(s);
+  }
+}
+
 }  // namespace
 
 Result<FitCheckpoint> PrepareFit(const capture::Capture& capture, const JobConfig& config,
@@ -656,84 +833,20 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
                       const FitOptions& options) {
   const auto begin = Clock::now();
   SOFTID_ASSIGN_OR_RETURN(FitSetup setup, SetUpFit(capture, config));
-  const geometry::TriangleMesh& mesh = setup.mesh;
-  const std::shared_ptr<const std::vector<ObservedFrame>>& frames = setup.frames;
-  const ParameterSpace& space = *setup.space;
-  const std::vector<fem::PhysicalParameters>& starts = setup.starts;
-  const int threads = setup.threads;
-  fem::SimulationOptions& simulation = setup.simulation;
+  const int num_starts = static_cast<int>(setup.starts.size());
   FitResult result;
   result.fitted = config.fit;
   result.base = setup.base;
-  result.starts.resize(starts.size());
+  result.starts.resize(setup.starts.size());
   const cost::SurfaceCostOptions cost_options = CostOptionsFor(config.solver);
-  if (options.resume_from != nullptr) {
-    SOFTID_RETURN_IF_ERROR(TakeDiscretisation(
-        *options.resume_from, config, static_cast<int>(starts.size()), &simulation, &result));
-  } else {
-    SOFTID_RETURN_IF_ERROR(
-        ChooseDiscretisation(capture, mesh, config, *frames, options.cancel, &simulation, &result));
-  }
-  SOFTID_ASSIGN_OR_RETURN(std::vector<int> to_run,
-                          StartsToRun(options, static_cast<int>(starts.size())));
-  FitCheckpoint checkpoint = CheckpointOf(result, static_cast<int>(starts.size()));
-  if (options.resume_from != nullptr) {
-    for (const StartResult& finished : options.resume_from->finished) {
-      result.starts[finished.index] = finished;
-      checkpoint.finished.push_back(finished);
-    }
-  }
-  std::mutex checkpoint_mutex;
+  SOFTID_RETURN_IF_ERROR(DiscretiseFit(capture, config, options, &setup, &result));
+  SOFTID_ASSIGN_OR_RETURN(std::vector<int> to_run, StartsToRun(options, num_starts));
+  FitCheckpoint checkpoint = ResumedCheckpoint(options, num_starts, &result);
   if (options.on_checkpoint) options.on_checkpoint(checkpoint);
-  auto finished = [&](const StartResult& start) {
-    std::lock_guard lock(checkpoint_mutex);
-    checkpoint.finished.push_back(start);
-    if (options.on_checkpoint) options.on_checkpoint(checkpoint);
-  };
-
-  ProgressBoard board(options, config, static_cast<int>(starts.size()), threads);
-  for (size_t i = 0; i < starts.size() - to_run.size(); ++i) board.StartBegins();
-  std::atomic<int> next_start{0};
-  std::mutex error_mutex;
-  Status error;
-  auto worker = [&]() {
-    std::unique_ptr<TrajectoryObjective> objective;
-    try {
-      objective =
-          std::make_unique<TrajectoryObjective>(mesh, capture.fixed_region, starts[0], simulation,
-                                                cost_options, frames, capture.fps, result.substeps);
-    } catch (const std::invalid_argument& e) {
-      std::lock_guard lock(error_mutex);
-      error = Status::InvalidArgument(e.what());
-      return;
-    }
-    objective->SetCancelFlag(options.cancel);
-    for (int next = next_start++; next < static_cast<int>(to_run.size()); next = next_start++) {
-      if (options.cancel != nullptr && options.cancel->load()) break;
-      const int s = to_run[next];
-      board.StartBegins();
-      RunStart(s, starts[s], *objective, space, result.base, config, options, board,
-               &result.starts[s]);
-      // A start stopped by a cancel did not finish: a resumed fit runs it again.
-      if (options.cancel == nullptr || !options.cancel->load()) finished(result.starts[s]);
-    }
-  };
-  if (!to_run.empty()) {
-    // The simulations keep the thread count of the whole fit (above), so that a resumed fit
-    // computes exactly what the uninterrupted one would have.
-    const int pool_threads = std::min(threads, static_cast<int>(to_run.size()));
-    std::vector<std::jthread> pool;
-    for (int t = 1; t < pool_threads; ++t) pool.emplace_back(worker);
-    worker();
-  }
-  SOFTID_RETURN_IF_ERROR(error);
+  SOFTID_RETURN_IF_ERROR(
+      RunStarts(capture, config, options, setup, cost_options, to_run, &checkpoint, &result));
   result.cancelled = options.cancel != nullptr && options.cancel->load();
-  for (size_t s = 0; s < result.starts.size(); ++s) {
-    const StartResult& start = result.starts[s];
-    if (start.failed || start.evaluations == 0) continue;
-    if (result.best < 0 || start.final_cost < result.starts[result.best].final_cost)
-      result.best = static_cast<int>(s);
-  }
+  ChooseBestStart(&result);
   result.total_seconds = SecondsSince(begin);
   if (result.best < 0) {
     if (result.cancelled) return Status::FailedPrecondition("the fit was cancelled");
@@ -748,79 +861,77 @@ nlohmann::json ParameterValueJson(const fem::PhysicalParameters& p, const std::s
   return parameter != nullptr ? fem::ToJson(p, *parameter) : nlohmann::json(nullptr);
 }
 
-nlohmann::json ToJson(const FitResult& result) {
-  auto parameters_json = [&](const StartResult& start) {
-    nlohmann::json out = nlohmann::json::object();
-    for (const std::string& name : result.fitted) {
-      out[name] = {{"value", ParameterValueJson(start.final, name)},
-                   {"unit", std::string(fem::ParameterUnit(name))},
-                   {"initial", ParameterValueJson(start.initial, name)}};
-    }
-    return out;
-  };
-  auto stages_json = [](const StartResult& start) {
-    nlohmann::json out = nlohmann::json::array();
-    for (const HorizonStageResult& stage : start.stages) {
-      out.push_back({{"last_frame", stage.last_frame},
-                     {"iterations", stage.iterations},
-                     {"cost", CostJson(stage.initial_cost, stage.final_cost)},
-                     {"termination", stage.termination}});
-    }
-    return out;
-  };
-  auto refinement_json = [](const StartResult& start) -> nlohmann::json {
-    if (!start.refinement) return nullptr;
-    const RefinementResult& r = *start.refinement;
-    return {{"method", "levenberg_marquardt"},
-            {"iterations", r.iterations},
-            {"cost", CostJson(r.initial_cost, r.final_cost)},
-            {"converged", r.converged},
-            {"termination", r.termination},
-            {"evaluations", r.evaluations},
-            {"failed_evaluations", r.failed_evaluations}};
-  };
-  auto start_json = [&](const StartResult& start) {
-    nlohmann::json cost = CostJson(start.initial_cost, start.final_cost);
-    cost["heldout_initial"] = start.initial_heldout_cost;
-    cost["heldout_final"] = start.final_heldout_cost;
-    return nlohmann::json{{"index", start.index},
-                          {"parameters", parameters_json(start)},
-                          {"cost", cost},
-                          {"iterations", start.iterations},
-                          {"converged", start.converged},
-                          {"failed", start.failed},
-                          {"termination", start.termination},
-                          {"evaluations", start.evaluations},
-                          {"failed_evaluations", start.failed_evaluations},
-                          {"simulation_steps", start.steps},
-                          {"unconverged_steps", start.unconverged_steps},
-                          {"seconds", start.seconds},
-                          {"stages", stages_json(start)},
-                          {"refinement", refinement_json(start)}};
-  };
-  const StartResult& best = result.Best();
-  nlohmann::json out;
-  out["format"] = "softid-result/1";
-  out["parameters"] = parameters_json(best);
-  out["cost"] = start_json(best)["cost"];
-  out["iterations"] = best.iterations;
-  out["converged"] = best.converged;
-  out["termination"] = best.termination;
-  out["cancelled"] = result.cancelled;
-  out["best_start"] = best.index;
-  out["starts"] = nlohmann::json::array();
-  for (const StartResult& start : result.starts) out["starts"].push_back(start_json(start));
-  out["cost_history"] = best.cost_history;
-  out["cost_history_last_frame"] = best.cost_history_last_frame;
+namespace {
+
+// The fitted parameters of a start: value, unit and starting value of each.
+nlohmann::json FittedParametersJson(const FitResult& result, const StartResult& start) {
+  nlohmann::json out = nlohmann::json::object();
+  for (const std::string& name : result.fitted) {
+    out[name] = {{"value", ParameterValueJson(start.final, name)},
+                 {"unit", std::string(fem::ParameterUnit(name))},
+                 {"initial", ParameterValueJson(start.initial, name)}};
+  }
+  return out;
+}
+
+nlohmann::json StagesJson(const StartResult& start) {
+  nlohmann::json out = nlohmann::json::array();
+  for (const HorizonStageResult& stage : start.stages) {
+    out.push_back({{"last_frame", stage.last_frame},
+                   {"iterations", stage.iterations},
+                   {"cost", CostJson(stage.initial_cost, stage.final_cost)},
+                   {"termination", stage.termination}});
+  }
+  return out;
+}
+
+nlohmann::json RefinementJson(const StartResult& start) {
+  if (!start.refinement) return nullptr;
+  const RefinementResult& r = *start.refinement;
+  return {{"method", "levenberg_marquardt"},
+          {"iterations", r.iterations},
+          {"cost", CostJson(r.initial_cost, r.final_cost)},
+          {"converged", r.converged},
+          {"termination", r.termination},
+          {"evaluations", r.evaluations},
+          {"failed_evaluations", r.failed_evaluations}};
+}
+
+// A start's cost over the fitted frames and over the held-out ones.
+nlohmann::json StartCostJson(const StartResult& start) {
+  nlohmann::json cost = CostJson(start.initial_cost, start.final_cost);
+  cost["heldout_initial"] = start.initial_heldout_cost;
+  cost["heldout_final"] = start.final_heldout_cost;
+  return cost;
+}
+
+nlohmann::json StartJson(const FitResult& result, const StartResult& start) {
+  return nlohmann::json{{"index", start.index},
+                        {"parameters", FittedParametersJson(result, start)},
+                        {"cost", StartCostJson(start)},
+                        {"iterations", start.iterations},
+                        {"converged", start.converged},
+                        {"failed", start.failed},
+                        {"termination", start.termination},
+                        {"evaluations", start.evaluations},
+                        {"failed_evaluations", start.failed_evaluations},
+                        {"simulation_steps", start.steps},
+                        {"unconverged_steps", start.unconverged_steps},
+                        {"seconds", start.seconds},
+                        {"stages", StagesJson(start)},
+                        {"refinement", RefinementJson(start)}};
+}
+
+// The parameters the fit held: the base without the fitted ones.
+nlohmann::json HeldParametersJson(const FitResult& result) {
   nlohmann::json fixed = fem::ToJson(result.base);
   for (const std::string& name : result.fitted)
     fixed.erase(name == "ground_plane" ? std::string("ground") : name);
-  out["fixed"] = fixed;
-  // How finely space and time were resolved; "selection" only when the job asked for "auto".
-  out["grid"] = {{"cells", result.cells}, {"cell_size_m", result.cell_size_m}};
-  if (result.grid_selection) out["grid"]["selection"] = ToJson(*result.grid_selection);
-  out["time_step"] = {{"substeps", result.substeps}};
-  if (result.substep_selection) out["time_step"]["selection"] = ToJson(*result.substep_selection);
+  return fixed;
+}
+
+// Time spent over every start, and per simulated forward plus adjoint step.
+nlohmann::json TimingJson(const FitResult& result) {
   int evaluations = 0;
   long long steps = 0;
   double forward = 0.0, backward = 0.0;
@@ -830,7 +941,7 @@ nlohmann::json ToJson(const FitResult& result) {
     forward += start.forward_seconds;
     backward += start.backward_seconds;
   }
-  out["timing"] = {
+  return {
       {"total_seconds", result.total_seconds},
       {"evaluations", evaluations},
       {"simulated_steps", steps},
@@ -838,6 +949,32 @@ nlohmann::json ToJson(const FitResult& result) {
       {"backward_seconds", backward},
       {"ms_per_forward_adjoint_step", steps > 0 ? 1e3 * (forward + backward) / steps : 0.0},
   };
+}
+
+}  // namespace
+
+nlohmann::json ToJson(const FitResult& result) {
+  const StartResult& best = result.Best();
+  nlohmann::json out;
+  out["format"] = "softid-result/1";
+  out["parameters"] = FittedParametersJson(result, best);
+  out["cost"] = StartCostJson(best);
+  out["iterations"] = best.iterations;
+  out["converged"] = best.converged;
+  out["termination"] = best.termination;
+  out["cancelled"] = result.cancelled;
+  out["best_start"] = best.index;
+  out["starts"] = nlohmann::json::array();
+  for (const StartResult& start : result.starts) out["starts"].push_back(StartJson(result, start));
+  out["cost_history"] = best.cost_history;
+  out["cost_history_last_frame"] = best.cost_history_last_frame;
+  out["fixed"] = HeldParametersJson(result);
+  // How finely space and time were resolved; "selection" only when the job asked for "auto".
+  out["grid"] = {{"cells", result.cells}, {"cell_size_m", result.cell_size_m}};
+  if (result.grid_selection) out["grid"]["selection"] = ToJson(*result.grid_selection);
+  out["time_step"] = {{"substeps", result.substeps}};
+  if (result.substep_selection) out["time_step"]["selection"] = ToJson(*result.substep_selection);
+  out["timing"] = TimingJson(result);
   return out;
 }
 

@@ -24,6 +24,76 @@ fem::SimulationOptions WithCells(fem::SimulationOptions simulation, int cells) {
   return simulation;
 }
 
+Status CheckGridSelectionInputs(const GridSelectionOptions& options, double fps, int last_frame,
+                                double depth_noise_m) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  if (!(depth_noise_m > 0.0) || !std::isfinite(depth_noise_m))
+    return Status::InvalidArgument(fmt::format("depth_noise_m = {}: must be > 0", depth_noise_m));
+  if (!(fps > 0.0)) return Status::InvalidArgument(fmt::format("fps = {}: must be > 0", fps));
+  if (last_frame < 1) {
+    return Status::InvalidArgument(
+        fmt::format("last_frame = {}: need at least one frame after the first", last_frame));
+  }
+  return Status::Ok();
+}
+
+// The comparison of the runs on the grids of `cells` (coarse) and `finer_cells` (fine).
+GridTrial CompareGrids(int cells, int finer_cells, const SurfaceRun& coarse, const SurfaceRun& fine,
+                       const geometry::TriangleMesh& rest_mesh) {
+  GridTrial trial{cells, finer_cells, coarse.grid_nodes};
+  trial.diverged = coarse.frames.empty() || fine.frames.empty();
+  if (!trial.diverged) {
+    const TrajectoryDifference difference = CompareTrajectories(
+        coarse.frames, fine.frames, static_cast<int>(rest_mesh.vertices.size()));
+    trial.difference_m = difference.difference_m;
+    trial.worst_frame = difference.worst_frame;
+  }
+  return trial;
+}
+
+// Refines the grid through options.candidates (while affordable) until a grid and the next finer
+// one agree within selection->tolerance_m; records every trial. Throws std::invalid_argument as
+// SimulateSurfaceTrajectory.
+Status RefineGridUntilConverged(const geometry::TriangleMesh& rest_mesh,
+                                const std::optional<Eigen::AlignedBox3d>& fixed_region,
+                                const fem::PhysicalParameters& parameters,
+                                const fem::SimulationOptions& simulation, double fps,
+                                int last_frame, const GridSelectionOptions& options,
+                                GridSelection* selection) {
+  auto run = [&](int cells) {
+    return SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters,
+                                     WithCells(simulation, cells), fps, last_frame,
+                                     options.substeps, options.cancel);
+  };
+  const Eigen::Vector3d size = rest_mesh.Bounds().sizes();
+  auto affordable = [&](int cells) {
+    return GridNodeEstimate(size, cells) <= options.max_grid_nodes;
+  };
+  auto started = Clock::now();
+  selection->cells = options.candidates.front();
+  SurfaceRun coarse = run(selection->cells);
+  for (size_t i = 1; i < options.candidates.size() && affordable(options.candidates[i]); ++i) {
+    const int finer_cells = options.candidates[i];
+    SurfaceRun fine = run(finer_cells);
+    if (Cancelled(options.cancel)) return Status::Cancelled("the grid choice was cancelled");
+    GridTrial trial = CompareGrids(selection->cells, finer_cells, coarse, fine, rest_mesh);
+    trial.seconds = std::chrono::duration<double>(Clock::now() - started).count();
+    started = Clock::now();
+    selection->trials.push_back(trial);
+    spdlog::info("grid: {} vs {} cells along the longest side: surface differs by {:.3g} mm{}",
+                 trial.cells, trial.finer_cells, 1e3 * trial.difference_m,
+                 trial.diverged ? " (a run diverged)" : "");
+    if (!trial.diverged && trial.difference_m <= selection->tolerance_m) {
+      selection->within_tolerance = true;
+      break;
+    }
+    selection->cells = finer_cells;
+    coarse = std::move(fine);
+  }
+  if (Cancelled(options.cancel)) return Status::Cancelled("the grid choice was cancelled");
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status GridSelectionOptions::Validate() const {
@@ -54,58 +124,15 @@ Result<GridSelection> SelectGrid(const geometry::TriangleMesh& rest_mesh,
                                  const fem::SimulationOptions& simulation, double fps,
                                  int last_frame, double depth_noise_m,
                                  const GridSelectionOptions& options) {
-  SOFTID_RETURN_IF_ERROR(options.Validate());
-  if (!(depth_noise_m > 0.0) || !std::isfinite(depth_noise_m))
-    return Status::InvalidArgument(fmt::format("depth_noise_m = {}: must be > 0", depth_noise_m));
-  if (!(fps > 0.0)) return Status::InvalidArgument(fmt::format("fps = {}: must be > 0", fps));
-  if (last_frame < 1) {
-    return Status::InvalidArgument(
-        fmt::format("last_frame = {}: need at least one frame after the first", last_frame));
-  }
+  SOFTID_RETURN_IF_ERROR(CheckGridSelectionInputs(options, fps, last_frame, depth_noise_m));
   GridSelection selection;
   selection.depth_noise_m = depth_noise_m;
   selection.tolerance_m =
       std::max(options.noise_fraction * depth_noise_m,
                options.min_tolerance_fraction * rest_mesh.Bounds().sizes().maxCoeff());
-  auto run = [&](int cells) {
-    return SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters,
-                                     WithCells(simulation, cells), fps, last_frame,
-                                     options.substeps, options.cancel);
-  };
-  const Eigen::Vector3d size = rest_mesh.Bounds().sizes();
-  auto affordable = [&](int cells) {
-    return GridNodeEstimate(size, cells) <= options.max_grid_nodes;
-  };
   try {
-    auto started = Clock::now();
-    selection.cells = options.candidates.front();
-    SurfaceRun coarse = run(selection.cells);
-    for (size_t i = 1; i < options.candidates.size() && affordable(options.candidates[i]); ++i) {
-      const int finer_cells = options.candidates[i];
-      SurfaceRun fine = run(finer_cells);
-      if (Cancelled(options.cancel)) return Status::Cancelled("the grid choice was cancelled");
-      GridTrial trial{selection.cells, finer_cells, coarse.grid_nodes};
-      trial.diverged = coarse.frames.empty() || fine.frames.empty();
-      if (!trial.diverged) {
-        const TrajectoryDifference difference = CompareTrajectories(
-            coarse.frames, fine.frames, static_cast<int>(rest_mesh.vertices.size()));
-        trial.difference_m = difference.difference_m;
-        trial.worst_frame = difference.worst_frame;
-      }
-      trial.seconds = std::chrono::duration<double>(Clock::now() - started).count();
-      started = Clock::now();
-      selection.trials.push_back(trial);
-      spdlog::info("grid: {} vs {} cells along the longest side: surface differs by {:.3g} mm{}",
-                   trial.cells, trial.finer_cells, 1e3 * trial.difference_m,
-                   trial.diverged ? " (a run diverged)" : "");
-      if (!trial.diverged && trial.difference_m <= selection.tolerance_m) {
-        selection.within_tolerance = true;
-        break;
-      }
-      selection.cells = finer_cells;
-      coarse = std::move(fine);
-    }
-    if (Cancelled(options.cancel)) return Status::Cancelled("the grid choice was cancelled");
+    SOFTID_RETURN_IF_ERROR(RefineGridUntilConverged(rest_mesh, fixed_region, parameters, simulation,
+                                                    fps, last_frame, options, &selection));
   } catch (const std::invalid_argument& error) {
     return Status::InvalidArgument(error.what());
   }

@@ -75,6 +75,100 @@ int FinestAffordableCandidate(const Eigen::Vector3d& size) {
   return selection.candidates.front();
 }
 
+// The capture's extent must be non-empty and hold the frames the config selects.
+Status CheckCaptureExtent(const JobConfig& config, const CaptureExtent& extent) {
+  if (extent.num_frames < 1 || extent.mesh_bounds.isEmpty()) {
+    return Status::InvalidArgument("capture: no frames or an empty mesh");
+  }
+  if (!extent.frame_periods.empty() &&
+      extent.frame_periods.size() != static_cast<size_t>(extent.num_frames)) {
+    return Status::InvalidArgument("capture: frame_times and frames differ in number");
+  }
+  const int last_frame = extent.num_frames - 1;
+  if (config.frames.first > last_frame) {
+    return Status::InvalidArgument(
+        fmt::format("frames.first = {}: the capture has {} frames (0-{})", config.frames.first,
+                    extent.num_frames, last_frame));
+  }
+  if (config.frames.last > last_frame) {
+    return Status::InvalidArgument(fmt::format("frames.last = {}: the capture has {} frames (0-{})",
+                                               config.frames.last, extent.num_frames, last_frame));
+  }
+  return Status::Ok();
+}
+
+// The size of one simulation of the job.
+struct RunSize {
+  double nodes = 0.0;  // of its grid
+  double steps = 0.0;  // to the last fitted frame
+};
+
+// One simulation's grid (the finest "auto" may choose) and steps (the most "auto" may choose);
+// sets the estimate's cell size, grid nodes and steps per run.
+RunSize EstimateRunSize(const JobConfig& config, const CaptureExtent& extent,
+                        JobResourceEstimate* estimate) {
+  const int last_frame = extent.num_frames - 1;
+  const int fitted_last = config.frames.last < 0 ? last_frame : config.frames.last;
+  RunSize run;
+  const Eigen::Vector3d size = extent.mesh_bounds.sizes();
+  const int cells = config.solver.cell_size_m <= 0.0 && config.solver.cells == kAutoCells
+                        ? FinestAffordableCandidate(size)
+                        : config.solver.cells;
+  estimate->cell_size_m = config.solver.cell_size_m > 0.0 ? config.solver.cell_size_m
+                                                          : size.maxCoeff() / std::max(1, cells);
+  run.nodes = BoxNodes(size, estimate->cell_size_m);
+  const int substeps = config.solver.substeps == kAutoSubsteps
+                           ? SubstepSelectionOptions{}.max_substeps
+                           : config.solver.substeps;
+  const double fitted_periods = extent.frame_periods.empty()
+                                    ? static_cast<double>(fitted_last)
+                                    : std::ceil(extent.frame_periods.at(fitted_last));
+  run.steps = fitted_periods * substeps;
+  estimate->grid_nodes = static_cast<int64_t>(std::min(run.nodes, 9e18));
+  estimate->steps_per_run = static_cast<int64_t>(std::min(run.steps, 9e18));
+  return run;
+}
+
+// Wall time of the fit (and the diagnosis' refits) on `cores` cores.
+double EstimateWallSeconds(const JobConfig& config, const RunSize& run, int cores,
+                           int concurrent_starts) {
+  const double nodes = run.nodes;
+  const double step_cpu_seconds =
+      kCpuSecondsPerNodeStep * nodes * std::pow(nodes / kReferenceNodes, kNodeExponent);
+  const double evaluations_per_start =
+      kEvaluationsPerIteration * (config.solver.max_iterations + 1.0);
+  const double start_rounds =
+      std::ceil(static_cast<double>(config.solver.starts) / concurrent_starts);
+  // Each concurrent start gets cores / concurrent_starts cores (at least one).
+  const double cores_per_start = std::max(1.0, static_cast<double>(cores) / concurrent_starts);
+  return start_rounds * evaluations_per_start * run.steps * step_cpu_seconds / cores_per_start *
+         (config.diagnose ? kDiagnosisFitFactor : 1.0);
+}
+
+// InvalidArgument naming the likely culprit when the estimate exceeds a limit.
+Status CheckWithinLimits(const JobConfig& config, const JobResourceLimits& limits,
+                         const RunSize& run, const JobResourceEstimate& estimate) {
+  const double nodes = run.nodes, steps = run.steps;
+  if (!(estimate.memory_bytes <= limits.max_memory_bytes)) {
+    return Status::InvalidArgument(fmt::format(
+        "{}: the job would need about {} of memory (grid of {:.3g} nodes at h = {:.3g} m, {:.3g} "
+        "steps per run, {} start(s) at once); at most {} is accepted: use fewer cells, substeps, "
+        "frames or threads",
+        MemoryCulprit(config), GiB(estimate.memory_bytes), nodes, estimate.cell_size_m, steps,
+        estimate.concurrent_starts, GiB(limits.max_memory_bytes)));
+  }
+  if (!(estimate.wall_seconds <= limits.max_wall_seconds)) {
+    return Status::InvalidArgument(fmt::format(
+        "{}: the job could run for about {} (grid of {:.3g} nodes, {:.3g} steps per run, {} "
+        "start(s) of up to {} iterations{}); at most {} is accepted: use fewer iterations, "
+        "starts, cells, substeps or frames",
+        TimeCulprit(config), Hours(estimate.wall_seconds), nodes, steps, config.solver.starts,
+        config.solver.max_iterations, config.diagnose ? ", with a diagnosis" : "",
+        Hours(limits.max_wall_seconds)));
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status JobResourceLimits::Validate() const {
@@ -94,78 +188,17 @@ Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
                                                  const CaptureExtent& extent,
                                                  const JobResourceLimits& limits) {
   SOFTID_RETURN_IF_ERROR(limits.Validate());
-  if (extent.num_frames < 1 || extent.mesh_bounds.isEmpty()) {
-    return Status::InvalidArgument("capture: no frames or an empty mesh");
-  }
-  if (!extent.frame_periods.empty() &&
-      extent.frame_periods.size() != static_cast<size_t>(extent.num_frames)) {
-    return Status::InvalidArgument("capture: frame_times and frames differ in number");
-  }
-  const int last_frame = extent.num_frames - 1;
-  if (config.frames.first > last_frame) {
-    return Status::InvalidArgument(
-        fmt::format("frames.first = {}: the capture has {} frames (0-{})", config.frames.first,
-                    extent.num_frames, last_frame));
-  }
-  if (config.frames.last > last_frame) {
-    return Status::InvalidArgument(fmt::format("frames.last = {}: the capture has {} frames (0-{})",
-                                               config.frames.last, extent.num_frames, last_frame));
-  }
-  const int fitted_last = config.frames.last < 0 ? last_frame : config.frames.last;
-
+  SOFTID_RETURN_IF_ERROR(CheckCaptureExtent(config, extent));
   JobResourceEstimate estimate;
-  const Eigen::Vector3d size = extent.mesh_bounds.sizes();
-  const int cells = config.solver.cell_size_m <= 0.0 && config.solver.cells == kAutoCells
-                        ? FinestAffordableCandidate(size)
-                        : config.solver.cells;
-  estimate.cell_size_m = config.solver.cell_size_m > 0.0 ? config.solver.cell_size_m
-                                                         : size.maxCoeff() / std::max(1, cells);
-  const double nodes = BoxNodes(size, estimate.cell_size_m);
-  const int substeps = config.solver.substeps == kAutoSubsteps
-                           ? SubstepSelectionOptions{}.max_substeps
-                           : config.solver.substeps;
-  const double fitted_periods = extent.frame_periods.empty()
-                                    ? static_cast<double>(fitted_last)
-                                    : std::ceil(extent.frame_periods.at(fitted_last));
-  const double steps = fitted_periods * substeps;
+  const RunSize run = EstimateRunSize(config, extent, &estimate);
   const int cores = config.solver.threads > 0 ? config.solver.threads : limits.cores;
   estimate.concurrent_starts = std::max(1, std::min(config.solver.starts, cores));
-  const double per_start = nodes * (kBytesPerNode + kBytesPerNodeStep * (steps + 1.0));
+  const double per_start = run.nodes * (kBytesPerNode + kBytesPerNodeStep * (run.steps + 1.0));
   // Observed points are bounded where they are loaded (kMaxObservedPoints): a frame's count
   // depends on its content, which a header does not tell.
   estimate.memory_bytes = estimate.concurrent_starts * per_start;
-  estimate.grid_nodes = static_cast<int64_t>(std::min(nodes, 9e18));
-  estimate.steps_per_run = static_cast<int64_t>(std::min(steps, 9e18));
-
-  const double step_cpu_seconds =
-      kCpuSecondsPerNodeStep * nodes * std::pow(nodes / kReferenceNodes, kNodeExponent);
-  const double evaluations_per_start =
-      kEvaluationsPerIteration * (config.solver.max_iterations + 1.0);
-  const double start_rounds =
-      std::ceil(static_cast<double>(config.solver.starts) / estimate.concurrent_starts);
-  // Each concurrent start gets cores / concurrent_starts cores (at least one).
-  const double cores_per_start =
-      std::max(1.0, static_cast<double>(cores) / estimate.concurrent_starts);
-  estimate.wall_seconds = start_rounds * evaluations_per_start * steps * step_cpu_seconds /
-                          cores_per_start * (config.diagnose ? kDiagnosisFitFactor : 1.0);
-
-  if (!(estimate.memory_bytes <= limits.max_memory_bytes)) {
-    return Status::InvalidArgument(fmt::format(
-        "{}: the job would need about {} of memory (grid of {:.3g} nodes at h = {:.3g} m, {:.3g} "
-        "steps per run, {} start(s) at once); at most {} is accepted: use fewer cells, substeps, "
-        "frames or threads",
-        MemoryCulprit(config), GiB(estimate.memory_bytes), nodes, estimate.cell_size_m, steps,
-        estimate.concurrent_starts, GiB(limits.max_memory_bytes)));
-  }
-  if (!(estimate.wall_seconds <= limits.max_wall_seconds)) {
-    return Status::InvalidArgument(fmt::format(
-        "{}: the job could run for about {} (grid of {:.3g} nodes, {:.3g} steps per run, {} "
-        "start(s) of up to {} iterations{}); at most {} is accepted: use fewer iterations, "
-        "starts, cells, substeps or frames",
-        TimeCulprit(config), Hours(estimate.wall_seconds), nodes, steps, config.solver.starts,
-        config.solver.max_iterations, config.diagnose ? ", with a diagnosis" : "",
-        Hours(limits.max_wall_seconds)));
-  }
+  estimate.wall_seconds = EstimateWallSeconds(config, run, cores, estimate.concurrent_starts);
+  SOFTID_RETURN_IF_ERROR(CheckWithinLimits(config, limits, run, estimate));
   return estimate;
 }
 

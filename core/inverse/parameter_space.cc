@@ -47,59 +47,64 @@ Result<ParameterSpace> ParameterSpace::Create(const std::vector<std::string>& na
       return json::Invalid(field, name, "is not a fittable parameter");
     }
     Entry entry{parameter, offset, 1};
-    switch (parameter->transform) {
-      case Transform::kLog:
-      case Transform::kHalfLogistic:
-      case Transform::kSoftplus: space.variable_names_.push_back(name); break;
-      case Transform::kIdentity:
-        entry.size = 3;
-        for (int k = 0; k < 3; ++k)
-          space.variable_names_.push_back(name + "[" + std::to_string(k) + "]");
-        break;
-      case Transform::kGroundPlaneTilt: {
-        if (!reference.ground) {
-          return json::Invalid(field, name,
-                               "needs a starting plane: give initial.ground_plane or "
-                               "fixed.ground");
-        }
-        entry.size = 3;
-        space.ground_normal_ = reference.ground->normal;
-        const Eigen::Vector3d n = space.ground_normal_;
-        const Eigen::Vector3d helper =
-            std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
-        space.ground_tangent_[0] = n.cross(helper).normalized();
-        space.ground_tangent_[1] = n.cross(space.ground_tangent_[0]);
-        space.variable_names_.insert(space.variable_names_.end(),
-                                     {name + ".tilt[0]", name + ".tilt[1]", name + ".offset"});
-        break;
-      }
-      case Transform::kStiffnessField: {
-        const fem::StiffnessField& f = reference.stiffness_field;
-        if (f.kind == fem::StiffnessField::Kind::kUniform) {
-          return json::Invalid(field, name,
-                               "needs a field shape: give initial.stiffness_field or "
-                               "fixed.stiffness_field as {\"kind\": \"regions\", ...} or "
-                               "{\"kind\": \"linear\", ...}");
-        }
-        space.field_kind_ = f.kind;
-        entry.size =
-            f.kind == fem::StiffnessField::Kind::kRegions ? static_cast<int>(f.regions.size()) : 3;
-        for (int k = 0; k < entry.size; ++k)
-          space.variable_names_.push_back(name + "[" + std::to_string(k) + "]");
-        break;
-      }
-      case Transform::kPose:
-        entry.size = 6;
-        for (const char* part : {".rotation[", ".translation["}) {
-          for (int k = 0; k < 3; ++k)
-            space.variable_names_.push_back(name + part + std::to_string(k) + "]");
-        }
-        break;
-    }
+    SOFTID_RETURN_IF_ERROR(space.AddVariables(name, field, reference, &entry));
     offset += entry.size;
     space.entries_.push_back(entry);
   }
   return space;
+}
+
+Status ParameterSpace::AddVariables(const std::string& name, const std::string& field,
+                                    const fem::PhysicalParameters& reference, Entry* entry) {
+  switch (entry->parameter->transform) {
+    case Transform::kLog:
+    case Transform::kHalfLogistic:
+    case Transform::kSoftplus: variable_names_.push_back(name); break;
+    case Transform::kIdentity:
+      entry->size = 3;
+      for (int k = 0; k < 3; ++k) variable_names_.push_back(name + "[" + std::to_string(k) + "]");
+      break;
+    case Transform::kGroundPlaneTilt: {
+      if (!reference.ground) {
+        return json::Invalid(field, name,
+                             "needs a starting plane: give initial.ground_plane or "
+                             "fixed.ground");
+      }
+      entry->size = 3;
+      ground_normal_ = reference.ground->normal;
+      const Eigen::Vector3d n = ground_normal_;
+      const Eigen::Vector3d helper =
+          std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+      ground_tangent_[0] = n.cross(helper).normalized();
+      ground_tangent_[1] = n.cross(ground_tangent_[0]);
+      variable_names_.insert(variable_names_.end(),
+                             {name + ".tilt[0]", name + ".tilt[1]", name + ".offset"});
+      break;
+    }
+    case Transform::kStiffnessField: {
+      const fem::StiffnessField& f = reference.stiffness_field;
+      if (f.kind == fem::StiffnessField::Kind::kUniform) {
+        return json::Invalid(field, name,
+                             "needs a field shape: give initial.stiffness_field or "
+                             "fixed.stiffness_field as {\"kind\": \"regions\", ...} or "
+                             "{\"kind\": \"linear\", ...}");
+      }
+      field_kind_ = f.kind;
+      entry->size =
+          f.kind == fem::StiffnessField::Kind::kRegions ? static_cast<int>(f.regions.size()) : 3;
+      for (int k = 0; k < entry->size; ++k)
+        variable_names_.push_back(name + "[" + std::to_string(k) + "]");
+      break;
+    }
+    case Transform::kPose:
+      entry->size = 6;
+      for (const char* part : {".rotation[", ".translation["}) {
+        for (int k = 0; k < 3; ++k)
+          variable_names_.push_back(name + part + std::to_string(k) + "]");
+      }
+      break;
+  }
+  return Status::Ok();
 }
 
 std::vector<double> ParameterSpace::ToVariables(const fem::PhysicalParameters& p) const {

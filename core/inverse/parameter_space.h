@@ -45,6 +45,10 @@ class ParameterSpace {
     int offset = 0;  // first variable
     int size = 1;
   };
+  // Create's step for one fitted parameter `name` (listed at `field`): sets entry->size, appends
+  // the variables' names and takes what the transform needs from `reference`.
+  Status AddVariables(const std::string& name, const std::string& field,
+                      const fem::PhysicalParameters& reference, Entry* entry);
   std::vector<Entry> entries_;
   std::vector<std::string> names_;
   std::vector<std::string> variable_names_;

@@ -16,13 +16,8 @@ bool Cancelled(const std::atomic<bool>* cancel) {
   return cancel != nullptr && cancel->load(std::memory_order_relaxed);
 }
 
-}  // namespace
-
-Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
-                                        const std::optional<Eigen::AlignedBox3d>& fixed_region,
-                                        const fem::PhysicalParameters& parameters,
-                                        const fem::SimulationOptions& simulation, double fps,
-                                        int last_frame, const SubstepSelectionOptions& options) {
+Status CheckSubstepSelectionInputs(const SubstepSelectionOptions& options, double fps,
+                                   int last_frame) {
   if (options.min_substeps < 1) {
     return Status::InvalidArgument("min_substeps = " + std::to_string(options.min_substeps) +
                                    ": must be at least 1");
@@ -40,48 +35,79 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
     return Status::InvalidArgument("last_frame = " + std::to_string(last_frame) +
                                    ": need at least one frame after the first");
   }
+  return Status::Ok();
+}
+
+// The comparison of the surface trajectories at `substeps` (coarse) and twice as many (fine).
+SubstepTrial CompareSubsteps(int substeps, const SurfaceTrajectory& coarse,
+                             const SurfaceTrajectory& fine) {
+  SubstepTrial trial;
+  trial.substeps = substeps;
+  trial.diverged = coarse.empty() || fine.empty();
+  if (!trial.diverged) {
+    const TrajectoryDifference difference = CompareTrajectories(coarse, fine);
+    trial.difference_m = difference.difference_m;
+    trial.worst_frame = difference.worst_frame;
+  }
+  return trial;
+}
+
+// Doubles the substeps from options.min_substeps until a run and one at twice the substeps agree
+// within selection->tolerance_m, or max_substeps is reached; records every trial. Throws
+// std::invalid_argument as SimulateSurfaceTrajectory.
+Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
+                                    const std::optional<Eigen::AlignedBox3d>& fixed_region,
+                                    const fem::PhysicalParameters& parameters,
+                                    const fem::SimulationOptions& simulation, double fps,
+                                    int last_frame, const SubstepSelectionOptions& options,
+                                    SubstepSelection* selection) {
+  int substeps = options.min_substeps;
+  SurfaceTrajectory coarse =
+      SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps, last_frame,
+                                substeps, options.cancel)
+          .frames;
+  if (Cancelled(options.cancel)) return Status::Cancelled("the time-step choice was cancelled");
+  while (true) {
+    if (substeps >= options.max_substeps) {
+      selection->substeps = options.max_substeps;
+      break;
+    }
+    const int finer = std::min(2 * substeps, options.max_substeps);
+    SurfaceTrajectory fine =
+        SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps, last_frame,
+                                  finer, options.cancel)
+            .frames;
+    if (Cancelled(options.cancel)) {
+      return Status::Cancelled("the time-step choice was cancelled");
+    }
+    const SubstepTrial trial = CompareSubsteps(substeps, coarse, fine);
+    selection->trials.push_back(trial);
+    spdlog::info("time step: {} vs {} substeps per frame: surface differs by {:.3g} mm{}", substeps,
+                 finer, 1e3 * trial.difference_m, trial.diverged ? " (a run diverged)" : "");
+    if (!trial.diverged && trial.difference_m <= selection->tolerance_m) {
+      selection->substeps = substeps;
+      selection->within_tolerance = true;
+      break;
+    }
+    substeps = finer;
+    coarse = std::move(fine);
+  }
+  return Status::Ok();
+}
+
+}  // namespace
+
+Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
+                                        const std::optional<Eigen::AlignedBox3d>& fixed_region,
+                                        const fem::PhysicalParameters& parameters,
+                                        const fem::SimulationOptions& simulation, double fps,
+                                        int last_frame, const SubstepSelectionOptions& options) {
+  SOFTID_RETURN_IF_ERROR(CheckSubstepSelectionInputs(options, fps, last_frame));
   SubstepSelection selection;
   selection.tolerance_m = options.tolerance_fraction * rest_mesh.Bounds().sizes().maxCoeff();
   try {
-    int substeps = options.min_substeps;
-    SurfaceTrajectory coarse =
-        SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps, last_frame,
-                                  substeps, options.cancel)
-            .frames;
-    if (Cancelled(options.cancel)) return Status::Cancelled("the time-step choice was cancelled");
-    while (true) {
-      if (substeps >= options.max_substeps) {
-        selection.substeps = options.max_substeps;
-        break;
-      }
-      const int finer = std::min(2 * substeps, options.max_substeps);
-      SurfaceTrajectory fine =
-          SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps,
-                                    last_frame, finer, options.cancel)
-              .frames;
-      if (Cancelled(options.cancel)) {
-        return Status::Cancelled("the time-step choice was cancelled");
-      }
-      SubstepTrial trial;
-      trial.substeps = substeps;
-      trial.diverged = coarse.empty() || fine.empty();
-      if (!trial.diverged) {
-        const TrajectoryDifference difference = CompareTrajectories(coarse, fine);
-        trial.difference_m = difference.difference_m;
-        trial.worst_frame = difference.worst_frame;
-      }
-      selection.trials.push_back(trial);
-      spdlog::info("time step: {} vs {} substeps per frame: surface differs by {:.3g} mm{}",
-                   substeps, finer, 1e3 * trial.difference_m,
-                   trial.diverged ? " (a run diverged)" : "");
-      if (!trial.diverged && trial.difference_m <= selection.tolerance_m) {
-        selection.substeps = substeps;
-        selection.within_tolerance = true;
-        break;
-      }
-      substeps = finer;
-      coarse = std::move(fine);
-    }
+    SOFTID_RETURN_IF_ERROR(DoubleSubstepsUntilConverged(
+        rest_mesh, fixed_region, parameters, simulation, fps, last_frame, options, &selection));
   } catch (const std::invalid_argument& error) {
     return Status::InvalidArgument(error.what());
   }

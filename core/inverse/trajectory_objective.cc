@@ -17,6 +17,17 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
 // 1e-12 steps of k * substeps, and an interpolation weight of 1e-9 changes nothing measurable.
 constexpr double kOnStepTolerance = 1e-9;
 
+// Sums the frame costs in frame order (the same bits whichever pass computed them).
+void SumFrameCosts(std::span<const ObservedFrame> frames, int fitted, int heldout,
+                   ObjectiveEvaluation* out) {
+  for (size_t k = 0; k < frames.size(); ++k) {
+    if (frames[k].heldout)
+      out->heldout_cost += out->frame_costs[k] / heldout;
+    else
+      out->cost += out->frame_costs[k] / fitted;
+  }
+}
+
 }  // namespace
 
 TrajectoryObjective::TrajectoryObjective(const geometry::TriangleMesh& rest_mesh,
@@ -69,13 +80,43 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
                                                           bool with_gradient) {
   ObjectiveEvaluation out;
   const auto forward_start = std::chrono::steady_clock::now();
+  SOFTID_RETURN_IF_ERROR(SimulateForward(parameters, &out));
+  if (out.diverged) return out;
+
+  const std::span<const ObservedFrame> frames(frames_->data(), active_frames_);
+  int fitted = 0, heldout = 0;
+  for (const ObservedFrame& frame : frames) (frame.heldout ? heldout : fitted) += 1;
+  SOFTID_THROW_UNLESS(fitted > 0, "every observed frame is held out");
+  out.frame_costs.resize(frames.size());
+  if (!with_gradient) {
+    for (size_t k = 0; k < frames.size(); ++k) {
+      out.frame_costs[k] =
+          cost_->Evaluate(ObservedDisplacement(static_cast<int>(k)), frames[k].points, nullptr);
+    }
+    SumFrameCosts(frames, fitted, heldout, &out);
+    out.forward_seconds = SecondsSince(forward_start);
+    return out;
+  }
+  out.forward_seconds = SecondsSince(forward_start);
+
+  // Each frame's cost comes with its gradient in the backward pass rather than from a second
+  // evaluation in the forward pass (at one step per frame that evaluation was a large share of
+  // the forward time).
+  const auto backward_start = std::chrono::steady_clock::now();
+  SOFTID_RETURN_IF_ERROR(Backpropagate(fitted, &out));
+  SumFrameCosts(frames, fitted, heldout, &out);
+  out.backward_seconds = SecondsSince(backward_start);
+  return out;
+}
+
+Status TrajectoryObjective::SimulateForward(const fem::PhysicalParameters& parameters,
+                                            ObjectiveEvaluation* out) {
   fem::Simulator& sim = *simulator_;
   try {
     sim.SetParameters(parameters);
   } catch (const std::invalid_argument& error) {
     return Status::InvalidArgument(error.what());
   }
-  const std::span<const ObservedFrame> frames(frames_->data(), active_frames_);
   const int last_step = observation_steps_[active_frames_ - 1].step;
   states_.resize(last_step + 1);
   states_[0] = sim.state();
@@ -85,44 +126,23 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
     }
     const fem::StepSummary summary = sim.Step();
     if (summary.diverged || !sim.state().u.allFinite()) {
-      out.diverged = true;
-      out.steps = step;
-      return out;
+      out->diverged = true;
+      out->steps = step;
+      return Status::Ok();
     }
-    if (!summary.converged) ++out.unconverged_steps;
+    if (!summary.converged) ++out->unconverged_steps;
     states_[step] = sim.state();
   }
-  out.steps = last_step;
+  out->steps = last_step;
+  return Status::Ok();
+}
 
-  int fitted = 0, heldout = 0;
-  for (const ObservedFrame& frame : frames) (frame.heldout ? heldout : fitted) += 1;
-  SOFTID_THROW_UNLESS(fitted > 0, "every observed frame is held out");
-  out.frame_costs.resize(frames.size());
-  // Sums the frame costs in frame order (the same bits whichever pass computed them).
-  auto sum_frame_costs = [&] {
-    for (size_t k = 0; k < frames.size(); ++k) {
-      if (frames[k].heldout)
-        out.heldout_cost += out.frame_costs[k] / heldout;
-      else
-        out.cost += out.frame_costs[k] / fitted;
-    }
-  };
-  if (!with_gradient) {
-    for (size_t k = 0; k < frames.size(); ++k) {
-      out.frame_costs[k] =
-          cost_->Evaluate(ObservedDisplacement(static_cast<int>(k)), frames[k].points, nullptr);
-    }
-    sum_frame_costs();
-    out.forward_seconds = SecondsSince(forward_start);
-    return out;
-  }
-  out.forward_seconds = SecondsSince(forward_start);
-
-  // Backward: the cost's gradient enters at the state of each fitted frame (split between the two
-  // steps around it when its time falls between them; `carry` holds the earlier step's share).
-  // Each frame's cost comes with its gradient here rather than from a second evaluation in the
-  // forward pass (at one step per frame that evaluation was a large share of the forward time).
-  const auto backward_start = std::chrono::steady_clock::now();
+Status TrajectoryObjective::Backpropagate(int fitted, ObjectiveEvaluation* out) {
+  // The cost's gradient enters at the state of each fitted frame (split between the two steps
+  // around it when its time falls between them; `carry` holds the earlier step's share).
+  fem::Simulator& sim = *simulator_;
+  const std::span<const ObservedFrame> frames(frames_->data(), active_frames_);
+  const int last_step = observation_steps_[active_frames_ - 1].step;
   const int size = static_cast<int>(states_[0].u.size());
   fem::StateAdjoint adjoint{Eigen::VectorXd::Zero(size), Eigen::VectorXd::Zero(size),
                             Eigen::VectorXd::Zero(size)};
@@ -135,12 +155,12 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
       const ObservedFrame& frame = frames[next_frame];
       const Eigen::VectorXd& u = ObservedDisplacement(next_frame);
       if (frame.heldout) {
-        out.frame_costs[next_frame] = cost_->Evaluate(u, frame.points, nullptr);
+        out->frame_costs[next_frame] = cost_->Evaluate(u, frame.points, nullptr);
         continue;
       }
-      out.frame_costs[next_frame] = cost_->Evaluate(u, frame.points, &frame_gradient_);
+      out->frame_costs[next_frame] = cost_->Evaluate(u, frame.points, &frame_gradient_);
       frame_gradient_ /= fitted;
-      const Eigen::VectorXd& gradient = RestGradient(next_frame, &out.gradient);
+      const Eigen::VectorXd& gradient = RestGradient(next_frame, &out->gradient);
       const double weight = observation_steps_[next_frame].weight;
       adjoint.u += weight * gradient;
       if (weight < 1.0) carry += (1.0 - weight) * gradient;
@@ -152,13 +172,11 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
     }
     add_frame_gradients(step);
     SOFTID_RETURN_IF_ERROR(
-        sim.BackpropagateStep(states_[step - 1], states_[step], &adjoint, &out.gradient));
+        sim.BackpropagateStep(states_[step - 1], states_[step], &adjoint, &out->gradient));
   }
   add_frame_gradients(0);
-  sim.BackpropagateInitialState(states_[0], adjoint, &out.gradient);
-  sum_frame_costs();
-  out.backward_seconds = SecondsSince(backward_start);
-  return out;
+  sim.BackpropagateInitialState(states_[0], adjoint, &out->gradient);
+  return Status::Ok();
 }
 
 int TrajectoryObjective::NumResiduals() const {

@@ -113,6 +113,12 @@ class TrajectoryObjective {
   // frame_gradient_ (d cost / d world displacement at frame k) in the rest frame, adding d cost /
   // d initial pose through it to *gradient.
   const Eigen::VectorXd& RestGradient(int k, fem::ParameterGradient* gradient);
+  // Evaluate's passes. The forward run from t = 0 into states_ (steps and unconverged steps into
+  // *out; out->diverged when it fails). The adjoint pass back through states_: every active
+  // frame's cost into out->frame_costs and d cost / d parameters into out->gradient, for
+  // `fitted` fitted frames.
+  Status SimulateForward(const fem::PhysicalParameters& parameters, ObjectiveEvaluation* out);
+  Status Backpropagate(int fitted, ObjectiveEvaluation* out);
 
   std::vector<ObservationStep> observation_steps_;  // per observed frame
   std::vector<fem::SimulationState> states_;        // per step, reused across evaluations
