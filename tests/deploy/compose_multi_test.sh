@@ -50,39 +50,12 @@ containers() {  # SERVICE: the names of its containers
 [ "$(id -u)" -eq 0 ] || skip "needs root to install and run podman"
 [ -x "$client" ] && [ -x "$lab" ] || skip "softid and softid-lab are not built in $build_dir"
 
-prepare_podman() {
-  if ! command -v podman >/dev/null || ! command -v debootstrap >/dev/null ||
-    ! command -v podman-compose >/dev/null ||
-    [ ! -x /usr/lib/cni/dnsname ]; then
-    # dnsname: containers on a compose network find each other by service name (postgres).
-    DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends \
-      podman runc uidmap fuse-overlayfs slirp4netns debootstrap podman-compose \
-      golang-github-containernetworking-plugin-dnsname >/dev/null ||
-      skip "cannot install podman and podman-compose"
-  fi
-  # runc cannot raise RLIMIT_NOFILE on these machines.
-  if ! grep -qs 'default_ulimits' /etc/containers/containers.conf; then
-    mkdir -p /etc/containers
-    printf '[containers]\ndefault_ulimits = []\n' >>/etc/containers/containers.conf
-  fi
-  # No registry is reachable: the base images come from Debian's own packages.
-  if ! "${podman[@]}" image exists docker.io/library/debian:bookworm; then
-    local mirror rootfs
-    mirror=$(sed -n 's/^URIs: *//p' /etc/apt/sources.list.d/*.sources 2>/dev/null | head -n 1)
-    mirror=${mirror:-http://deb.debian.org/debian}
-    rootfs=$(mktemp -d /tmp/softid-rootfs.XXXXXX)
-    debootstrap --variant=minbase bookworm "$rootfs" "$mirror" >/dev/null ||
-      skip "debootstrap could not make a base image"
-    tar -C "$rootfs" -c . | "${podman[@]}" import - docker.io/library/debian:bookworm >/dev/null
-    rm -rf "$rootfs"
-  fi
-  "${podman[@]}" image exists docker.io/library/debian:bookworm-slim ||
-    "${podman[@]}" tag docker.io/library/debian:bookworm docker.io/library/debian:bookworm-slim
-}
+# shellcheck source=tests/deploy/podman_prepare.sh
+source "$(dirname "$0")/podman_prepare.sh"
 
 tmp=$(mktemp -d /tmp/softid-compose.XXXXXX)
 # podman-compose runs podman itself: this configuration gives those calls runc as well (the
-# same settings as above, read instead of /etc/containers/containers.conf).
+# settings prepare_podman writes to /etc/containers/containers.conf, read from here instead).
 export CONTAINERS_CONF=$tmp/containers.conf
 printf '[containers]\ndefault_ulimits = []\n\n[engine]\nruntime = "runc"\n' >"$CONTAINERS_CONF"
 port=$((20000 + RANDOM % 30000))
@@ -120,6 +93,10 @@ cleanup() {
 }
 trap cleanup EXIT
 
+if ! command -v podman-compose >/dev/null || [ ! -x /usr/lib/cni/dnsname ]; then
+  # dnsname: containers on a compose network find each other by service name (postgres).
+  apt_install_or_skip podman-compose golang-github-containernetworking-plugin-dnsname
+fi
 prepare_podman
 podman-compose version >/dev/null 2>&1 || skip "podman-compose does not run"
 previous_image=$("${podman[@]}" image inspect -f '{{.Id}}' "$image" 2>/dev/null || true)

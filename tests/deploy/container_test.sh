@@ -32,31 +32,8 @@ fail() {
 [ "$(id -u)" -eq 0 ] || skip "needs root to install and run podman"
 [ -x "$client" ] && [ -x "$lab" ] || skip "softid and softid-lab are not built in $build_dir"
 
-prepare_podman() {
-  if ! command -v podman >/dev/null || ! command -v debootstrap >/dev/null; then
-    DEBIAN_FRONTEND=noninteractive apt-get install -y --no-install-recommends \
-      podman runc uidmap fuse-overlayfs slirp4netns debootstrap >/dev/null ||
-      skip "cannot install podman"
-  fi
-  # runc cannot raise RLIMIT_NOFILE on these machines.
-  if ! grep -qs 'default_ulimits' /etc/containers/containers.conf; then
-    mkdir -p /etc/containers
-    printf '[containers]\ndefault_ulimits = []\n' >>/etc/containers/containers.conf
-  fi
-  # No registry is reachable: the base images come from Debian's own packages.
-  if ! "${podman[@]}" image exists docker.io/library/debian:bookworm; then
-    local mirror rootfs
-    mirror=$(sed -n 's/^URIs: *//p' /etc/apt/sources.list.d/*.sources 2>/dev/null | head -n 1)
-    mirror=${mirror:-http://deb.debian.org/debian}
-    rootfs=$(mktemp -d /tmp/softid-rootfs.XXXXXX)
-    debootstrap --variant=minbase bookworm "$rootfs" "$mirror" >/dev/null ||
-      skip "debootstrap could not make a base image"
-    tar -C "$rootfs" -c . | "${podman[@]}" import - docker.io/library/debian:bookworm >/dev/null
-    rm -rf "$rootfs"
-  fi
-  "${podman[@]}" image exists docker.io/library/debian:bookworm-slim ||
-    "${podman[@]}" tag docker.io/library/debian:bookworm docker.io/library/debian:bookworm-slim
-}
+# shellcheck source=tests/deploy/podman_prepare.sh
+source "$(dirname "$0")/podman_prepare.sh"
 
 tmp=$(mktemp -d /tmp/softid-container.XXXXXX)
 cleanup() {
