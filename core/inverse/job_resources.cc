@@ -36,11 +36,11 @@ std::string GiB(double bytes) {
   return fmt::format("{:.3g} GiB", bytes / (1ull << 30));
 }
 
-// The config key that most plausibly made the job large, for the message.
 std::string Hours(double seconds) {
   return fmt::format("{:.3g} h", seconds / 3600.0);
 }
 
+// The config key that most plausibly made the job large, for the message.
 std::string MemoryCulprit(const JobConfig& config) {
   if (config.solver.cell_size_m > 0.0)
     return fmt::format("cell_size = {}", config.solver.cell_size_m);
