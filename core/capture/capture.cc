@@ -2,7 +2,6 @@
 
 #include <fmt/format.h>
 
-#include <cctype>
 #include <nlohmann/json.hpp>
 #include <set>
 #include <system_error>
@@ -162,13 +161,6 @@ Status ParseCameras(const JsonReader& reader, const json& root,
   return Status::Ok();
 }
 
-bool EndsWithObj(const std::string& file) {
-  if (file.size() < 4) return false;
-  std::string extension = file.substr(file.size() - 4);
-  for (char& c : extension) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return extension == ".obj";
-}
-
 }  // namespace
 
 json ToJson(const Capture& capture) {
@@ -310,117 +302,6 @@ Result<DepthImage> LoadFrame(const Capture& capture, int camera, int frame) {
   }
   return ReadDepthPng(capture.directory / recording.frames[frame], recording.depth_scale,
                       recording.camera.width, recording.camera.height);
-}
-
-namespace {
-
-// `capture` as WriteCapture writes it: its directory, the mesh file (object.obj unless named) and
-// the frames' file names <camera>/%06d.png, one per image of frames_per_camera.
-// InvalidArgument (naming `source`) for a mesh file that is not OBJ, a wrong number of image
-// lists or a camera name that cannot be a folder name.
-Result<Capture> NameCaptureFiles(const std::string& source, const std::filesystem::path& directory,
-                                 const Capture& capture,
-                                 const std::vector<std::vector<DepthImage>>& frames_per_camera) {
-  Capture out = capture;
-  out.directory = directory;
-  if (out.mesh_file.empty()) out.mesh_file = "object.obj";
-  if (!EndsWithObj(out.mesh_file)) {
-    return Status::InvalidArgument(
-        fmt::format("{}: mesh = \"{}\": must end in \".obj\" (the mesh is written as OBJ)", source,
-                    out.mesh_file));
-  }
-  if (frames_per_camera.size() != out.cameras.size()) {
-    return Status::InvalidArgument(
-        fmt::format("{}: {} image lists for {} cameras: need one per camera", source,
-                    frames_per_camera.size(), out.cameras.size()));
-  }
-  for (size_t i = 0; i < out.cameras.size(); ++i) {
-    CameraRecording& recording = out.cameras[i];
-    const std::string& name = recording.camera.name;
-    if (!IsSafeFolderName(name)) {
-      return Status::InvalidArgument(fmt::format(
-          "{}: cameras[{}].name = \"{}\": must be usable as a folder name (not empty, no '/', "
-          "'\\' or control characters, not \".\" or \"..\")",
-          source, i, name));
-    }
-    recording.frames.clear();
-    for (size_t k = 0; k < frames_per_camera[i].size(); ++k) {
-      recording.frames.push_back(fmt::format("{}/{:06d}.png", name, k));
-    }
-  }
-  return out;
-}
-
-// InvalidArgument unless every image has its camera's size.
-Status CheckImageSizes(const std::string& source, const Capture& out,
-                       const std::vector<std::vector<DepthImage>>& frames_per_camera) {
-  for (size_t i = 0; i < out.cameras.size(); ++i) {
-    const PinholeCamera& camera = out.cameras[i].camera;
-    for (size_t k = 0; k < frames_per_camera[i].size(); ++k) {
-      const DepthImage& image = frames_per_camera[i][k];
-      if (image.width != camera.width || image.height != camera.height ||
-          image.depth.size() != static_cast<size_t>(image.width) * image.height) {
-        return Status::InvalidArgument(fmt::format(
-            "{}: frames_per_camera[{}][{}] is {}x{} with {} values: camera \"{}\" is {}x{}", source,
-            i, k, image.width, image.height, image.depth.size(), camera.name, camera.width,
-            camera.height));
-      }
-    }
-  }
-  return Status::Ok();
-}
-
-// The files of a validated capture: the previous capture.json removed first, the mesh, the
-// frames, and capture.json last, atomically.
-Status WriteCaptureFiles(const std::filesystem::path& directory, const Capture& out,
-                         const geometry::TriangleMesh& mesh,
-                         const std::vector<std::vector<DepthImage>>& frames_per_camera) {
-  std::error_code error;
-  std::filesystem::create_directories(directory, error);
-  if (error) {
-    return Status::IoError(
-        fmt::format("{}: cannot create folder: {}", directory.string(), error.message()));
-  }
-  const std::filesystem::path json_path = directory / kCaptureFileName;
-  std::filesystem::remove(json_path, error);
-  if (error) {
-    return Status::IoError(fmt::format("{}: cannot remove the previous capture.json: {}",
-                                       json_path.string(), error.message()));
-  }
-  const std::filesystem::path mesh_path = directory / out.mesh_file;
-  std::filesystem::create_directories(mesh_path.parent_path(), error);
-  SOFTID_RETURN_IF_ERROR(geometry::WriteTriangleMeshObj(mesh_path, mesh));
-  for (size_t i = 0; i < out.cameras.size(); ++i) {
-    const CameraRecording& recording = out.cameras[i];
-    std::filesystem::create_directories(directory / recording.camera.name, error);
-    if (error) {
-      return Status::IoError(fmt::format("{}: cannot create folder: {}",
-                                         (directory / recording.camera.name).string(),
-                                         error.message()));
-    }
-    for (size_t k = 0; k < recording.frames.size(); ++k) {
-      SOFTID_RETURN_IF_ERROR(WriteDepthPng(directory / recording.frames[k], frames_per_camera[i][k],
-                                           recording.depth_scale));
-    }
-  }
-  return WriteFileAtomically(json_path, ToJson(out).dump(2) + "\n");
-}
-
-}  // namespace
-
-Status WriteCapture(const std::filesystem::path& directory, const Capture& capture,
-                    const geometry::TriangleMesh& mesh,
-                    const std::vector<std::vector<DepthImage>>& frames_per_camera) {
-  const std::string source = fmt::format("WriteCapture({})", directory.string());
-  SOFTID_ASSIGN_OR_RETURN(const Capture out,
-                          NameCaptureFiles(source, directory, capture, frames_per_camera));
-  // The same rules a reader applies (also catches empty or unequal frame lists).
-  SOFTID_RETURN_IF_ERROR(CaptureFromJson(ToJson(out), source).status());
-  SOFTID_RETURN_IF_ERROR(CheckImageSizes(source, out, frames_per_camera));
-  if (mesh.vertices.empty() || mesh.triangles.empty()) {
-    return Status::InvalidArgument(fmt::format("{}: mesh is empty (no triangles)", source));
-  }
-  return WriteCaptureFiles(directory, out, mesh, frames_per_camera);
 }
 
 }  // namespace softid::capture

@@ -146,7 +146,9 @@ Result<DepthImage> LoadFrame(const Capture& capture, int camera, int frame);
 // Writes a capture folder: `mesh` as OBJ to capture.mesh_file ("object.obj" when empty; must end
 // in ".obj"), frames_per_camera[i][k] as <camera name>/%06d.png with camera i's depth_scale, and
 // capture.json last (through a temporary file renamed into place, after removing any previous
-// capture.json) so an interrupted write never looks complete. capture.directory and each
+// capture.json) so an interrupted write never looks complete. The frames are staged and moved
+// into place only when all are written (capture_writer.h, which also writes frame by frame): a
+// write that fails on a frame leaves a previous capture in the folder as it was. capture.directory and each
 // camera's `frames` are ignored (frame names are generated). Everything is validated before the
 // first file is written: the same rules as CaptureFromJson, camera names usable as folder names
 // (no '/', '\\', "." or ".."), one image list per camera with equal counts (>= 1), image sizes

@@ -5,11 +5,13 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <limits>
 #include <nlohmann/json.hpp>
 #include <optional>
 
 #include "core/capture/capture.h"
+#include "core/capture/capture_writer.h"
 #include "core/capture/pixel_rays.h"
 #include "core/common/for_each_index.h"
 #include "core/ingest/camera_view.h"
@@ -73,10 +75,22 @@ Status MarkHiddenPixels(const recording::Recording& rec, int c, const WorldPlane
   return Status::Ok();
 }
 
-// Segments and tracks the object through every frame of camera c.
+// The mean of `points`; none for none.
+std::optional<Eigen::Vector3d> MeanOf(const std::vector<Eigen::Vector3d>& points) {
+  if (points.empty()) return std::nullopt;
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3d& p : points) sum += p;
+  return sum / static_cast<double>(points.size());
+}
+
+// Receives the object's points of each recording frame of a camera, in order.
+using FrameSink = std::function<Status(int frame, const std::vector<Eigen::Vector3d>& points_C)>;
+
+// Segments and tracks the object through every frame of camera c; hands each frame's points to
+// `sink`, keeps frame 0's and every frame's centre in *view.
 Status SegmentCamera(const recording::Recording& rec, int c, double object_radius_m,
-                     const IngestOptions& options, CameraView* view, CameraIngest* report,
-                     const IngestProgress& progress) {
+                     const IngestOptions& options, const FrameSink& sink, CameraView* view,
+                     CameraIngest* report, const IngestProgress& progress) {
   const recording::RecordingCamera& camera = rec.cameras[c];
   const int n = static_cast<int>(camera.frames.size());
   ObjectTracker tracker(object_radius_m, options.tracking);
@@ -121,7 +135,9 @@ Status SegmentCamera(const recording::Recording& rec, int c, double object_radiu
       report->object_pixels.push_back(static_cast<int>(tracked.pixels.size()));
       report->rejected_regions.push_back(tracked.rejected_regions);
       report->object_masks.push_back(tracked.pixels);
-      view->object_points_C.push_back(std::move(points));
+      view->centres_C.push_back(MeanOf(points));
+      SOFTID_RETURN_IF_ERROR(sink(k, points));
+      if (k == 0) view->release_points_C = std::move(points);
       if (progress) progress("segmentation", k + 1, n);
     }
   }
@@ -256,14 +272,9 @@ Status FloorAndWorld(const recording::Recording& rec, const IngestOptions& optio
 // The object's centre in every frame of camera c, world frame (frames without points: none).
 std::vector<std::optional<Eigen::Vector3d>> ObjectCentres(const CameraView& view) {
   std::vector<std::optional<Eigen::Vector3d>> centres;
-  for (const std::vector<Eigen::Vector3d>& points : view.object_points_C) {
-    if (points.empty()) {
-      centres.emplace_back();
-      continue;
-    }
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    for (const Eigen::Vector3d& p : points) sum += p;
-    centres.emplace_back(view.X_WC * (sum / static_cast<double>(points.size())));
+  for (const std::optional<Eigen::Vector3d>& centre_C : view.centres_C) {
+    centres.push_back(centre_C ? std::optional<Eigen::Vector3d>(view.X_WC * *centre_C)
+                               : std::nullopt);
   }
   return centres;
 }
@@ -311,41 +322,79 @@ Status CheckTheObjectIsReleasedAndMoves(const recording::Recording& rec,
   return Status::Ok();
 }
 
-// Stage 5: the capture folder: one clock, the object's points on each camera's ideal pinhole.
-Status WriteIngestedCapture(const recording::Recording& rec, const geometry::TriangleMesh& mesh_S,
-                            const IngestOptions& options, const std::vector<CameraView>& views,
-                            const std::filesystem::path& capture_dir, IngestReport* report) {
-  const Timeline timeline = MergeTimeline(rec, options.same_time_s);
-  report->time_origin_s = timeline.origin_s;
-  report->median_interval_s = timeline.median_interval_s;
-  report->max_gap_s = timeline.max_gap_s;
+// The capture's cameras as the recording declares them (their poses come with Finish).
+capture::Capture CaptureHeader(const recording::Recording& rec) {
   capture::Capture capture;
   capture.mesh_file = "object.obj";
-  capture.fps = timeline.median_interval_s > 0.0 ? 1.0 / timeline.median_interval_s : 30.0;
-  capture.mass_kg = rec.mass_kg;
-  capture.floor = capture::Capture::Floor{report->floor_W.normal_W, report->floor_W.offset_m};
-  std::vector<std::vector<DepthImage>> frames(rec.NumCameras());
   for (int c = 0; c < rec.NumCameras(); ++c) {
     capture::CameraRecording camera;
     camera.camera = rec.cameras[c].camera;
-    camera.camera.X_WC = views[c].X_WC;
     camera.depth_scale = rec.cameras[c].depth_scale;
     capture.cameras.push_back(camera);
   }
+  return capture;
+}
+
+// Hands camera c's recording frames to `writer` at their capture frames on the timeline, the
+// object's points splatted on the camera's ideal pinhole.
+FrameSink CaptureFrameSink(const recording::Recording& rec, int c, const Timeline& timeline,
+                           capture::CaptureWriter* writer) {
+  std::vector<std::vector<int>> capture_frames(rec.cameras[c].frames.size());
+  for (size_t i = 0; i < timeline.frames.size(); ++i) {
+    const int k = timeline.frames[i].frame_of[c];
+    if (k >= 0) capture_frames[k].push_back(static_cast<int>(i));
+  }
+  const capture::PinholeCamera camera = rec.cameras[c].camera;
+  return [c, camera, writer, capture_frames = std::move(capture_frames)](
+             int k, const std::vector<Eigen::Vector3d>& points_C) -> Status {
+    if (capture_frames[k].empty()) return Status::Ok();
+    const DepthImage image = SplatToPinhole(points_C, camera);
+    for (const int i : capture_frames[k]) SOFTID_RETURN_IF_ERROR(writer->WriteFrame(c, i, image));
+    return Status::Ok();
+  };
+}
+
+// Stage 3 for camera c: the object's pixels in every frame, written to the capture as they are
+// found; empty images where the camera has no frame at a capture frame's moment.
+Status SegmentAndWriteCamera(const recording::Recording& rec, int c, double object_radius_m,
+                             const IngestOptions& options, const Timeline& timeline,
+                             capture::CaptureWriter* writer, CameraView* view, IngestReport* report,
+                             const IngestProgress& progress) {
+  if (!report->cameras[c].static_from_background)
+    SOFTID_RETURN_IF_ERROR(MarkHiddenPixels(rec, c, report->floor_W, options, view));
+  SOFTID_RETURN_IF_ERROR(SegmentCamera(rec, c, object_radius_m, options,
+                                       CaptureFrameSink(rec, c, timeline, writer), view,
+                                       &report->cameras[c], progress));
+  const capture::PinholeCamera& camera = rec.cameras[c].camera;
+  const DepthImage empty = DepthImage::Zeros(camera.width, camera.height);
+  for (size_t i = 0; i < timeline.frames.size(); ++i) {
+    if (timeline.frames[i].frame_of[c] < 0)
+      SOFTID_RETURN_IF_ERROR(writer->WriteFrame(c, static_cast<int>(i), empty));
+  }
+  return Status::Ok();
+}
+
+// Stage 5: the capture folder's mesh and capture.json (the frames are written): one clock, the
+// cameras' poses, the floor.
+Status FinishIngestedCapture(const recording::Recording& rec, const geometry::TriangleMesh& mesh_S,
+                             const Timeline& timeline, const std::vector<CameraView>& views,
+                             const std::filesystem::path& capture_dir,
+                             capture::CaptureWriter* writer, IngestReport* report) {
+  report->time_origin_s = timeline.origin_s;
+  report->median_interval_s = timeline.median_interval_s;
+  report->max_gap_s = timeline.max_gap_s;
+  capture::Capture capture = CaptureHeader(rec);
+  capture.fps = timeline.median_interval_s > 0.0 ? 1.0 / timeline.median_interval_s : 30.0;
+  capture.mass_kg = rec.mass_kg;
+  capture.floor = capture::Capture::Floor{report->floor_W.normal_W, report->floor_W.offset_m};
+  for (int c = 0; c < rec.NumCameras(); ++c) capture.cameras[c].camera.X_WC = views[c].X_WC;
   for (const TimelineFrame& entry : timeline.frames) {
     capture.frame_times.push_back(entry.time_s);
     report->frame_times_s.push_back(entry.time_s);
-    for (int c = 0; c < rec.NumCameras(); ++c) {
-      const capture::PinholeCamera& camera = capture.cameras[c].camera;
-      frames[c].push_back(
-          entry.frame_of[c] < 0
-              ? DepthImage::Zeros(camera.width, camera.height)
-              : SplatToPinhole(views[c].object_points_C[entry.frame_of[c]], camera));
-    }
   }
   geometry::TriangleMesh mesh_W = mesh_S;
   for (Eigen::Vector3d& v : mesh_W.vertices) v = report->X_WS * v;
-  SOFTID_RETURN_IF_ERROR(capture::WriteCapture(capture_dir, capture, mesh_W, frames));
+  SOFTID_RETURN_IF_ERROR(writer->Finish(capture, mesh_W));
   return WriteIngestJson(capture_dir / "ingest.json", *report);
 }
 
@@ -378,13 +427,15 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
   }
   // 2. The floor and the world frame.
   SOFTID_RETURN_IF_ERROR(FloorAndWorld(rec, options, &views, &report));
-  // 3. The object's pixels in every frame.
+  // 3. The object's pixels in every frame, on one clock, into the capture.
   const double object_radius_m = 0.5 * mesh_S.Bounds().diagonal().norm();
+  const Timeline timeline = MergeTimeline(rec, options.same_time_s);
+  SOFTID_ASSIGN_OR_RETURN(capture::CaptureWriter writer,
+                          capture::CaptureWriter::Create(capture_dir, CaptureHeader(rec),
+                                                         static_cast<int>(timeline.frames.size())));
   for (int c = 0; c < rec.NumCameras(); ++c) {
-    if (!report.cameras[c].static_from_background)
-      SOFTID_RETURN_IF_ERROR(MarkHiddenPixels(rec, c, report.floor_W, options, &views[c]));
-    SOFTID_RETURN_IF_ERROR(
-        SegmentCamera(rec, c, object_radius_m, options, &views[c], &report.cameras[c], progress));
+    SOFTID_RETURN_IF_ERROR(SegmentAndWriteCamera(rec, c, object_radius_m, options, timeline,
+                                                 &writer, &views[c], &report, progress));
   }
   SOFTID_RETURN_IF_ERROR(CheckSomeCameraSeesTheWholeObject(rec, report));
   // 4. The mesh's pose at the release.
@@ -393,7 +444,8 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
   SOFTID_RETURN_IF_ERROR(CheckTheObjectIsReleasedAndMoves(rec, mesh_S, views, report));
   SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
   // 5. The capture, and a picture of what the ingest saw.
-  SOFTID_RETURN_IF_ERROR(WriteIngestedCapture(rec, mesh_S, options, views, capture_dir, &report));
+  SOFTID_RETURN_IF_ERROR(
+      FinishIngestedCapture(rec, mesh_S, timeline, views, capture_dir, &writer, &report));
   SOFTID_RETURN_IF_ERROR(
       WriteContactSheet(capture_dir / kContactSheetFileName, rec, report, mesh_S, views[0].rays));
   return report;

@@ -84,7 +84,10 @@ using IngestProgress = std::function<void(std::string_view stage, int done, int 
 // interpolation; frame_times) plus ingest.json and ingest.png (contact_sheet.h). Errors name the
 // stage, the camera and the frame: no foreground, the object on the image border in every frame of
 // every camera, a mesh whose size cannot match the object's points, a registration that does not
-// converge (overlap and RMS), no floor. Cancelled when options.cancel is set meanwhile.
+// converge (overlap and RMS), no floor. Cancelled when options.cancel is set meanwhile. Frames
+// are written as they are segmented (capture_writer.h): of each frame only the object's mask
+// stays in memory (the report's), not its images or points; an ingest that fails before its capture is complete (segmentation,
+// registration) leaves an earlier capture in `capture_dir` as it was.
 Result<IngestReport> Ingest(const recording::Recording& recording,
                             const std::filesystem::path& capture_dir,
                             const IngestOptions& options = {}, const IngestProgress& progress = {});

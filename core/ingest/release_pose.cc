@@ -37,7 +37,7 @@ std::vector<Eigen::Vector3d> ReleasePoints(const recording::Recording& rec,
                                            const IngestOptions& options,
                                            const std::vector<CameraView>& views,
                                            std::vector<int>* cameras) {
-  std::vector<Eigen::Vector3d> points = views[0].object_points_C[0];
+  std::vector<Eigen::Vector3d> points = views[0].release_points_C;
   cameras->assign(1, 0);
   const double t0 = rec.cameras[0].frames[0].time_s;
   const Eigen::Isometry3d X_C0W = views[0].X_WC.inverse();
@@ -45,7 +45,7 @@ std::vector<Eigen::Vector3d> ReleasePoints(const recording::Recording& rec,
     if (std::abs(rec.cameras[c].frames[0].time_s - t0) > options.same_time_s) continue;
     const Eigen::Isometry3d X_C0C = X_C0W * views[c].X_WC;
     cameras->push_back(c);
-    for (const Eigen::Vector3d& p_C : views[c].object_points_C[0]) points.push_back(X_C0C * p_C);
+    for (const Eigen::Vector3d& p_C : views[c].release_points_C) points.push_back(X_C0C * p_C);
   }
   return points;
 }
@@ -93,7 +93,7 @@ Result<std::vector<Eigen::Vector3d>> SilhouettePoints(const recording::Recording
 Status PoseMeshAtRelease(const recording::Recording& rec, const geometry::TriangleMesh& mesh_S,
                          const IngestOptions& options, const std::vector<CameraView>& views,
                          IngestReport* report) {
-  const std::vector<Eigen::Vector3d>& first = views[0].object_points_C[0];
+  const std::vector<Eigen::Vector3d>& first = views[0].release_points_C;
   SOFTID_RETURN_IF_ERROR(CheckMeshScale(mesh_S, first, rec.cameras[0].camera.name));
   MeshRegistrationOptions registration = options.registration;
   std::vector<float> sigmas = views[0].scene.sigma_m;

@@ -6,12 +6,14 @@
 #include <array>
 #include <fstream>
 #include <initializer_list>
+#include <iterator>
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
 #include <opencv2/imgcodecs.hpp>
 #include <string>
 #include <vector>
 
+#include "core/capture/capture_writer.h"
 #include "core/capture/depth_renderer.h"
 #include "core/geometry/primitives.h"
 #include "tests/core/capture/test_temp_dir.h"
@@ -635,15 +637,79 @@ TEST(Capture, WriteRejectsInvalidInput) {
   EXPECT_FALSE(fs::exists(dir.path() / "object.obj"));
 }
 
-// Rewriting a folder replaces the capture; a failed rewrite leaves no stale capture.json.
-TEST(Capture, FailedRewriteLeavesNoCaptureJson) {
+// A rewrite that fails (a depth a 16-bit PNG cannot store) leaves the previous capture as it was:
+// the new files are staged and moved into place only when all of them are written.
+TEST(Capture, FailedRewriteKeepsThePreviousCapture) {
   const CaptureDir dir;
   TestCapture bad = dir.test();
   bad.frames[0][1].depth[0] = 1000.0f;  // too far for a 16-bit PNG at 0.5 mm
   const Status status = WriteCapture(dir.path(), bad.capture, bad.mesh, bad.frames);
   EXPECT_EQ(status.code(), StatusCode::kInvalidArgument);
   EXPECT_NE(status.message().find("000001.png"), std::string::npos) << status.message();
-  EXPECT_EQ(ReadCapture(dir.path()).status().code(), StatusCode::kNotFound);
+  const Result<Capture> read = ReadCapture(dir.path());
+  ASSERT_TRUE(read.ok()) << read.status().ToString();
+  const Result<DepthImage> frame = LoadFrame(*read, 0, 1);
+  ASSERT_TRUE(frame.ok()) << frame.status().ToString();
+  EXPECT_NEAR(frame->depth[0], dir.test().frames[0][1].depth[0], 0.0005);
+  EXPECT_FALSE(fs::exists(dir.path() / ".capture-writing"));
+}
+
+// Frames written one at a time, in any order, make the same files as WriteCapture.
+TEST(CaptureWriter, WritesTheSameFilesAsWriteCapture) {
+  const CaptureDir reference;
+  const TestCapture& test = reference.test();
+  const TempDir dir;
+  {
+    Result<CaptureWriter> writer = CaptureWriter::Create(dir.path(), test.capture, kNumFrames);
+    ASSERT_TRUE(writer.ok()) << writer.status().ToString();
+    for (int k = kNumFrames - 1; k >= 0; --k) {
+      for (int c = 0; c < 2; ++c) ASSERT_TRUE(writer->WriteFrame(c, k, test.frames[c][k]).ok());
+    }
+    EXPECT_FALSE(fs::exists(dir.path() / "cam0" / "000000.png"));  // staged until Finish
+    const Status finished = writer->Finish(test.capture, test.mesh);
+    ASSERT_TRUE(finished.ok()) << finished.ToString();
+  }
+  for (const std::string file :
+       {"capture.json", "object.obj", "cam0/000002.png", "cam1/000000.png"}) {
+    std::ifstream a(reference.path() / file, std::ios::binary),
+        b(dir.path() / file, std::ios::binary);
+    const std::string bytes_a((std::istreambuf_iterator<char>(a)), {});
+    const std::string bytes_b((std::istreambuf_iterator<char>(b)), {});
+    EXPECT_FALSE(bytes_b.empty()) << file;
+    if (file == "capture.json") continue;  // names its own folder
+    EXPECT_EQ(bytes_a, bytes_b) << file;
+  }
+  EXPECT_FALSE(fs::exists(dir.path() / ".capture-writing"));
+}
+
+// A writer that does not finish leaves nothing: no capture.json, no frames, and not the folder it
+// made; Finish refuses while a frame is missing, naming it; bad frames are refused by index and
+// size.
+TEST(CaptureWriter, UnfinishedWriteLeavesNothing) {
+  const TestCapture test = MakeTestCapture();
+  const TempDir dir;
+  const fs::path folder = dir.path() / "capture";
+  {
+    Result<CaptureWriter> writer = CaptureWriter::Create(folder, test.capture, kNumFrames);
+    ASSERT_TRUE(writer.ok()) << writer.status().ToString();
+    for (int k = 0; k < kNumFrames; ++k)
+      ASSERT_TRUE(writer->WriteFrame(0, k, test.frames[0][k]).ok());
+    const Status missing = writer->Finish(test.capture, test.mesh);
+    EXPECT_EQ(missing.code(), StatusCode::kFailedPrecondition);
+    EXPECT_NE(missing.message().find("camera \"cam1\" frame 0 was not written"), std::string::npos)
+        << missing.message();
+    const Status out_of_range = writer->WriteFrame(1, kNumFrames, test.frames[1][0]);
+    EXPECT_EQ(out_of_range.code(), StatusCode::kInvalidArgument);
+    EXPECT_NE(out_of_range.message().find("camera 1 frame 3: out of range"), std::string::npos)
+        << out_of_range.message();
+    const Status wrong_size = writer->WriteFrame(1, 0, DepthImage::Zeros(8, 8));
+    EXPECT_NE(wrong_size.message().find("is 8x8"), std::string::npos) << wrong_size.message();
+    EXPECT_FALSE(fs::exists(folder / "capture.json"));
+    EXPECT_FALSE(fs::exists(folder / "cam0"));
+  }
+  EXPECT_FALSE(fs::exists(folder));
+  EXPECT_EQ(CaptureWriter::Create(folder, test.capture, 0).status().code(),
+            StatusCode::kInvalidArgument);
 }
 
 // Frame times (jittered or dropped frames) round-trip and replace k / fps; without them frame k
