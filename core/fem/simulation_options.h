@@ -2,6 +2,7 @@
 #pragma once
 
 #include "core/common/status.h"
+#include "core/fem/hex_element.h"
 
 namespace softid::fem {
 
@@ -125,6 +126,11 @@ struct SimulationOptions {
   // concurrent starts leave free. Results do not depend on thread timing, but the summation
   // order (the last bits) depends on the thread count.
   int threads = 1;  // [-], >= 0
+
+  // The element (hex_element.h). Trilinear by default: the accuracy and diagnosis benchmarks were
+  // run with it, and incompatible modes are not yet better on every capture measured
+  // (docs/benchmarks.md, "Element").
+  ElementFormulation element = ElementFormulation::kTrilinear;
 
   Status Validate() const;
 };

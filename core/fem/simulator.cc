@@ -216,6 +216,11 @@ void Simulator::BuildMassAndStiffness() {
   element_rotation_.assign(mesh_.NumElements(), Eigen::Matrix3d::Identity());
   element_stiffness_weights_.resize(mesh_.NumElements());
   element_scale_.resize(mesh_.NumElements());
+  // d K / d mu depends on the Poisson ratio for the incompatible-modes element: rebuilt on demand.
+  if (options_.element != ElementFormulation::kTrilinear) {
+    shear_matrices_.clear();
+    element_shear_index_.clear();
+  }
   const double lambda = parameters.LameLambda();
   const double mu = parameters.LameMu();
   for (int e = 0; e < mesh_.NumElements(); ++e) {
@@ -232,7 +237,7 @@ void Simulator::BuildMassAndStiffness() {
     const auto [it, added] = distinct.emplace(key, static_cast<int>(stiffness_matrices_.size()));
     if (added) {
       stiffness_matrices_.push_back(
-          ElementStiffness(stiffness_weights, h, scale * lambda, scale * mu));
+          ElementStiffness(stiffness_weights, h, scale * lambda, scale * mu, options_.element));
     }
     element_stiffness_index_[e] = it->second;
     element_stiffness_weights_[e] = stiffness_weights;

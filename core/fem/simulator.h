@@ -268,8 +268,9 @@ class Simulator {
                        SurfaceAdjoint* surface = nullptr);
   struct ResidualAdjointPass;  // ResidualAdjoint's stages (simulator_adjoint.cc)
   struct AdjointStep;          // BackpropagateStep's stages (simulator_adjoint.cc)
-  // Per element the shear part of the stiffness, ElementStiffness(weights, h, 0, 1), without the
-  // stiffness field's scale: d K / d poisson_ratio needs it. Built on the first backward pass.
+  // Per element d K / d mu (ElementShearDerivative), without the stiffness field's scale (it does
+  // not depend on it): d K / d poisson_ratio needs it. Built on the first backward pass after the
+  // parameters are applied.
   void BuildShearStiffness();
   std::vector<Matrix24d, Eigen::aligned_allocator<Matrix24d>> shear_matrices_;
   std::vector<int> element_shear_index_;  // into shear_matrices_, per element

@@ -28,7 +28,9 @@ void Simulator::BuildShearStiffness() {
     const auto [it, added] =
         distinct.emplace(element_stiffness_weights_[e], static_cast<int>(shear_matrices_.size()));
     if (added)
-      shear_matrices_.push_back(ElementStiffness(element_stiffness_weights_[e], h, 0.0, 1.0));
+      shear_matrices_.push_back(ElementShearDerivative(element_stiffness_weights_[e], h,
+                                                       parameters_.LameLambda(),
+                                                       parameters_.LameMu(), options_.element));
     element_shear_index_[e] = it->second;
   }
 }

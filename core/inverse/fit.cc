@@ -535,6 +535,7 @@ Status ChooseGrid(const capture::Capture& capture, const geometry::TriangleMesh&
                   const std::atomic<bool>* cancel, fem::SimulationOptions* simulation,
                   FitResult* result) {
   const double length = mesh.Bounds().sizes().maxCoeff();
+  result->element = config.solver.element;
   if (config.solver.cell_size_m > 0.0) {
     result->cell_size_m = config.solver.cell_size_m;
     return Status::Ok();
@@ -603,6 +604,7 @@ Status TakeDiscretisation(const FitCheckpoint& checkpoint, const JobConfig& conf
   }
   result->cells = checkpoint.cells;
   result->cell_size_m = checkpoint.cell_size_m;
+  result->element = config.solver.element;
   result->grid_selection = checkpoint.grid_selection;
   result->substeps = checkpoint.substeps;
   result->substep_selection = checkpoint.substep_selection;
@@ -970,7 +972,9 @@ nlohmann::json ToJson(const FitResult& result) {
   out["cost_history_last_frame"] = best.cost_history_last_frame;
   out["fixed"] = HeldParametersJson(result);
   // How finely space and time were resolved; "selection" only when the job asked for "auto".
-  out["grid"] = {{"cells", result.cells}, {"cell_size_m", result.cell_size_m}};
+  out["grid"] = {{"cells", result.cells},
+                 {"cell_size_m", result.cell_size_m},
+                 {"element", fem::ToString(result.element)}};
   if (result.grid_selection) out["grid"]["selection"] = ToJson(*result.grid_selection);
   out["time_step"] = {{"substeps", result.substeps}};
   if (result.substep_selection) out["time_step"]["selection"] = ToJson(*result.substep_selection);

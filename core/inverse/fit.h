@@ -18,7 +18,7 @@
 //    "cost_history_last_frame": [..],  // the last frame that cost is over (continuation stages
 //                                      // fit a prefix of the frames; see StartResult)
 //    "fixed": {..},                  // every parameter the fit did not change, public JSON
-//    "grid": {"cells": 16, "cell_size_m": .., "selection": {..}},  // selection: when "auto"
+//    "grid": {"cells": 16, "cell_size_m": .., "element": "..", "selection": {..}},  // when "auto"
 //    "time_step": {"substeps": 4, "selection": {..}},  // selection: when chosen ("auto")
 //    "timing": {"total_seconds": .., "evaluations": .., "ms_per_forward_adjoint_step": .., ..}}
 // Vectors are arrays and the ground plane is {"normal": [..], "offset": ..}.
@@ -145,7 +145,8 @@ struct FitResult {
   // config gave cell_size) and the cell size h [m].
   int cells = 0;
   double cell_size_m = 0.0;
-  std::optional<GridSelection> grid_selection;  // when chosen
+  std::optional<GridSelection> grid_selection;                                    // when chosen
+  fem::ElementFormulation element = fem::ElementFormulation::kIncompatibleModes;  // the config's
 
   const StartResult& Best() const { return starts.at(best); }
 };

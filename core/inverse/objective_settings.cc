@@ -11,6 +11,7 @@ fem::SimulationOptions SimulationOptionsFor(const SolverOptions& solver) {
   simulation.cell_size = solver.cell_size_m;
   if (solver.rho_infinity != SolverOptions::kNewmark)
     simulation.UseGeneralizedAlpha(solver.rho_infinity);
+  simulation.element = solver.element;
   // The band must fit in the padding, and the cost must be truncated where the grid cuts it off.
   simulation.padding_cells = std::max(
       {simulation.padding_cells, static_cast<int>(std::ceil(solver.cost.truncation_cells)) + 1,

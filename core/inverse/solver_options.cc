@@ -19,6 +19,7 @@ constexpr const char* kSubstepsRequirement = "must be \"auto\" or an integer >= 
 constexpr const char* kRhoInfinityRequirement = "must be a number in [0, 1]";
 constexpr const char* kPositiveRequirement = "must be a finite number > 0";
 constexpr const char* kGradientRequirement = "must be \"adjoint\" or \"finite_difference\"";
+constexpr const char* kElementRequirement = "must be \"trilinear\" or \"incompatible_modes\"";
 constexpr const char* kRestSdfRequirement = "must be \"surface_fitted\", \"exact\" or \"sampled\"";
 constexpr auto kCostKeys =
     std::to_array<std::string_view>({"band_cells", "truncation_cells", "rest_sdf"});
@@ -67,6 +68,14 @@ Result<CostSettings> ParseCost(const Json& value) {
   return settings;
 }
 
+Result<fem::ElementFormulation> ParseElement(const Json& value) {
+  for (fem::ElementFormulation element :
+       {fem::ElementFormulation::kIncompatibleModes, fem::ElementFormulation::kTrilinear}) {
+    if (value.is_string() && value.get<std::string>() == fem::ToString(element)) return element;
+  }
+  return json::Invalid("element", value, kElementRequirement);
+}
+
 Result<GradientMethod> ParseGradient(const Json& value) {
   for (GradientMethod method : {GradientMethod::kAdjoint, GradientMethod::kFiniteDifference}) {
     if (value.is_string() && value.get<std::string>() == ToString(method)) return method;
@@ -106,6 +115,9 @@ Status ParseDiscretisation(const Json& j, SolverOptions* options) {
     if (!value.is_number() || !(value.get<double>() >= 0.0 && value.get<double>() <= 1.0))
       return json::Invalid("rho_infinity", value, kRhoInfinityRequirement);
     options->rho_infinity = value.get<double>();
+  }
+  if (j.contains("element")) {
+    SOFTID_ASSIGN_OR_RETURN(options->element, ParseElement(j["element"]));
   }
   return Status::Ok();
 }
@@ -190,6 +202,10 @@ Status SolverOptions::Validate() const {
   if (rho_infinity != kNewmark && !(rho_infinity >= 0.0 && rho_infinity <= 1.0)) {
     return json::Invalid("rho_infinity", rho_infinity, kRhoInfinityRequirement);
   }
+  if (element != fem::ElementFormulation::kIncompatibleModes &&
+      element != fem::ElementFormulation::kTrilinear) {
+    return json::Invalid("element", static_cast<int>(element), kElementRequirement);
+  }
   if (starts < 1) return json::Invalid("starts", starts, AtLeast(1));
   if (threads < 0) return json::Invalid("threads", threads, AtLeast(0));
   if (max_iterations < 1) return json::Invalid("max_iterations", max_iterations, AtLeast(1));
@@ -224,6 +240,7 @@ void WriteJson(const SolverOptions& options, Json* job_config) {
   Json& j = *job_config;
   j["cells"] = options.cells == kAutoCells ? Json("auto") : Json(options.cells);
   j["substeps"] = options.substeps == kAutoSubsteps ? Json("auto") : Json(options.substeps);
+  j["element"] = fem::ToString(options.element);
   j["starts"] = options.starts;
   j["threads"] = options.threads;
   j["seed"] = options.seed;

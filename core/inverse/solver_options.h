@@ -13,6 +13,7 @@
 
 #include "core/common/status.h"
 #include "core/cost/sparse_surface_cost.h"
+#include "core/fem/hex_element.h"
 
 namespace softid::inverse {
 
@@ -69,6 +70,11 @@ struct SolverOptions {
   // Newmark parameters. Must match how the motion is best resolved, not how a capture was made.
   static constexpr double kNewmark = -1.0;
   double rho_infinity = kNewmark;  // [-], in [0, 1] or kNewmark
+  // The grid's element (fem/hex_element.h): "trilinear" (the default) or "incompatible_modes",
+  // which bends as the continuum does with few cells across a limb, where the trilinear element
+  // is too stiff and biases Young's modulus low. Not yet the default: see docs/benchmarks.md,
+  // "Element".
+  fem::ElementFormulation element = fem::ElementFormulation::kTrilinear;
 
   // Independent optimisations from random starts (drawn from the initial ranges); the best result
   // wins. Contact-rich fits have local minima, so one start is rarely enough.
@@ -118,6 +124,7 @@ inline constexpr auto kSolverOptionKeys = std::to_array<std::string_view>({
     "cell_size",
     "substeps",
     "rho_infinity",
+    "element",
     "starts",
     "threads",
     "seed",

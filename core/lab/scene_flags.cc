@@ -61,6 +61,10 @@ void SceneFlags::Register(CLI::App* app) {
                   "generalized-alpha time stepping with this high-frequency spectral radius in "
                   "[0, 1] (default: Newmark, gamma 0.6)")
       ->check(CLI::Range(0.0, 1.0));
+  app->add_option("--element", element,
+                  "the grid's element: trilinear or incompatible_modes (docs/job-config.md)")
+      ->check(CLI::IsMember({"trilinear", "incompatible_modes"}))
+      ->capture_default_str();
   app->add_option("--fps", fps, "frames per second")->capture_default_str();
   app->add_option("--duration", duration, "seconds to simulate (default: the scene's)");
 }
@@ -139,6 +143,9 @@ scenes::RunOptions SceneFlags::BuildRunOptions() const {
   run.simulation.cells_along_longest_side = cells;
   run.simulation.cell_size = cell_size;
   if (rho_infinity >= 0.0) run.simulation.UseGeneralizedAlpha(rho_infinity);
+  run.simulation.element = element == fem::ToString(fem::ElementFormulation::kIncompatibleModes)
+                               ? fem::ElementFormulation::kIncompatibleModes
+                               : fem::ElementFormulation::kTrilinear;
   run.fps = fps;
   run.substeps_per_frame = substeps;
   run.duration = duration;

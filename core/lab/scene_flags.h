@@ -30,7 +30,8 @@ struct SceneFlags {
   // Simulation.
   int cells = 20;
   double cell_size = 0.0;
-  double rho_infinity = -1.0;  // < 0: Newmark; else generalized-alpha (SimulationOptions)
+  double rho_infinity = -1.0;         // < 0: Newmark; else generalized-alpha (SimulationOptions)
+  std::string element = "trilinear";  // fem::ElementFormulation's name
   int substeps = 4;
   double fps = 60.0;
   std::optional<double> duration;

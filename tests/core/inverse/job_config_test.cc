@@ -72,6 +72,7 @@ json FullConfig() {
     "cell_size": 0.004,
     "substeps": 3,
     "rho_infinity": 0.8,
+    "element": "incompatible_modes",
     "frames": {"first": 2, "last": 40},
     "heldout_every": 5,
     "starts": 8,
@@ -129,6 +130,7 @@ TEST(JobConfig, DefaultsFromEmptyObject) {
   EXPECT_EQ(config->solver.substeps, kAutoSubsteps);
   EXPECT_EQ(config->solver.rho_infinity, SolverOptions::kNewmark);
   EXPECT_EQ(SimulationOptionsFor(config->solver).generalized_alpha_f, 0.0);
+  EXPECT_EQ(SimulationOptionsFor(config->solver).element, fem::ElementFormulation::kTrilinear);
   EXPECT_EQ(config->frames.first, 0);
   EXPECT_EQ(config->frames.last, -1);
   EXPECT_EQ(config->heldout_every, 0);
@@ -177,6 +179,8 @@ TEST(JobConfig, FullConfigRoundTrips) {
   EXPECT_EQ(config->solver.cell_size_m, 0.004);
   EXPECT_EQ(config->solver.substeps, 3);
   EXPECT_EQ(config->solver.rho_infinity, 0.8);
+  EXPECT_EQ(SimulationOptionsFor(config->solver).element,
+            fem::ElementFormulation::kIncompatibleModes);
   // rho = 0.8: alpha_m = 1/3, alpha_f = 4/9 (Chung & Hulbert), gamma = 1/2 - alpha_m + alpha_f.
   const fem::SimulationOptions simulation = SimulationOptionsFor(config->solver);
   EXPECT_NEAR(simulation.generalized_alpha_m, 1.0 / 3.0, 1e-15);
@@ -373,6 +377,8 @@ TEST(JobConfigRejects, NumericalSettings) {
                 "rho_infinity = 1.5: ", "must be a number in [0, 1]");
   ExpectInvalid(json::parse(R"({"rho_infinity": "newmark"})"),
                 "rho_infinity = \"newmark\": ", "must be a number in [0, 1]");
+  ExpectInvalid(json::parse(R"({"element": "quadratic"})"),
+                "element = \"quadratic\": ", "must be \"trilinear\" or \"incompatible_modes\"");
   ExpectInvalid(json::parse(R"({"starts": 0})"), "starts = 0: ", "must be an integer >= 1");
   ExpectInvalid(json::parse(R"({"threads": -1})"), "threads = -1: ", "must be an integer >= 0");
   ExpectInvalid(json::parse(R"({"seed": -3})"), "seed = -3: ", "must be an integer >= 0");

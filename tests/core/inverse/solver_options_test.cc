@@ -40,6 +40,8 @@ TEST(SolverOptions, ValidateNamesEveryFieldOutOfRange) {
       {[](SolverOptions& o) { o.substeps = -2; }, "substeps = -2: ", "integer >= 1"},
       {[](SolverOptions& o) { o.rho_infinity = 1.5; }, "rho_infinity = 1.5: ", "in [0, 1]"},
       {[](SolverOptions& o) { o.rho_infinity = kNaN; }, "rho_infinity = ", "in [0, 1]"},
+      {[](SolverOptions& o) { o.element = static_cast<fem::ElementFormulation>(5); },
+       "element = 5: ", "\"trilinear\" or \"incompatible_modes\""},
       {[](SolverOptions& o) { o.starts = 0; }, "starts = 0: ", "integer >= 1"},
       {[](SolverOptions& o) { o.threads = -1; }, "threads = -1: ", "integer >= 0"},
       {[](SolverOptions& o) { o.max_iterations = 0; }, "max_iterations = 0: ", "integer >= 1"},
@@ -74,6 +76,7 @@ TEST(SolverOptions, JsonRoundTripKeepsEveryField) {
   options.cell_size_m = 0.004;
   options.substeps = 6;
   options.rho_infinity = 0.8;
+  options.element = fem::ElementFormulation::kIncompatibleModes;
   options.starts = 3;
   options.threads = 2;
   options.seed = 12345678901234ULL;
