@@ -203,13 +203,16 @@ void ReportSize(const SizeRuns& runs, int target, const BenchFlags& flags, Bench
     adjoint_median_ms = Median(runs.adjoint_ms_runs);
   }
   const double adjoint_ms = adjoint.ms;
-  std::printf(
-      "%10d %8d %8d %4d %6.2f %10.2f %10.2f %8.2f %10.2f %10.2f %10.1f %8d %12.2f %8.2f %12.2f "
-      "%12.2f\n",
-      runs.cells, runs.nodes, runs.resolution, runs.threads, runs.parallel_share, runs.setup, ms,
-      Median(runs.ms_runs), cpu_ms, summary->newton_iterations / steps,
-      summary->linear_iterations / steps, summary->refactorizations, adjoint_ms, adjoint_median_ms,
-      adjoint.cpu_ms, adjoint.adjoint_cpu_ms);
+  std::printf("%10d %8d %8d %4d %6.2f %10.2f %10.2f %8.2f %10.2f %10.2f %10.1f %8d", runs.cells,
+              runs.nodes, runs.resolution, runs.threads, runs.parallel_share, runs.setup, ms,
+              Median(runs.ms_runs), cpu_ms, summary->newton_iterations / steps,
+              summary->linear_iterations / steps, summary->refactorizations);
+  if (flags.adjoint) {
+    std::printf(" %12.2f %8.2f %12.2f %12.2f\n", adjoint_ms, adjoint_median_ms, adjoint.cpu_ms,
+                adjoint.adjoint_cpu_ms);
+  } else {
+    std::printf(" %12s %8s %12s %12s\n", "-", "-", "-", "-");  // not timed (--no-adjoint)
+  }
   if (target == 3000) totals->adjoint_cpu_ms_at_3000 = adjoint.cpu_ms;
   if (target == 3000) totals->adjoint_ms_at_3000 = adjoint_ms;
   std::fflush(stdout);
