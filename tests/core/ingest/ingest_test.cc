@@ -177,7 +177,7 @@ fs::path WriteSmallRecording(const RawDir& dir) {
 }
 
 // A refusal: a recording spoilt one way, ingested; the error names what is wrong and nothing is
-// written.
+// written (not even the capture folder).
 class IngestRejects : public ::testing::Test {
  protected:
   // The small recording of WriteSmallRecording, read back.
@@ -199,7 +199,7 @@ class IngestRejects : public ::testing::Test {
       EXPECT_NE(report.status().message().find(phrase), std::string::npos)
           << "no \"" << phrase << "\" in: " << report.status().message();
     }
-    EXPECT_FALSE(fs::exists(cap_.path / "capture.json"));
+    EXPECT_FALSE(fs::exists(cap_.path)) << "the refused ingest left its capture folder behind";
   }
   void CopyOverFrames(const std::string& source, size_t first) {
     const std::vector<recording::RecordingFrame>& frames = rec_.cameras[0].frames;
@@ -232,6 +232,29 @@ TEST_F(IngestRejects, NoObjectInTheFrames) {
   WriteAndRead();
   CopyOverFrames(rec_.cameras[0].background[0], 0);
   ExpectRefused(StatusCode::kFailedPrecondition, {"no foreground", rec_.cameras[0].frames[0].file});
+}
+
+// A refused ingest into the folder of an earlier capture leaves that capture as it was (the new
+// frames are staged until the capture is complete).
+TEST_F(IngestRejects, RefusalKeepsAnEarlierCaptureInTheFolder) {
+  WriteAndRead();
+  ASSERT_TRUE(Ingest(rec_, cap_.path).ok());
+  const Result<capture::Capture> before = capture::ReadCapture(cap_.path);
+  ASSERT_TRUE(before.ok()) << before.status().ToString();
+  const Result<capture::DepthImage> frame_before = capture::LoadFrame(*before, 0, 1);
+  ASSERT_TRUE(frame_before.ok());
+  CopyOverFrames(rec_.cameras[0].frames[0].file, 1);  // now it never moves
+  const Result<IngestReport> refused = Ingest(rec_, cap_.path);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("never moves"), std::string::npos)
+      << refused.status().message();
+  const Result<capture::Capture> after = capture::ReadCapture(cap_.path);
+  ASSERT_TRUE(after.ok()) << after.status().ToString();
+  EXPECT_EQ(after->NumFrames(), before->NumFrames());
+  const Result<capture::DepthImage> frame_after = capture::LoadFrame(*after, 0, 1);
+  ASSERT_TRUE(frame_after.ok());
+  EXPECT_EQ(frame_after->depth, frame_before->depth);
+  EXPECT_FALSE(fs::exists(cap_.path / ".capture-writing"));
 }
 
 // Every frame shows the object as at the release (frame 0 copied over the others): it never
@@ -286,7 +309,7 @@ TEST(Ingest, CancelStopsBetweenFramesAndWritesNoCapture) {
   EXPECT_EQ(report.status().code(), StatusCode::kCancelled) << report.status().ToString();
   EXPECT_EQ(segmented, 2);
   EXPECT_FALSE(registered);
-  EXPECT_FALSE(fs::exists(cap.path / "capture.json"));
+  EXPECT_FALSE(fs::exists(cap.path));
 }
 
 }  // namespace
