@@ -38,6 +38,8 @@ def parse_args(argv):
     parser.add_argument("--starts", type=int, default=2)
     parser.add_argument("--max-iterations", type=int, default=50)
     parser.add_argument("--cells", default="auto", help='"auto" (default) or a number')
+    parser.add_argument("--element", choices=["trilinear", "incompatible_modes"],
+                        default="trilinear", help="the job config's \"element\"")
     return parser.parse_args(argv)
 
 
@@ -59,7 +61,8 @@ def job_config(truth, args):
         initial["friction_coefficient"] = 0.1
     cells = args.cells if args.cells == "auto" else int(args.cells)
     return {"fit": fit, "fixed": fixed, "initial": initial, "starts": args.starts,
-            "max_iterations": args.max_iterations, "cells": cells, "uncertainty": True}
+            "max_iterations": args.max_iterations, "cells": cells, "uncertainty": True,
+            "element": args.element}
 
 
 def ensure_capture(case, resolution, out):
