@@ -111,6 +111,21 @@ void ExpectRelativeDerivative(const char* name, Simulator& sim, const Trajectory
       1e-4, adjoint_value * base);
 }
 
+// The linear stiffness field's log-gradient along one direction.
+void ExpectStiffnessFieldDerivative(Simulator& sim, const TrajectoryLoss& loss,
+                                    const PhysicalParameters& p, const ParameterGradient& g,
+                                    const Eigen::Vector3d& direction) {
+  ASSERT_EQ(g.stiffness_field.size(), 3u);
+  ExpectDirectionalDerivative(
+      "stiffness_field.log_gradient", sim, loss,
+      [&](double t) {
+        PhysicalParameters q = p;
+        q.stiffness_field.log_gradient += t * direction;
+        return q;
+      },
+      1e-4, Eigen::Vector3d::Map(g.stiffness_field.data()).dot(direction));
+}
+
 geometry::TriangleMesh SmallBox() {
   return geometry::MakeBox(Eigen::Vector3d(0.1, 0.07, 0.05), 0.025);
 }
@@ -162,15 +177,7 @@ TEST_P(Adjoint, FreeFlightGradientMatchesFiniteDifferences) {
   vector("initial_velocity", &PhysicalParameters::initial_velocity, g.initial_velocity, 0.1);
   vector("initial_angular_velocity", &PhysicalParameters::initial_angular_velocity,
          g.initial_angular_velocity, 1.0);
-  ASSERT_EQ(g.stiffness_field.size(), 3u);
-  ExpectDirectionalDerivative(
-      "stiffness_field.log_gradient", sim, loss,
-      [&](double t) {
-        PhysicalParameters q = p;
-        q.stiffness_field.log_gradient += t * direction;
-        return q;
-      },
-      1e-4, Eigen::Vector3d::Map(g.stiffness_field.data()).dot(direction));
+  ExpectStiffnessFieldDerivative(sim, loss, p, g, direction);
 }
 
 TEST_P(Adjoint, ContactAndFrictionGradientMatchesFiniteDifferences) {
@@ -304,14 +311,7 @@ TEST(Adjoint, IncompatibleModesGradientMatchesFiniteDifferences) {
   ExpectRelativeDerivative("stiffness_damping", sim, loss, p,
                            &PhysicalParameters::stiffness_damping, g.stiffness_damping);
   const Eigen::Vector3d direction(0.6, -0.3, 0.74);
-  ExpectDirectionalDerivative(
-      "stiffness_field.log_gradient", sim, loss,
-      [&](double t) {
-        PhysicalParameters q = p;
-        q.stiffness_field.log_gradient += t * direction;
-        return q;
-      },
-      1e-4, Eigen::Vector3d::Map(g.stiffness_field.data()).dot(direction));
+  ExpectStiffnessFieldDerivative(sim, loss, p, g, direction);
 }
 
 INSTANTIATE_TEST_SUITE_P(Integrators, Adjoint,
