@@ -113,12 +113,16 @@ struct RegistrationScale {
         fine_distance_m(std::max(3.0 * options.noise_sigma_m, 0.25 * voxel_m)) {}
 };
 
+// Stops once an iteration changes the inlier share by less than 1e-6 and the RMS by less than a
+// micrometre (Open3D compares absolute changes): far below the pose's noise. Tighter limits ran
+// all 60 iterations every time, a third of a 100-frame ingest, for no change in the pose beyond
+// a few hundredths of a millimetre (docs/benchmarks.md).
 reg::RegistrationResult FineIcp(const o3d::geometry::PointCloud& observed,
                                 const o3d::geometry::PointCloud& model, double distance_m,
                                 const Eigen::Matrix4d& start) {
   return reg::RegistrationICP(observed, model, distance_m, start,
                               reg::TransformationEstimationPointToPlane(),
-                              reg::ICPConvergenceCriteria(1e-9, 1e-9, 60));
+                              reg::ICPConvergenceCriteria(1e-6, 1e-6, 60));
 }
 
 // Every observed point, or kFinalPoints of them taken evenly: the pose's noise falls as one over
@@ -245,7 +249,9 @@ Result<MeshRegistration> RegisterMesh(const geometry::TriangleMesh& mesh_S,
   ForEachIndex(survivors.size(), workers,
                [&](size_t i) { refined[i] = refine(*thinned, survivors[i]); });
   const int winner = Winner(refined);
-  MeshRegistration best = FromIcp(refine(*FinalPoints(observed), refined[winner].transformation_),
+  // The winner has converged on the thinned cloud: only the fine pairing distance is left to run.
+  MeshRegistration best = FromIcp(FineIcp(*FinalPoints(observed), *model, scale.fine_distance_m,
+                                          refined[winner].transformation_),
                                   scale.fine_distance_m);
   best.hypothesis = winner;
   if (best.overlap < options.min_overlap) {
