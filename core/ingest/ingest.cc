@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <fstream>
 #include <functional>
@@ -23,6 +24,20 @@ namespace softid::ingest {
 namespace {
 
 using capture::DepthImage;
+
+// Seconds since the last lap (or construction).
+class StageClock {
+ public:
+  double Lap() {
+    const auto now = std::chrono::steady_clock::now();
+    const double seconds = std::chrono::duration<double>(now - last_).count();
+    last_ = now;
+    return seconds;
+  }
+
+ private:
+  std::chrono::steady_clock::time_point last_ = std::chrono::steady_clock::now();
+};
 
 Result<StaticScene> CameraStaticScene(const recording::Recording& rec, int c,
                                       const IngestOptions& options, bool* from_background) {
@@ -209,6 +224,10 @@ Status IngestOptions::Validate() const {
   return Status::Ok();
 }
 
+double IngestStageSeconds::Total() const {
+  return static_scene + floor + segmentation + registration + finishing;
+}
+
 nlohmann::json IngestReport::ToJson() const {
   nlohmann::json cams = nlohmann::json::array();
   for (const CameraIngest& c : cameras) {
@@ -238,7 +257,14 @@ nlohmann::json IngestReport::ToJson() const {
            {{"origin_s", time_origin_s},
             {"frames", frame_times_s.size()},
             {"median_interval_s", median_interval_s},
-            {"max_gap_s", max_gap_s}}}};
+            {"max_gap_s", max_gap_s}}},
+          {"seconds",
+           {{"static_scene", seconds.static_scene},
+            {"floor", seconds.floor},
+            {"segmentation", seconds.segmentation},
+            {"registration", seconds.registration},
+            {"finishing", seconds.finishing},
+            {"total", seconds.Total()}}}};
 }
 
 namespace {
@@ -375,7 +401,7 @@ Status SegmentAndWriteCamera(const recording::Recording& rec, int c, double obje
 }
 
 // Stage 5: the capture folder's mesh and capture.json (the frames are written): one clock, the
-// cameras' poses, the floor.
+// cameras' poses, the floor. ingest.json follows.
 Status FinishIngestedCapture(const recording::Recording& rec, const geometry::TriangleMesh& mesh_S,
                              const Timeline& timeline, const std::vector<CameraView>& views,
                              const std::filesystem::path& capture_dir,
@@ -394,8 +420,7 @@ Status FinishIngestedCapture(const recording::Recording& rec, const geometry::Tr
   }
   geometry::TriangleMesh mesh_W = mesh_S;
   for (Eigen::Vector3d& v : mesh_W.vertices) v = report->X_WS * v;
-  SOFTID_RETURN_IF_ERROR(writer->Finish(capture, mesh_W));
-  return WriteIngestJson(capture_dir / "ingest.json", *report);
+  return writer->Finish(capture, mesh_W);
 }
 
 }  // namespace
@@ -407,6 +432,7 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
   if (rec.NumCameras() == 0) return Status::InvalidArgument("ingest: the recording has no camera");
   SOFTID_ASSIGN_OR_RETURN(const geometry::TriangleMesh mesh_S, recording::LoadRecordingMesh(rec));
   IngestReport report;
+  StageClock clock;
   std::vector<CameraView> views(rec.NumCameras());
   report.cameras.resize(rec.NumCameras());
   // 1. Each camera's lens and static scene.
@@ -425,8 +451,10 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
     if (progress) progress("static scene", c + 1, rec.NumCameras());
     SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
   }
+  report.seconds.static_scene = clock.Lap();
   // 2. The floor and the world frame.
   SOFTID_RETURN_IF_ERROR(FloorAndWorld(rec, options, &views, &report));
+  report.seconds.floor = clock.Lap();
   // 3. The object's pixels in every frame, on one clock, into the capture.
   const double object_radius_m = 0.5 * mesh_S.Bounds().diagonal().norm();
   const Timeline timeline = MergeTimeline(rec, options.same_time_s);
@@ -438,16 +466,20 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
                                                  &writer, &views[c], &report, progress));
   }
   SOFTID_RETURN_IF_ERROR(CheckSomeCameraSeesTheWholeObject(rec, report));
+  report.seconds.segmentation = clock.Lap();
   // 4. The mesh's pose at the release.
   SOFTID_RETURN_IF_ERROR(PoseMeshAtRelease(rec, mesh_S, options, views, &report));
   if (progress) progress("registration", 1, 1);
   SOFTID_RETURN_IF_ERROR(CheckTheObjectIsReleasedAndMoves(rec, mesh_S, views, report));
   SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
-  // 5. The capture, and a picture of what the ingest saw.
+  report.seconds.registration = clock.Lap();
+  // 5. The capture, a picture of what the ingest saw, and last the report with every stage's time.
   SOFTID_RETURN_IF_ERROR(
       FinishIngestedCapture(rec, mesh_S, timeline, views, capture_dir, &writer, &report));
   SOFTID_RETURN_IF_ERROR(
       WriteContactSheet(capture_dir / kContactSheetFileName, rec, report, mesh_S, views[0].rays));
+  report.seconds.finishing = clock.Lap();
+  SOFTID_RETURN_IF_ERROR(WriteIngestJson(capture_dir / "ingest.json", report));
   return report;
 }
 

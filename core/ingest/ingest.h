@@ -55,6 +55,18 @@ struct CameraIngest {
   std::vector<std::vector<int>> object_masks;
 };
 
+// Wall time of the ingest's stages [s]. Only the segmentation grows with the recording's length:
+// the static scene reads at most max_static_frames frames (or the background frames), and the
+// others work on the first frame or on the whole capture's summary.
+struct IngestStageSeconds {
+  double static_scene = 0.0;  // every camera's lens and static scene
+  double floor = 0.0;         // the floor and the world frame
+  double segmentation = 0.0;  // every frame of every camera read, segmented, tracked and written
+  double registration = 0.0;  // the mesh's pose at the release and the checks on the motion
+  double finishing = 0.0;     // the mesh, capture.json and the contact sheet
+  double Total() const;
+};
+
 struct IngestReport {
   std::vector<CameraIngest> cameras;
   FloorPlane floor_C;             // in camera 0's frame
@@ -69,6 +81,7 @@ struct IngestReport {
   double time_origin_s = 0.0;                              // device-clock time of t = 0
   std::vector<double> frame_times_s;
   double median_interval_s = 0.0, max_gap_s = 0.0;
+  IngestStageSeconds seconds;
 
   // ingest.json contents (masks left out).
   nlohmann::json ToJson() const;
@@ -86,8 +99,8 @@ using IngestProgress = std::function<void(std::string_view stage, int done, int 
 // every camera, a mesh whose size cannot match the object's points, a registration that does not
 // converge (overlap and RMS), no floor. Cancelled when options.cancel is set meanwhile. Frames
 // are written as they are segmented (capture_writer.h): of each frame only the object's mask
-// stays in memory (the report's), not its images or points; an ingest that fails before its capture is complete (segmentation,
-// registration) leaves an earlier capture in `capture_dir` as it was.
+// stays in memory (the report's), not its images or points; an ingest that fails before its capture
+// is complete (segmentation, registration) leaves an earlier capture in `capture_dir` as it was.
 Result<IngestReport> Ingest(const recording::Recording& recording,
                             const std::filesystem::path& capture_dir,
                             const IngestOptions& options = {}, const IngestProgress& progress = {});

@@ -1,10 +1,12 @@
 // softid-lab prove-ingest: raw recordings in, against their truth. Six synthetic raw recordings as
 // a station records them (torus, scanned bunny, pillow on a ramp; one camera without a pose and
 // three with; with and without background frames) are made, ingested and held against the truth:
-// object masks, floor, mesh pose, ingest time. With --fit, Young's modulus is fitted from each
+// object masks, floor, mesh pose, ingest time (of a 100-frame recording: the segmentation's time
+// per frame times 100, plus the stages paid once). With --fit, Young's modulus is fitted from each
 // ingested capture (initial_pose fitted along) and from a clean capture of the same motion.
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -52,6 +54,9 @@ struct CaseOutcome {
   IngestAccuracy accuracy;
   int frames = 0;
   double ingest_s = 0.0;
+  // The ingest of a 100-frame recording from this one's stage times: the segmentation grows with
+  // the frames, the rest is paid once (ingest.h, IngestStageSeconds).
+  double ingest_100_frames_s = 0.0;
   std::optional<double> e_truth, e_raw, e_clean;
 };
 
@@ -106,6 +111,8 @@ Result<CaseOutcome> RunCase(const ProveIngestFlags& flags, const IngestCase& c,
   SOFTID_ASSIGN_OR_RETURN(const ingest::IngestReport report, ingest::Ingest(rec, dir / "ingested"));
   out.ingest_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   out.frames = static_cast<int>(report.frame_times_s.size());
+  out.ingest_100_frames_s = out.ingest_s - report.seconds.segmentation +
+                            report.seconds.segmentation * 100.0 / std::max(1, out.frames);
   SOFTID_ASSIGN_OR_RETURN(out.accuracy, CompareIngestWithTruth(dir / "recording", rec, report));
   if (!flags.fit) return out;
   scenes::SynthesisOptions clean;
@@ -124,7 +131,7 @@ void PrintRow(const IngestCase& c, const CaseOutcome& o) {
   const IngestAccuracy& a = o.accuracy;
   std::printf("| %s | %.3f | %.2f / %.2f | %.2f | %.2f / %.2f | %.1f |", c.name.c_str(),
               a.worst_iou, a.floor_angle_deg, 1e3 * a.floor_offset_m, 1e3 * a.surface_rms_m,
-              1e3 * a.vertex_rms_m, a.rotation_deg, 100.0 * o.ingest_s / o.frames);
+              1e3 * a.vertex_rms_m, a.rotation_deg, o.ingest_100_frames_s);
   if (o.e_raw && o.e_clean && o.e_truth) {
     std::printf(" %+.1f %% | %+.1f %% |", 100.0 * (*o.e_raw / *o.e_truth - 1.0),
                 100.0 * (*o.e_clean / *o.e_truth - 1.0));
@@ -136,7 +143,7 @@ void PrintRow(const IngestCase& c, const CaseOutcome& o) {
 int RunProveIngest(const ProveIngestFlags& flags) {
   std::printf(
       "| recording | worst mask IoU | floor deg / mm | mesh surface RMS mm | mesh vertex "
-      "RMS mm / deg | ingest s per 100 frames |%s\n",
+      "RMS mm / deg | ingest s for 100 frames |%s\n",
       flags.fit ? " E from raw (+ initial_pose) | E from clean |" : "");
   std::printf("| --- | --- | --- | --- | --- | --- |%s\n", flags.fit ? " --- | --- |" : "");
   std::fflush(stdout);

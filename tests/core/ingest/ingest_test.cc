@@ -141,7 +141,16 @@ void IngestAndCompare(int background_frames, const Bounds& bounds, int cameras =
     EXPECT_NEAR(written->frame_times[k], expected, 1e-6) << "frame " << k;
   }
   ASSERT_TRUE(written->floor.has_value());
-  EXPECT_TRUE(fs::exists(cap.path / "ingest.json"));
+  // Every stage took some time, and ingest.json carries the same times.
+  const IngestStageSeconds& stage = report->seconds;
+  for (const double seconds :
+       {stage.static_scene, stage.floor, stage.segmentation, stage.registration, stage.finishing}) {
+    EXPECT_GT(seconds, 0.0);
+  }
+  nlohmann::json ingest_json;
+  std::ifstream(cap.path / "ingest.json") >> ingest_json;
+  EXPECT_DOUBLE_EQ(ingest_json["seconds"]["segmentation"].get<double>(), stage.segmentation);
+  EXPECT_DOUBLE_EQ(ingest_json["seconds"]["total"].get<double>(), stage.Total());
   ExpectContactSheetShowsTheObject(cap.path / kContactSheetFileName,
                                    static_cast<int>(camera.object_masks.size()));
 }
