@@ -76,6 +76,25 @@ std::pair<std::vector<std::vector<int>>, std::vector<int>> SplitElements(
 // Least share of an element's mass a corner gets, as a fraction of the uniform share V_e / 8.
 constexpr double kMinNodeMassShare = 0.25;
 
+// Per axis, the face of the fixed region that cuts through the body (NaN where none does): the
+// grid puts a plane of nodes on it, so that the clamped length is the region's at every
+// resolution. Holding the nodes inside the region otherwise clamps up to the last node plane
+// inside, which moves with the grid: a bar clamped over 2 cm was held over 2 cm at 24 and 48
+// cells and 1.5 cm at 32, and its fitted modulus followed (docs/benchmarks.md).
+Eigen::Vector3d ClampFacePlanes(const Eigen::AlignedBox3d& fixed_region,
+                                const Eigen::AlignedBox3d& body) {
+  Eigen::Vector3d planes = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+  for (int a = 0; a < 3; ++a) {
+    const auto cuts = [&](double face) { return face > body.min()[a] && face < body.max()[a]; };
+    if (cuts(fixed_region.max()[a])) {
+      planes[a] = fixed_region.max()[a];
+    } else if (cuts(fixed_region.min()[a])) {
+      planes[a] = fixed_region.min()[a];
+    }
+  }
+  return planes;
+}
+
 }  // namespace
 
 Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalParameters& parameters,
@@ -91,7 +110,7 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
   rest_frame_ = RestFrame(parameters.initial_pose, pose_centre_);
   parameters_ = rest_frame_.ToRest(parameters);
 
-  BuildGrid(rest_mesh);
+  BuildGrid(rest_mesh, fixed_region);
   EmbedSurface(rest_mesh);
   team_ = std::make_unique<ThreadTeam>(AssemblyThreads());
   PartitionElements();
@@ -99,7 +118,11 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
   const int n = mesh_.NumNodes();
   fixed_.assign(n, 0);
   if (fixed_region) {
-    for (int i = 0; i < n; ++i) fixed_[i] = fixed_region->contains(mesh_.rest_positions[i]) ? 1 : 0;
+    // The nodes on the clamp's face (ClampFacePlanes) belong to it despite rounding.
+    const double tolerance = 1e-9 * mesh_.CellSize();
+    const Eigen::AlignedBox3d held(fixed_region->min() - Eigen::Vector3d::Constant(tolerance),
+                                   fixed_region->max() + Eigen::Vector3d::Constant(tolerance));
+    for (int i = 0; i < n; ++i) fixed_[i] = held.contains(mesh_.rest_positions[i]) ? 1 : 0;
   }
   assembler_ = ElementAssembler(n, mesh_.element_nodes);
   solver_.SetThreadTeam(team_.get());
@@ -108,11 +131,13 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
   ApplyParameters();
 }
 
-void Simulator::BuildGrid(const geometry::TriangleMesh& rest_mesh) {
+void Simulator::BuildGrid(const geometry::TriangleMesh& rest_mesh,
+                          const std::optional<Eigen::AlignedBox3d>& fixed_region) {
   geometry::SignedDistanceOptions sdf_options;
   sdf_options.cells_along_longest_side = options_.cells_along_longest_side;
   sdf_options.cell_size = options_.cell_size;
   sdf_options.padding_cells = options_.padding_cells;
+  if (fixed_region) sdf_options.node_plane = ClampFacePlanes(*fixed_region, rest_mesh.Bounds());
   Result<geometry::SignedDistanceField> sdf =
       geometry::ComputeSignedDistanceField(rest_mesh, sdf_options);
   ThrowIfError(sdf.status());

@@ -241,7 +241,8 @@ class Simulator {
   void FactorizeReference();
   // The constructor's stages: the hex grid from the rest mesh's signed distance, the embedded
   // surface, the assembly's threads and their element and surface-point ranges.
-  void BuildGrid(const geometry::TriangleMesh& rest_mesh);
+  void BuildGrid(const geometry::TriangleMesh& rest_mesh,
+                 const std::optional<Eigen::AlignedBox3d>& fixed_region);
   void EmbedSurface(const geometry::TriangleMesh& rest_mesh);
   int AssemblyThreads() const;
   void PartitionElements();

@@ -40,8 +40,9 @@ Status LayOutGrid(const Eigen::AlignedBox3d& bounds, const Eigen::Vector3d& exte
   long long num_nodes = 1;
   for (int a = 0; a < 3; ++a) {
     // A tolerance keeps exact multiples of h (extent = 20 h) from gaining a cell by rounding.
-    const double cells =
-        std::max(0.0, std::ceil(extent[a] / h - 1e-9)) + 2.0 * options.padding_cells;
+    const double aligned_padding = std::isnan(options.node_plane[a]) ? 0.0 : 2.0;
+    const double cells = std::max(0.0, std::ceil(extent[a] / h - 1e-9)) +
+                         2.0 * options.padding_cells + aligned_padding;
     if (cells + 1 > static_cast<double>(kMaxNodes)) {
       num_nodes = kMaxNodes + 1;
       break;
@@ -56,6 +57,13 @@ Status LayOutGrid(const Eigen::AlignedBox3d& bounds, const Eigen::Vector3d& exte
   }
   grid->cell_size = h;
   grid->origin = bounds.center() - 0.5 * h * grid->num_cells.cast<double>();
+  for (int a = 0; a < 3; ++a) {
+    if (std::isnan(options.node_plane[a])) continue;
+    // Up by less than a cell from the centred place; the extra cell on each side keeps the padding.
+    const double below = grid->origin[a];
+    grid->origin[a] +=
+        options.node_plane[a] - below - h * std::floor((options.node_plane[a] - below) / h);
+  }
   return Status::Ok();
 }
 
@@ -110,6 +118,12 @@ Status SignedDistanceOptions::Validate() const {
   if (num_threads < 0) {
     return Status::InvalidArgument(Field("num_threads") + " = " + std::to_string(num_threads) +
                                    ": must be >= 0 (0 = hardware concurrency)");
+  }
+  for (int a = 0; a < 3; ++a) {
+    if (std::isinf(node_plane[a])) {
+      return Status::InvalidArgument(Field("node_plane") + "[" + std::to_string(a) + "] = " +
+                                     std::to_string(node_plane[a]) + ": must be finite or NaN");
+    }
   }
   return Status::Ok();
 }

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <limits>
 #include <vector>
 
 #include "core/common/status.h"
@@ -17,6 +18,11 @@ struct SignedDistanceOptions {
   int padding_cells = 4;  // empty cells added on every side of the mesh bounds, >= 1 (room for
                           // the narrow band the cost needs)
   int num_threads = 0;    // worker threads; 0 = std::thread::hardware_concurrency(), >= 0
+  // Per axis, a coordinate a plane of grid nodes must pass through [m]; NaN (the default): none,
+  // the grid is centred on the mesh bounds. An aligned axis gets one more cell of padding on each
+  // side, so that moving the nodes by up to a cell keeps padding_cells. Used to put nodes on a
+  // clamp's face, which otherwise falls between nodes wherever the grid puts them.
+  Eigen::Vector3d node_plane = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
   // InvalidArgument naming the field and value, e.g.
   // "SignedDistanceOptions.padding_cells = 0: must be >= 1".
   Status Validate() const;

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numbers>
 
 #include "core/geometry/cut_cell_weights.h"
@@ -84,6 +85,32 @@ TEST(SignedDistanceField, GridLayout) {
   const auto coarse = ComputeSignedDistanceField(box, options);
   ASSERT_TRUE(coarse.ok());
   EXPECT_EQ(coarse->grid.num_cells, Eigen::Vector3i(16, 11, 9));
+}
+
+// A node plane can be asked for per axis: the grid moves by less than a cell, keeps its padding,
+// and an axis left NaN stays centred.
+TEST(SignedDistanceField, GridPutsNodesOnRequestedPlanes) {
+  const TriangleMesh box = MakeBox(Eigen::Vector3d(0.2, 0.1, 0.05), 0.05);
+  for (const int cells : {7, 12, 20, 33}) {
+    SignedDistanceOptions options = Cells(cells);
+    options.padding_cells = 2;
+    options.node_plane.x() = -0.0817;
+    const auto field = ComputeSignedDistanceField(box, options);
+    ASSERT_TRUE(field.ok()) << field.status().ToString();
+    const RegularGrid& grid = field->grid;
+    const double h = grid.cell_size;
+    const double steps = (-0.0817 - grid.origin.x()) / h;
+    EXPECT_NEAR(steps, std::round(steps), 1e-9) << cells << " cells";
+    const Eigen::Vector3d far_corner = grid.origin + h * grid.num_cells.cast<double>();
+    EXPECT_LE(grid.origin.x(), -0.1 - 2 * h + 1e-12) << cells << " cells";
+    EXPECT_GE(far_corner.x(), 0.1 + 2 * h - 1e-12) << cells << " cells";
+    EXPECT_NEAR(0.5 * (grid.origin.y() + far_corner.y()), 0.0, 1e-12);
+  }
+  SignedDistanceOptions options;
+  options.node_plane.z() = std::numeric_limits<double>::infinity();
+  EXPECT_NE(options.Validate().message().find("SignedDistanceOptions.node_plane[2] = inf"),
+            std::string::npos)
+      << options.Validate().message();
 }
 
 // For a box the signed distance is known in closed form at every node.
