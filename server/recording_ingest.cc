@@ -108,6 +108,10 @@ Result<IngestedCapture> IngestRecording(const store::Job& job, const store::Capt
   IngestNotes notes(job, context);
   ingest::IngestOptions options;
   options.cancel = cancel;
+  // The ingest keeps to the job's share of the cores, as the fit does.
+  options.threads = context.cores_per_job;
+  options.static_scene.threads = context.cores_per_job;
+  options.registration.threads = context.cores_per_job;
   Result<ingest::IngestReport> report = ingest::Ingest(
       *recording, capture_dir, options,
       [&](std::string_view stage, int done, int total) { notes(stage, done, total); });

@@ -59,8 +59,10 @@ Result<StaticScene> CameraStaticScene(const recording::Recording& rec, int c,
     SOFTID_RETURN_IF_ERROR(image.status());
     images.push_back(std::move(*image));
   }
-  return *from_background ? EstimateEmptyScene(images, options.static_scene)
-                          : EstimateStaticScene(images, options.static_scene);
+  StaticSceneOptions scene_options = options.static_scene;
+  if (scene_options.threads == 0) scene_options.threads = options.threads;
+  return *from_background ? EstimateEmptyScene(images, scene_options)
+                          : EstimateStaticScene(images, scene_options);
 }
 
 Status CheckNotCancelled(const IngestOptions& options) {

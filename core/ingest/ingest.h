@@ -35,8 +35,9 @@ struct IngestOptions {
   int max_static_frames = 64;
   // Frames of different cameras this close in time form one capture frame [s].
   double same_time_s = 1e-4;
-  // Threads reading and segmenting frames side by side; 0 = one per core. The registration has
-  // its own (registration.threads).
+  // Threads reading and segmenting frames side by side, and sorting the static scene's readings
+  // when static_scene.threads is 0; 0 = one per core. The registration has its own
+  // (registration.threads).
   int threads = 0;  // >= 0
   // Checked between frames and stages; once set, Ingest stops with Cancelled and writes no
   // capture.json. Not owned; null: never cancelled.

@@ -7,6 +7,8 @@
 #include <functional>
 #include <map>
 
+#include "core/common/for_each_index.h"
+
 namespace softid::ingest {
 namespace {
 
@@ -42,6 +44,38 @@ void FloorSigmaByDepth(StaticScene* scene) {
   }
 }
 
+// Per pixel p in [begin, end): the farthest window of cluster_width_m holding min_readings
+// readings (a lone reading far behind, a flying pixel, is skipped rather than taken for the
+// scene); its median is the depth and 1.4826 times its median absolute deviation the sigma.
+void FarthestClusters(const std::vector<capture::DepthImage>& images,
+                      const StaticSceneOptions& options, size_t begin, size_t end,
+                      StaticScene* scene) {
+  const size_t min_count = static_cast<size_t>(options.min_readings);
+  std::vector<float> readings, cluster;
+  readings.reserve(images.size());
+  cluster.reserve(images.size());
+  for (size_t p = begin; p < end; ++p) {
+    readings.clear();
+    for (const capture::DepthImage& image : images) {
+      if (image.depth[p] > 0.0f) readings.push_back(image.depth[p]);
+    }
+    std::sort(readings.begin(), readings.end(), std::greater<float>());
+    size_t last = 0;
+    for (size_t first = 0; first < readings.size(); ++first) {
+      last = std::max(last, first);
+      while (last < readings.size() && readings[first] - readings[last] <= options.cluster_width_m)
+        ++last;
+      if (last - first < min_count) continue;
+      cluster.assign(readings.begin() + first, readings.begin() + last);
+      const float median = Median(cluster);
+      for (float& z : cluster) z = std::abs(z - median);
+      scene->depth_m[p] = median;
+      scene->sigma_m[p] = 1.4826f * Median(cluster);
+      break;
+    }
+  }
+}
+
 }  // namespace
 
 Status StaticSceneOptions::Validate() const {
@@ -56,6 +90,8 @@ Status StaticSceneOptions::Validate() const {
     return Status::InvalidArgument(
         fmt::format("min_height_above_floor_m = {}: must be >= 0", min_height_above_floor_m));
   }
+  if (threads < 0)
+    return Status::InvalidArgument(fmt::format("threads = {}: must be >= 0", threads));
   return Status::Ok();
 }
 
@@ -77,32 +113,17 @@ Result<StaticScene> EstimateStaticScene(const std::vector<capture::DepthImage>& 
   }
   scene.depth_m.assign(pixels, 0.0f);
   scene.sigma_m.assign(pixels, 0.0f);
-  const size_t min_count = static_cast<size_t>(options.min_readings);
-  std::vector<float> readings, cluster;
-  readings.reserve(images.size());
-  cluster.reserve(images.size());
-  for (size_t p = 0; p < pixels; ++p) {
-    readings.clear();
-    for (const capture::DepthImage& image : images) {
-      if (image.depth[p] > 0.0f) readings.push_back(image.depth[p]);
-    }
-    std::sort(readings.begin(), readings.end(), std::greater<float>());
-    // The farthest window of cluster_width_m holding min_count readings: a lone reading far
-    // behind (a flying pixel) is skipped rather than taken for the scene.
-    size_t end = 0;
-    for (size_t begin = 0; begin < readings.size(); ++begin) {
-      end = std::max(end, begin);
-      while (end < readings.size() && readings[begin] - readings[end] <= options.cluster_width_m)
-        ++end;
-      if (end - begin < min_count) continue;
-      cluster.assign(readings.begin() + begin, readings.begin() + end);
-      const float median = Median(cluster);
-      for (float& z : cluster) z = std::abs(z - median);
-      scene.depth_m[p] = median;
-      scene.sigma_m[p] = 1.4826f * Median(cluster);
-      break;
-    }
-  }
+  // Rows in bands, a band per task: each pixel's readings are sorted on their own (the dearest
+  // part of an ingest's static scene: 64 frames of 640 x 480), so bands run side by side.
+  constexpr int kRowsPerBand = 16;
+  const int bands = (scene.height + kRowsPerBand - 1) / kRowsPerBand;
+  ForEachIndex(bands, options.threads > 0 ? options.threads : CoreCount(), [&](size_t band) {
+    const int first_row = static_cast<int>(band) * kRowsPerBand;
+    const size_t begin = static_cast<size_t>(first_row) * scene.width;
+    const size_t end =
+        static_cast<size_t>(std::min(scene.height, first_row + kRowsPerBand)) * scene.width;
+    FarthestClusters(images, options, begin, end, &scene);
+  });
   FloorSigmaByDepth(&scene);
   return scene;
 }

@@ -44,6 +44,9 @@ struct StaticSceneOptions {
   int min_readings = 1;
   // MarkHiddenByTheObject: scene points at most this high above the floor are floor [m].
   double min_height_above_floor_m = 0.01;
+  // Threads for the per-pixel work; 0: one per core. Pixels are independent, so the scene does
+  // not depend on the count.
+  int threads = 0;  // >= 0
 
   Status Validate() const;
 };

@@ -95,6 +95,32 @@ TEST(StaticScene, RejectsEmptyOrMismatchedInput) {
                 .message()
                 .find("cluster_width_m = -1"),
             std::string::npos);
+  StaticSceneOptions no_threads;
+  no_threads.threads = -1;
+  EXPECT_NE(EstimateStaticScene({DepthImage::Zeros(4, 3)}, no_threads)
+                .status()
+                .message()
+                .find("threads = -1"),
+            std::string::npos);
+}
+
+// The pixels are shared out among threads in bands of rows; the scene is the same whatever the
+// count (and a band count that does not divide the height leaves no row out).
+TEST(StaticScene, SameSceneOnOneThreadOrMany) {
+  const RawScene s = MakeRawScene();
+  StaticSceneOptions one, three;
+  one.threads = 1;
+  three.threads = 3;
+  const Result<StaticScene> serial = EstimateStaticScene(s.frames, one);
+  const Result<StaticScene> parallel = EstimateStaticScene(s.frames, three);
+  ASSERT_TRUE(serial.ok() && parallel.ok());
+  EXPECT_EQ(serial->depth_m, parallel->depth_m);
+  EXPECT_EQ(serial->sigma_m, parallel->sigma_m);
+  const int last_row = s.frames[0].height - 1;
+  int known_in_last_row = 0;
+  for (int col = 0; col < s.frames[0].width; ++col)
+    known_in_last_row += parallel->depth(col, last_row) > 0.0f ? 1 : 0;
+  EXPECT_GT(known_in_last_row, 0);
 }
 
 // A noise-free frame over a flat scene 2 m away with sigma 1 cm: margins 4 cm, 2 cm to join.
