@@ -130,7 +130,7 @@ Result<CaptureWriter> CaptureWriter::Create(const std::filesystem::path& directo
   std::filesystem::remove_all(writer.staging_, error);  // a writer that died unfinished
   for (const CameraRecording& recording : writer.named_.cameras)
     SOFTID_RETURN_IF_ERROR(MakeFolder(writer.staging_ / recording.camera.name));
-  writer.written_.assign(writer.named_.cameras.size(), std::vector<bool>(num_frames, false));
+  writer.written_.assign(writer.named_.cameras.size(), std::vector<uint8_t>(num_frames, 0));
   return writer;
 }
 
@@ -165,7 +165,7 @@ Status CaptureWriter::WriteFrame(int camera, int frame, const DepthImage& image)
   SOFTID_RETURN_IF_ERROR(CheckImageSize(source, recording.camera, camera, frame, image));
   SOFTID_RETURN_IF_ERROR(
       WriteDepthPng(staging_ / recording.frames[frame], image, recording.depth_scale));
-  written_[camera][frame] = true;
+  written_[camera][frame] = 1;
   return Status::Ok();
 }
 

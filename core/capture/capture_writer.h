@@ -8,6 +8,7 @@
 // removed when the writer is destroyed unfinished, and so is a capture folder it made).
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <vector>
 
@@ -35,7 +36,8 @@ class CaptureWriter {
 
   // Writes frame `frame` of camera `camera` with the camera's depth_scale. InvalidArgument for an
   // index out of range, an image of another size than the camera's, or depths a PNG cannot store
-  // (WriteDepthPng); IoError when it cannot be written.
+  // (WriteDepthPng); IoError when it cannot be written. Different frames may be written from
+  // different threads at once.
   Status WriteFrame(int camera, int frame, const DepthImage& image);
 
   // Writes the mesh, moves every frame into place and writes capture.json last. `capture` gives
@@ -53,8 +55,10 @@ class CaptureWriter {
   std::filesystem::path staging_;
   Capture named_;  // Create's capture with the directory, mesh file and frame names set
   int num_frames_ = 0;
-  std::vector<std::vector<bool>> written_;  // [camera][frame]
-  bool made_directory_ = false;             // Create made `directory_`
+  // [camera][frame]; bytes, not std::vector<bool>'s shared bits, so that threads writing different
+  // frames touch different memory.
+  std::vector<std::vector<uint8_t>> written_;
+  bool made_directory_ = false;  // Create made `directory_`
   bool finished_ = false;
 };
 

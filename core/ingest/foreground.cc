@@ -78,11 +78,9 @@ std::vector<std::vector<int>> GrowRegions(const capture::DepthImage& frame,
   label->assign(frame.depth.size(), kUnseen);
   std::vector<std::vector<int>> regions;
   std::vector<int> stack, members;
-  // Grows from `seed` over the pixels `take` admits, labelling them `id`; they go to `members`.
-  const auto flood = [&](int seed, int id, auto take) {
-    members.assign(1, seed);
-    stack.assign(1, seed);
-    (*label)[seed] = id;
+  // Grows from the pixels on `stack` (labelled `id` already) over the pixels `take` admits,
+  // labelling them `id`; they go to `members`.
+  const auto grow = [&](int id, auto take) {
     while (!stack.empty()) {
       const int p = stack.back();
       stack.pop_back();
@@ -102,26 +100,51 @@ std::vector<std::vector<int>> GrowRegions(const capture::DepthImage& frame,
       }
     }
   };
+  const uint8_t* kinds = candidates.ptr<uint8_t>(0);  // continuous: made whole by ClassifyPixels
   for (int seed = 0; seed < static_cast<int>(label->size()); ++seed) {
-    if (candidates(seed / frame.width, seed % frame.width) != kNearer) continue;
-    if ((*label)[seed] != kUnseen) continue;
+    if (kinds[seed] != kNearer || (*label)[seed] != kUnseen) continue;
     const int id = static_cast<int>(regions.size());
-    flood(seed, id, [&](int q, uint8_t kind) { return kind == kNearer && (*label)[q] == kUnseen; });
+    members.assign(1, seed);
+    stack.assign(1, seed);
+    (*label)[seed] = id;
+    grow(id, [&](int q, uint8_t kind) { return kind == kNearer && (*label)[q] == kUnseen; });
     if (static_cast<int>(members.size()) < options.min_region_pixels) {
       for (const int p : members) (*label)[p] = kDropped;
       continue;
     }
     regions.push_back(members);
   }
+  // Each region grows from all its pixels at once (the pixels reached are those a growth from
+  // each pixel in turn reaches: reachability does not depend on the order).
   for (int id = 0; id < static_cast<int>(regions.size()); ++id) {
-    for (size_t i = 0, n = regions[id].size(); i < n; ++i) {
-      flood(regions[id][i], id,
-            [&](int q, uint8_t kind) { return kind == kJoinsOnly && (*label)[q] == kUnseen; });
-      regions[id].insert(regions[id].end(), members.begin() + 1, members.end());
-    }
+    members.clear();
+    stack = regions[id];
+    grow(id, [&](int q, uint8_t kind) { return kind == kJoinsOnly && (*label)[q] == kUnseen; });
+    regions[id].insert(regions[id].end(), members.begin(), members.end());
   }
   for (int& l : *label) l = std::max(l, -1);
   return regions;
+}
+
+// The rows and columns the regions' pixels span (empty: lo > hi). Only pixels beside a region
+// can join one, and the object covers a small part of a frame: the whole 640 x 480 image, scanned
+// for them, cost more than the rest of the segmentation.
+struct PixelBox {
+  int row_lo = 0, row_hi = -1, col_lo = 0, col_hi = -1;
+};
+
+PixelBox RegionsBox(const std::vector<std::vector<int>>& regions, int width, int height) {
+  PixelBox box{height, -1, width, -1};
+  for (const std::vector<int>& members : regions) {
+    for (const int p : members) {
+      const int row = p / width, col = p % width;
+      box.row_lo = std::min(box.row_lo, row);
+      box.row_hi = std::max(box.row_hi, row);
+      box.col_lo = std::min(box.col_lo, col);
+      box.col_hi = std::max(box.col_hi, col);
+    }
+  }
+  return box;
 }
 
 // A pixel with data that is not foreground but whose neighbours mostly are, of one region, and
@@ -129,10 +152,13 @@ std::vector<std::vector<int>> GrowRegions(const capture::DepthImage& frame,
 // on the regions as grown, so that the filling never spreads; a hole through the object (a torus's)
 // is wider than one pixel and stays open.
 void FillEnclosedPixels(const capture::DepthImage& frame, const ForegroundOptions& options,
-                        std::vector<int>* label, std::vector<std::vector<int>>* regions) {
+                        const PixelBox& box, std::vector<int>* label,
+                        std::vector<std::vector<int>>* regions) {
   std::vector<std::pair<int, int>> joins;  // pixel, region
-  for (int row = 1; row + 1 < frame.height; ++row) {
-    for (int col = 1; col + 1 < frame.width; ++col) {
+  for (int row = std::max(1, box.row_lo - 1); row <= std::min(frame.height - 2, box.row_hi + 1);
+       ++row) {
+    for (int col = std::max(1, box.col_lo - 1); col <= std::min(frame.width - 2, box.col_hi + 1);
+         ++col) {
       const int p = row * frame.width + col;
       const float z = frame.depth[p];
       if ((*label)[p] >= 0 || z <= 0.0f) continue;
@@ -175,7 +201,19 @@ Result<Foreground> SegmentForeground(const capture::DepthImage& frame, const Sta
   const cv::Mat1b candidates = ClassifyPixels(frame, scene, options);
   std::vector<int> label;
   std::vector<std::vector<int>> pixels = GrowRegions(frame, candidates, options, &label);
-  FillEnclosedPixels(frame, options, &label, &pixels);
+  const PixelBox box = RegionsBox(pixels, frame.width, frame.height);
+  FillEnclosedPixels(frame, options, box, &label, &pixels);
+  // Each region's pixels in row-major order, from its labels: those filled in lie at most one
+  // pixel outside the box.
+  for (std::vector<int>& members : pixels) members.clear();
+  for (int row = std::max(0, box.row_lo - 1); row <= std::min(frame.height - 1, box.row_hi + 1);
+       ++row) {
+    for (int col = std::max(0, box.col_lo - 1); col <= std::min(frame.width - 1, box.col_hi + 1);
+         ++col) {
+      const int p = row * frame.width + col;
+      if (label[p] >= 0) pixels[label[p]].push_back(p);
+    }
+  }
   Foreground out;
   out.width = frame.width;
   out.height = frame.height;
@@ -183,7 +221,6 @@ Result<Foreground> SegmentForeground(const capture::DepthImage& frame, const Sta
   for (std::vector<int>& members : pixels) {
     ForegroundRegion region;
     region.pixels = std::move(members);
-    std::sort(region.pixels.begin(), region.pixels.end());
     for (const int p : region.pixels) {
       const Eigen::Vector2d& xy = rays.xy[p];
       region.centroid_C += frame.depth[p] * Eigen::Vector3d(xy.x(), xy.y(), 1.0);

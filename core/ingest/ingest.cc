@@ -100,7 +100,8 @@ std::optional<Eigen::Vector3d> MeanOf(const std::vector<Eigen::Vector3d>& points
   return sum / static_cast<double>(points.size());
 }
 
-// Receives the object's points of each recording frame of a camera, in order.
+// Receives the object's points of each recording frame of a camera; called from several threads
+// at once for different frames.
 using FrameSink = std::function<Status(int frame, const std::vector<Eigen::Vector3d>& points_C)>;
 
 // Segments and tracks the object through every frame of camera c; hands each frame's points to
@@ -113,11 +114,14 @@ Status SegmentCamera(const recording::Recording& rec, int c, double object_radiu
   ObjectTracker tracker(object_radius_m, options.tracking);
   int frames_on_border = 0;
   // Frames are read and segmented side by side, a few per worker at a time (memory stays bounded
-  // on long recordings); tracking follows them in order.
+  // on long recordings); tracking follows them in order; the sink (a PNG per frame) runs side by
+  // side again.
   const int workers = options.threads > 0 ? options.threads : CoreCount();
   const int chunk = 2 * workers;
   std::vector<Result<DepthImage>> images(chunk, Status::Internal("unread"));
   std::vector<Result<Foreground>> segmented(chunk, Status::Internal("unsegmented"));
+  std::vector<std::vector<Eigen::Vector3d>> points(chunk);
+  std::vector<Status> sunk(chunk);
   for (int first = 0; first < n; first += chunk) {
     SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
     const int count = std::min(chunk, n - first);
@@ -129,7 +133,6 @@ Status SegmentCamera(const recording::Recording& rec, int c, double object_radiu
     });
     for (int i = 0; i < count; ++i) {
       const int k = first + i;
-      SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
       SOFTID_RETURN_IF_ERROR(segmented[i].status());
       const DepthImage& image = *images[i];
       const TrackedFrame tracked =
@@ -140,22 +143,27 @@ Status SegmentCamera(const recording::Recording& rec, int c, double object_radiu
             "scene (is the object in view, and does it move during the recording?)",
             camera.camera.name, camera.frames[0].file));
       }
-      std::vector<Eigen::Vector3d> points;
-      points.reserve(tracked.pixels.size());
+      points[i].clear();
+      points[i].reserve(tracked.pixels.size());
       bool border = false;
       for (const int pixel : tracked.pixels) {
         const Eigen::Vector2d& xy = view->rays.xy[pixel];
-        points.push_back(image.depth[pixel] * Eigen::Vector3d(xy.x(), xy.y(), 1.0));
+        points[i].push_back(image.depth[pixel] * Eigen::Vector3d(xy.x(), xy.y(), 1.0));
         border = border || OnBorder(pixel, image.width, image.height);
       }
       frames_on_border += border ? 1 : 0;
       report->object_pixels.push_back(static_cast<int>(tracked.pixels.size()));
       report->rejected_regions.push_back(tracked.rejected_regions);
       report->object_masks.push_back(tracked.pixels);
-      view->centres_C.push_back(MeanOf(points));
-      SOFTID_RETURN_IF_ERROR(sink(k, points));
-      if (k == 0) view->release_points_C = std::move(points);
-      if (progress) progress("segmentation", k + 1, n);
+      view->centres_C.push_back(MeanOf(points[i]));
+    }
+    ForEachIndex(count, workers,
+                 [&](size_t i) { sunk[i] = sink(first + static_cast<int>(i), points[i]); });
+    for (int i = 0; i < count; ++i) SOFTID_RETURN_IF_ERROR(sunk[i]);
+    if (first == 0) view->release_points_C = std::move(points[0]);
+    for (int i = 0; i < count; ++i) {
+      SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
+      if (progress) progress("segmentation", first + i + 1, n);
     }
   }
   report->cut_off = frames_on_border == n;
