@@ -164,15 +164,25 @@ std::vector<Eigen::Matrix4d> Hypotheses(const geometry::TriangleMesh& mesh_S,
   return starts;
 }
 
+// At most this many observed points in the coarse ICP that ranks the hypotheses.
+constexpr size_t kRankingPoints = 500;
+
 // The best `keep` hypotheses after a coarse ICP on the downsampled clouds, best first. Each ICP
 // runs on one thread; results land by index, so the outcome does not depend on the threads.
+// Ranking only tells the right basin from the wrong ones, which differ in overlap by far more than
+// a share measured on 500 points scatters (+-2 %); the survivors are refined on every point. (Three
+// 640 x 480 views give ~1,100 downsampled points: ranking 200 hypotheses on all of them took
+// 1.3 s of a 100-frame ingest.)
 std::vector<Eigen::Matrix4d> RankHypotheses(const std::vector<Eigen::Matrix4d>& starts,
                                             const Features& observed, const Features& model,
                                             double voxel_m, size_t keep, int workers) {
+  const size_t every = (observed.cloud->points_.size() + kRankingPoints - 1) / kRankingPoints;
+  const std::shared_ptr<o3d::geometry::PointCloud> ranked =
+      every <= 1 ? observed.cloud : observed.cloud->UniformDownSample(every);
   std::vector<std::pair<double, Eigen::Matrix4d>> coarse(starts.size());
   ForEachIndex(starts.size(), workers, [&](size_t i) {
     const reg::RegistrationResult r = reg::RegistrationICP(
-        *observed.cloud, *model.cloud, 2.0 * voxel_m, starts[i],
+        *ranked, *model.cloud, 2.0 * voxel_m, starts[i],
         reg::TransformationEstimationPointToPlane(), reg::ICPConvergenceCriteria(1e-4, 1e-4, 15));
     coarse[i] = {r.fitness_ - r.inlier_rmse_ / (2.0 * voxel_m), r.transformation_};
   });
