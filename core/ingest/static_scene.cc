@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <limits>
 #include <map>
 
 #include "core/common/for_each_index.h"
@@ -47,13 +48,40 @@ void FloorSigmaByDepth(StaticScene* scene) {
 // Per pixel p in [begin, end): the farthest window of cluster_width_m holding min_readings
 // readings (a lone reading far behind, a flying pixel, is skipped rather than taken for the
 // scene); its median is the depth and 1.4826 times its median absolute deviation the sigma.
+// The median of readings[first, last) (sorted, descending) and the median of their absolute
+// deviations from it, each the element Median() would take (index count / 2 in ascending order),
+// without copying or partitioning: the deviations grow outward from the median on both sides, so
+// the two sides merge in order.
+void SortedMedianAndDeviation(const std::vector<float>& readings, size_t first, size_t last,
+                              float* median, float* deviation) {
+  const size_t rank = (last - first) / 2;
+  const size_t at = last - 1 - rank;  // ascending index `rank` of a descending run
+  *median = readings[at];
+  *deviation = 0.0f;                 // the median's own
+  size_t farther = at, nearer = at;  // the sides' last merged readings
+  constexpr float kNone = std::numeric_limits<float>::infinity();
+  for (size_t k = 0; k < rank; ++k) {
+    const float up = farther > first ? readings[farther - 1] - *median : kNone;
+    const float down = nearer + 1 < last ? *median - readings[nearer + 1] : kNone;
+    if (up <= down) {
+      *deviation = up;
+      --farther;
+    } else {
+      *deviation = down;
+      ++nearer;
+    }
+  }
+}
+
+// Per pixel p in [begin, end): the farthest window of cluster_width_m holding min_readings
+// readings (a lone reading far behind, a flying pixel, is skipped rather than taken for the
+// scene); its median is the depth and 1.4826 times its median absolute deviation the sigma.
 void FarthestClusters(const std::vector<capture::DepthImage>& images,
                       const StaticSceneOptions& options, size_t begin, size_t end,
                       StaticScene* scene) {
   const size_t min_count = static_cast<size_t>(options.min_readings);
-  std::vector<float> readings, cluster;
+  std::vector<float> readings;
   readings.reserve(images.size());
-  cluster.reserve(images.size());
   for (size_t p = begin; p < end; ++p) {
     readings.clear();
     for (const capture::DepthImage& image : images) {
@@ -66,11 +94,9 @@ void FarthestClusters(const std::vector<capture::DepthImage>& images,
       while (last < readings.size() && readings[first] - readings[last] <= options.cluster_width_m)
         ++last;
       if (last - first < min_count) continue;
-      cluster.assign(readings.begin() + first, readings.begin() + last);
-      const float median = Median(cluster);
-      for (float& z : cluster) z = std::abs(z - median);
-      scene->depth_m[p] = median;
-      scene->sigma_m[p] = 1.4826f * Median(cluster);
+      float deviation = 0.0f;
+      SortedMedianAndDeviation(readings, first, last, &scene->depth_m[p], &deviation);
+      scene->sigma_m[p] = 1.4826f * deviation;
       break;
     }
   }
