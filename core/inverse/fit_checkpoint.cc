@@ -135,9 +135,16 @@ SubstepSelection ReadSubstepSelection(const Json& j) {
   selection.substeps = j.at("substeps").get<int>();
   selection.tolerance_m = j.at("tolerance_m").get<double>();
   selection.within_tolerance = j.at("within_tolerance").get<bool>();
+  // Checkpoints written before these keys existed still resume.
+  selection.converging = j.value("converging", true);
   for (const Json& t : j.at("trials")) {
-    selection.trials.push_back({t.at("substeps").get<int>(), t.at("difference_m").get<double>(),
-                                t.at("worst_frame").get<int>(), t.at("diverged").get<bool>()});
+    SubstepTrial trial;
+    trial.substeps = t.at("substeps").get<int>();
+    trial.difference_m = t.at("difference_m").get<double>();
+    trial.worst_frame = t.at("worst_frame").get<int>();
+    trial.frames_within_tolerance = t.value("frames_within_tolerance", 0);
+    trial.diverged = t.at("diverged").get<bool>();
+    selection.trials.push_back(trial);
   }
   return selection;
 }

@@ -45,6 +45,7 @@ TrajectoryDifference CompareTrajectories(const SurfaceTrajectory& a, const Surfa
     double sum = 0.0;
     for (size_t i = 0; i < count; ++i) sum += (a[frame][i] - b[frame][i]).squaredNorm();
     const double rms = std::sqrt(sum / static_cast<double>(std::max<size_t>(1, count)));
+    out.per_frame_m.push_back(rms);
     if (rms > out.difference_m) {
       out.difference_m = rms;
       out.worst_frame = static_cast<int>(frame);

@@ -32,8 +32,9 @@ SurfaceRun SimulateSurfaceTrajectory(const geometry::TriangleMesh& rest_mesh,
                                      int substeps, const std::atomic<bool>* cancel);
 
 struct TrajectoryDifference {
-  double difference_m = 0.0;  // max over frames of the RMS distance over surface vertices [m]
-  int worst_frame = 0;        // where that maximum is
+  double difference_m = 0.0;        // max over frames of the RMS distance over surface vertices [m]
+  int worst_frame = 0;              // where that maximum is
+  std::vector<double> per_frame_m;  // the RMS distance of each frame [m]
 };
 
 // Compares the first `vertices` vertices of each frame (-1: all; both trajectories must then have

@@ -40,7 +40,7 @@ Status CheckSubstepSelectionInputs(const SubstepSelectionOptions& options, doubl
 
 // The comparison of the surface trajectories at `substeps` (coarse) and twice as many (fine).
 SubstepTrial CompareSubsteps(int substeps, const SurfaceTrajectory& coarse,
-                             const SurfaceTrajectory& fine) {
+                             const SurfaceTrajectory& fine, double tolerance_m) {
   SubstepTrial trial;
   trial.substeps = substeps;
   trial.diverged = coarse.empty() || fine.empty();
@@ -48,8 +48,20 @@ SubstepTrial CompareSubsteps(int substeps, const SurfaceTrajectory& coarse,
     const TrajectoryDifference difference = CompareTrajectories(coarse, fine);
     trial.difference_m = difference.difference_m;
     trial.worst_frame = difference.worst_frame;
+    while (trial.frames_within_tolerance < static_cast<int>(difference.per_frame_m.size()) &&
+           difference.per_frame_m[trial.frames_within_tolerance] <= tolerance_m)
+      ++trial.frames_within_tolerance;
   }
   return trial;
+}
+
+// Whether the last halving of the step at least halved the difference (true with one trial).
+bool LastHalvingConverged(const std::vector<SubstepTrial>& trials) {
+  if (trials.size() < 2) return true;
+  const SubstepTrial& previous = trials[trials.size() - 2];
+  const SubstepTrial& last = trials.back();
+  if (previous.diverged || last.diverged) return true;  // says nothing about the motion
+  return last.difference_m <= 0.5 * previous.difference_m;
 }
 
 // Doubles the substeps from options.min_substeps until a run and one at twice the substeps agree
@@ -80,7 +92,7 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
     if (Cancelled(options.cancel)) {
       return Status::Cancelled("the time-step choice was cancelled");
     }
-    const SubstepTrial trial = CompareSubsteps(substeps, coarse, fine);
+    const SubstepTrial trial = CompareSubsteps(substeps, coarse, fine, selection->tolerance_m);
     selection->trials.push_back(trial);
     spdlog::info("time step: {} vs {} substeps per frame: surface differs by {:.3g} mm{}", substeps,
                  finer, 1e3 * trial.difference_m, trial.diverged ? " (a run diverged)" : "");
@@ -111,7 +123,20 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
   } catch (const std::invalid_argument& error) {
     return Status::InvalidArgument(error.what());
   }
-  if (!selection.within_tolerance) {
+  selection.converging = LastHalvingConverged(selection.trials);
+  if (!selection.within_tolerance && !selection.converging) {
+    const SubstepTrial& previous = selection.trials[selection.trials.size() - 2];
+    const SubstepTrial& last = selection.trials.back();
+    spdlog::warn(
+        "time step: halving the step did not shrink the surface's difference ({:.3g} mm at {} vs "
+        "{} substeps per frame, {:.3g} mm at {} vs {}; tolerance {:.3g} mm): from frame {} on the "
+        "motion is sensitive to the smallest change, not to the step (undamped contact rocks "
+        "chaotically; damping settles it), and no step makes those frames predictable; {} "
+        "substeps taken",
+        1e3 * previous.difference_m, previous.substeps, 2 * previous.substeps,
+        1e3 * last.difference_m, last.substeps, 2 * last.substeps, 1e3 * selection.tolerance_m,
+        last.frames_within_tolerance, selection.substeps);
+  } else if (!selection.within_tolerance) {
     spdlog::warn(
         "time step: even {} substeps per frame leave the surface {:.3g} mm from a run at half the "
         "step (tolerance {:.3g} mm); the fit may be biased by the time discretisation",
@@ -128,11 +153,13 @@ nlohmann::json ToJson(const SubstepSelection& selection) {
     trials.push_back({{"substeps", t.substeps},
                       {"difference_m", t.difference_m},
                       {"worst_frame", t.worst_frame},
+                      {"frames_within_tolerance", t.frames_within_tolerance},
                       {"diverged", t.diverged}});
   }
   return {{"substeps", selection.substeps},
           {"tolerance_m", selection.tolerance_m},
           {"within_tolerance", selection.within_tolerance},
+          {"converging", selection.converging},
           {"trials", trials}};
 }
 

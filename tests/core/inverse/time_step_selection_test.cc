@@ -2,6 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+#include <algorithm>
+
+#include "core/geometry/primitives.h"
 #include "core/scenes/scene.h"
 
 namespace softid::inverse {
@@ -35,6 +39,12 @@ TEST(SelectSubsteps, StepDoublingDifferencesShrinkAndTheChoiceMeetsTheTolerance)
   // The time discretisation error converges: each halving of the step at least halves it.
   EXPECT_LT(all->trials[1].difference_m, 0.5 * all->trials[0].difference_m);
   EXPECT_LT(all->trials[2].difference_m, 0.5 * all->trials[1].difference_m);
+  EXPECT_TRUE(all->converging);
+  // In free fall before the bounce every step agrees; the bounce is where they part.
+  for (const SubstepTrial& trial : all->trials) {
+    EXPECT_GT(trial.frames_within_tolerance, 0);
+    EXPECT_LE(trial.frames_within_tolerance, trial.worst_frame);
+  }
 
   // A tolerance between the second and third differences selects 4 substeps, after two trials.
   const double length = scene->mesh.Bounds().sizes().maxCoeff();
@@ -48,6 +58,46 @@ TEST(SelectSubsteps, StepDoublingDifferencesShrinkAndTheChoiceMeetsTheTolerance)
   ASSERT_EQ(chosen->trials.size(), 3u);
   EXPECT_LE(chosen->trials.back().difference_m, chosen->tolerance_m);
   EXPECT_GT(chosen->trials[1].difference_m, chosen->tolerance_m);
+  EXPECT_EQ(chosen->trials.back().frames_within_tolerance, 31);  // frames 0-30
+  EXPECT_LT(chosen->trials[1].frames_within_tolerance, 31);
+  const nlohmann::json json = ToJson(*chosen);
+  EXPECT_TRUE(json.at("converging").get<bool>());
+  EXPECT_EQ(json.at("trials").back().at("frames_within_tolerance").get<int>(), 31);
+}
+
+// A block dropped tilted onto a frictionless floor with no damping rocks from corner to corner:
+// a chaotic motion, in which the runs at s and 2 s substeps part after the first impacts whatever
+// s is. The selection says so instead of blaming the step.
+TEST(SelectSubsteps, ChaoticRockingIsToldFromAStepError) {
+  geometry::TriangleMesh block = geometry::MakeBox(Eigen::Vector3d(0.12, 0.08, 0.06), 0.02);
+  const Eigen::Matrix3d tilt = (Eigen::AngleAxisd(0.35, Eigen::Vector3d::UnitY()) *
+                                Eigen::AngleAxisd(0.17, Eigen::Vector3d::UnitX()))
+                                   .toRotationMatrix();
+  double lowest = 0.0;
+  for (Eigen::Vector3d& v : block.vertices) {
+    v = tilt * v;
+    lowest = std::min(lowest, v.z());
+  }
+  for (Eigen::Vector3d& v : block.vertices) v.z() += 0.04 - lowest;  // 4 cm above the floor
+  fem::PhysicalParameters parameters;
+  parameters.youngs_modulus = 86e3;
+  parameters.poisson_ratio = 0.35;
+  parameters.density = 400.0;
+  parameters.gravity = Eigen::Vector3d(0.0, 0.0, -9.81);
+  parameters.ground = fem::GroundPlane{};
+  SubstepSelectionOptions options;
+  options.min_substeps = 8;
+  options.max_substeps = 32;
+  const Result<SubstepSelection> selection =
+      SelectSubsteps(block, std::nullopt, parameters, CoarseGrid(), 60.0, 47, options);
+  ASSERT_TRUE(selection.ok()) << selection.status().ToString();
+  ASSERT_EQ(selection->trials.size(), 2u);
+  EXPECT_FALSE(selection->within_tolerance);
+  EXPECT_FALSE(selection->converging)
+      << selection->trials[0].difference_m << " then " << selection->trials[1].difference_m;
+  // Before the first impact (it falls 4 cm: about 5 frames) the runs agree.
+  EXPECT_GT(selection->trials.back().frames_within_tolerance, 3);
+  EXPECT_LT(selection->trials.back().frames_within_tolerance, 48);
 }
 
 // Newmark integrates a constant acceleration exactly: in free fall the first candidate passes.
