@@ -55,13 +55,16 @@ SubstepTrial CompareSubsteps(int substeps, const SurfaceTrajectory& coarse,
   return trial;
 }
 
-// Whether the last halving of the step at least halved the difference (true with one trial).
+// Whether the last halving of the step shrank the difference by at least a quarter (true with one
+// trial). A step error halves at first order (contact) and falls to a quarter at second, give or
+// take: a scanned bunny's landing went 0.99 -> 0.59 mm, slow but converging. A chaotic motion's
+// difference stays or grows (16.8 -> 18.2 mm for a rocking block).
 bool LastHalvingConverged(const std::vector<SubstepTrial>& trials) {
   if (trials.size() < 2) return true;
   const SubstepTrial& previous = trials[trials.size() - 2];
   const SubstepTrial& last = trials.back();
   if (previous.diverged || last.diverged) return true;  // says nothing about the motion
-  return last.difference_m <= 0.5 * previous.difference_m;
+  return last.difference_m <= 0.75 * previous.difference_m;
 }
 
 // Doubles the substeps from options.min_substeps until a run and one at twice the substeps agree

@@ -50,11 +50,11 @@ struct SubstepSelection {
   int substeps = 0;  // the choice
   double tolerance_m = 0.0;
   bool within_tolerance = false;  // false: max_substeps taken without meeting the tolerance
-  // False when the last halving of the step did not halve the difference, as a step error does
-  // (first order in contact): the motion itself is then sensitive to the smallest change (an
-  // undamped block rocking on a floor is chaotic: 7.4, 22 and 14 mm between 8/16, 16/32 and 32/64
-  // substeps, docs/benchmarks.md), and no step makes its frames from trials.back()
-  // .frames_within_tolerance on predictable.
+  // False when the last halving of the step shrank the difference by less than a quarter, where
+  // a step error halves at least (first order, in contact): the motion itself is then sensitive
+  // to the smallest change (an undamped block rocking on a floor is chaotic: 7.4, 22 and 14 mm
+  // between 8/16, 16/32 and 32/64 substeps, docs/benchmarks.md), and no step makes its frames from
+  // trials.back().frames_within_tolerance on predictable.
   bool converging = true;
   std::vector<SubstepTrial> trials;
 };
