@@ -150,10 +150,10 @@ PixelBox RegionsBox(const std::vector<std::vector<int>>& regions, int width, int
 // A pixel with data that is not foreground but whose neighbours mostly are, of one region, and
 // whose depth continues theirs, is that region's surface under a noisy reading: it joins. Decided
 // on the regions as grown, so that the filling never spreads; a hole through the object (a torus's)
-// is wider than one pixel and stays open.
+// is wider than one pixel and stays open. Only the labels change: the caller lists each region's
+// pixels from them.
 void FillEnclosedPixels(const capture::DepthImage& frame, const ForegroundOptions& options,
-                        const PixelBox& box, std::vector<int>* label,
-                        std::vector<std::vector<int>>* regions) {
+                        const PixelBox& box, std::vector<int>* label) {
   std::vector<std::pair<int, int>> joins;  // pixel, region
   for (int row = std::max(1, box.row_lo - 1); row <= std::min(frame.height - 2, box.row_hi + 1);
        ++row) {
@@ -180,10 +180,7 @@ void FillEnclosedPixels(const capture::DepthImage& frame, const ForegroundOption
       joins.emplace_back(p, region);
     }
   }
-  for (const auto& [p, region] : joins) {
-    (*label)[p] = region;
-    (*regions)[region].push_back(p);
-  }
+  for (const auto& [p, region] : joins) (*label)[p] = region;
 }
 
 }  // namespace
@@ -202,7 +199,7 @@ Result<Foreground> SegmentForeground(const capture::DepthImage& frame, const Sta
   std::vector<int> label;
   std::vector<std::vector<int>> pixels = GrowRegions(frame, candidates, options, &label);
   const PixelBox box = RegionsBox(pixels, frame.width, frame.height);
-  FillEnclosedPixels(frame, options, box, &label, &pixels);
+  FillEnclosedPixels(frame, options, box, &label);
   // Each region's pixels in row-major order, from its labels: those filled in lie at most one
   // pixel outside the box.
   for (std::vector<int>& members : pixels) members.clear();
