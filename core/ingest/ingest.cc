@@ -100,6 +100,40 @@ std::optional<Eigen::Vector3d> MeanOf(const std::vector<Eigen::Vector3d>& points
   return sum / static_cast<double>(points.size());
 }
 
+// Whether any of `pixels` lies on the image's border.
+bool OnBorderAnywhere(const std::vector<int>& pixels, const DepthImage& image) {
+  for (const int pixel : pixels) {
+    if (OnBorder(pixel, image.width, image.height)) return true;
+  }
+  return false;
+}
+
+// Picks the object among frame k's foreground regions (in order: the tracker follows it), puts its
+// points in *points_C and records its mask, pixel count and centre.
+Status TrackFrame(const recording::Recording& rec, int c, int k, const DepthImage& image,
+                  const Foreground& foreground, ObjectTracker* tracker,
+                  std::vector<Eigen::Vector3d>* points_C, CameraView* view, CameraIngest* report) {
+  const recording::RecordingCamera& camera = rec.cameras[c];
+  const TrackedFrame tracked = tracker->Track(foreground, view->X_WC, camera.frames[k].time_s);
+  if (k == 0 && !tracked.found) {
+    return Status::FailedPrecondition(fmt::format(
+        "ingest: camera \"{}\" frame 0 ({}): no foreground: nothing is nearer than the static "
+        "scene (is the object in view, and does it move during the recording?)",
+        camera.camera.name, camera.frames[0].file));
+  }
+  points_C->clear();
+  points_C->reserve(tracked.pixels.size());
+  for (const int pixel : tracked.pixels) {
+    const Eigen::Vector2d& xy = view->rays.xy[pixel];
+    points_C->push_back(image.depth[pixel] * Eigen::Vector3d(xy.x(), xy.y(), 1.0));
+  }
+  report->object_pixels.push_back(static_cast<int>(tracked.pixels.size()));
+  report->rejected_regions.push_back(tracked.rejected_regions);
+  report->object_masks.push_back(tracked.pixels);
+  view->centres_C.push_back(MeanOf(*points_C));
+  return Status::Ok();
+}
+
 // Receives the object's points of each recording frame of a camera; called from several threads
 // at once for different frames.
 using FrameSink = std::function<Status(int frame, const std::vector<Eigen::Vector3d>& points_C)>;
@@ -132,30 +166,10 @@ Status SegmentCamera(const recording::Recording& rec, int c, double object_radiu
                                     : Result<Foreground>(images[i].status());
     });
     for (int i = 0; i < count; ++i) {
-      const int k = first + i;
       SOFTID_RETURN_IF_ERROR(segmented[i].status());
-      const DepthImage& image = *images[i];
-      const TrackedFrame tracked =
-          tracker.Track(*segmented[i], view->X_WC, camera.frames[k].time_s);
-      if (k == 0 && !tracked.found) {
-        return Status::FailedPrecondition(fmt::format(
-            "ingest: camera \"{}\" frame 0 ({}): no foreground: nothing is nearer than the static "
-            "scene (is the object in view, and does it move during the recording?)",
-            camera.camera.name, camera.frames[0].file));
-      }
-      points[i].clear();
-      points[i].reserve(tracked.pixels.size());
-      bool border = false;
-      for (const int pixel : tracked.pixels) {
-        const Eigen::Vector2d& xy = view->rays.xy[pixel];
-        points[i].push_back(image.depth[pixel] * Eigen::Vector3d(xy.x(), xy.y(), 1.0));
-        border = border || OnBorder(pixel, image.width, image.height);
-      }
-      frames_on_border += border ? 1 : 0;
-      report->object_pixels.push_back(static_cast<int>(tracked.pixels.size()));
-      report->rejected_regions.push_back(tracked.rejected_regions);
-      report->object_masks.push_back(tracked.pixels);
-      view->centres_C.push_back(MeanOf(points[i]));
+      SOFTID_RETURN_IF_ERROR(TrackFrame(rec, c, first + i, *images[i], *segmented[i], &tracker,
+                                        &points[i], view, report));
+      frames_on_border += OnBorderAnywhere(report->object_masks.back(), *images[i]) ? 1 : 0;
     }
     ForEachIndex(count, workers,
                  [&](size_t i) { sunk[i] = sink(first + static_cast<int>(i), points[i]); });
