@@ -122,10 +122,17 @@ GridSelection ReadGridSelection(const Json& j) {
   selection.tolerance_m = j.at("tolerance_m").get<double>();
   selection.within_tolerance = j.at("within_tolerance").get<bool>();
   for (const Json& t : j.at("trials")) {
-    selection.trials.push_back({t.at("cells").get<int>(), t.at("finer_cells").get<int>(),
-                                t.at("grid_nodes").get<int>(), t.at("difference_m").get<double>(),
-                                t.at("worst_frame").get<int>(), t.at("diverged").get<bool>(),
-                                t.at("seconds").get<double>()});
+    GridTrial trial;
+    trial.cells = t.at("cells").get<int>();
+    trial.finer_cells = t.at("finer_cells").get<int>();
+    trial.grid_nodes = t.at("grid_nodes").get<int>();
+    trial.difference_m = t.at("difference_m").get<double>();
+    trial.worst_frame = t.at("worst_frame").get<int>();
+    // Checkpoints written before this key existed still resume.
+    trial.frames_within_tolerance = t.value("frames_within_tolerance", 0);
+    trial.diverged = t.at("diverged").get<bool>();
+    trial.seconds = t.at("seconds").get<double>();
+    selection.trials.push_back(trial);
   }
   return selection;
 }

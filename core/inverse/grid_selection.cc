@@ -39,14 +39,20 @@ Status CheckGridSelectionInputs(const GridSelectionOptions& options, double fps,
 
 // The comparison of the runs on the grids of `cells` (coarse) and `finer_cells` (fine).
 GridTrial CompareGrids(int cells, int finer_cells, const SurfaceRun& coarse, const SurfaceRun& fine,
-                       const geometry::TriangleMesh& rest_mesh) {
-  GridTrial trial{cells, finer_cells, coarse.grid_nodes};
+                       const geometry::TriangleMesh& rest_mesh, double tolerance_m) {
+  GridTrial trial;
+  trial.cells = cells;
+  trial.finer_cells = finer_cells;
+  trial.grid_nodes = coarse.grid_nodes;
   trial.diverged = coarse.frames.empty() || fine.frames.empty();
   if (!trial.diverged) {
     const TrajectoryDifference difference = CompareTrajectories(
         coarse.frames, fine.frames, static_cast<int>(rest_mesh.vertices.size()));
     trial.difference_m = difference.difference_m;
     trial.worst_frame = difference.worst_frame;
+    while (trial.frames_within_tolerance < static_cast<int>(difference.per_frame_m.size()) &&
+           difference.per_frame_m[trial.frames_within_tolerance] <= tolerance_m)
+      ++trial.frames_within_tolerance;
   }
   return trial;
 }
@@ -76,7 +82,8 @@ Status RefineGridUntilConverged(const geometry::TriangleMesh& rest_mesh,
     const int finer_cells = options.candidates[i];
     SurfaceRun fine = run(finer_cells);
     if (Cancelled(options.cancel)) return Status::Cancelled("the grid choice was cancelled");
-    GridTrial trial = CompareGrids(selection->cells, finer_cells, coarse, fine, rest_mesh);
+    GridTrial trial = CompareGrids(selection->cells, finer_cells, coarse, fine, rest_mesh,
+                                   selection->tolerance_m);
     trial.seconds = std::chrono::duration<double>(Clock::now() - started).count();
     started = Clock::now();
     selection->trials.push_back(trial);
@@ -139,11 +146,12 @@ Result<GridSelection> SelectGrid(const geometry::TriangleMesh& rest_mesh,
   if (!selection.within_tolerance) {
     spdlog::warn(
         "grid: {} cells along the longest side leave the surface {:.3g} mm from the next finer "
-        "grid (tolerance {:.3g} mm: {} x the depth noise {:.3g} mm), and no finer candidate is "
-        "tried (up to {} cells, at most {} nodes); the fit may be biased by the grid: see the "
-        "result's discretisation_error",
+        "grid from frame {} on (tolerance {:.3g} mm: {} x the depth noise {:.3g} mm), and no finer "
+        "candidate is tried (up to {} cells, at most {} nodes); the fit may be biased by the "
+        "grid: see the result's discretisation_error",
         selection.cells,
         selection.trials.empty() ? 0.0 : 1e3 * selection.trials.back().difference_m,
+        selection.trials.empty() ? 0 : selection.trials.back().frames_within_tolerance,
         1e3 * selection.tolerance_m, options.noise_fraction, 1e3 * depth_noise_m,
         options.candidates.back(), options.max_grid_nodes);
   }
@@ -165,6 +173,7 @@ nlohmann::json ToJson(const GridSelection& selection) {
                       {"grid_nodes", t.grid_nodes},
                       {"difference_m", t.difference_m},
                       {"worst_frame", t.worst_frame},
+                      {"frames_within_tolerance", t.frames_within_tolerance},
                       {"diverged", t.diverged},
                       {"seconds", t.seconds}});
   }

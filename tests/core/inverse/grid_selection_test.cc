@@ -3,6 +3,10 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
+#include <algorithm>
+
+#include "core/geometry/primitives.h"
 #include "core/scenes/scene.h"
 
 namespace softid::inverse {
@@ -59,6 +63,44 @@ TEST_F(SelectGridTest, RefinesUntilTheSurfaceMovesLessThanTheNoise) {
   EXPECT_EQ(coarse->cells, 4);
   EXPECT_EQ(coarse->trials.size(), 1u);
   EXPECT_TRUE(coarse->within_tolerance);
+  EXPECT_EQ(coarse->trials[0].frames_within_tolerance, kLastFrame + 1);
+}
+
+// A block dropped tilted onto a frictionless floor with no damping rocks from corner to corner:
+// the runs on two grids agree until it lands and part after the first impacts: the trials say from
+// which frame on.
+TEST(SelectGrid, TrialsSayUntilWhichFrameTheGridsAgree) {
+  geometry::TriangleMesh block = geometry::MakeBox(Eigen::Vector3d(0.12, 0.08, 0.06), 0.02);
+  const Eigen::Matrix3d tilt = (Eigen::AngleAxisd(0.35, Eigen::Vector3d::UnitY()) *
+                                Eigen::AngleAxisd(0.17, Eigen::Vector3d::UnitX()))
+                                   .toRotationMatrix();
+  double lowest = 0.0;
+  for (Eigen::Vector3d& v : block.vertices) {
+    v = tilt * v;
+    lowest = std::min(lowest, v.z());
+  }
+  for (Eigen::Vector3d& v : block.vertices) v.z() += 0.04 - lowest;  // 4 cm above the floor
+  fem::PhysicalParameters parameters;
+  parameters.youngs_modulus = 86e3;
+  parameters.poisson_ratio = 0.35;
+  parameters.density = 400.0;
+  parameters.gravity = Eigen::Vector3d(0.0, 0.0, -9.81);
+  parameters.ground = fem::GroundPlane{};
+  GridSelectionOptions options;
+  options.candidates = {6, 9, 13};
+  options.min_tolerance_fraction = 0.0;
+  const Result<GridSelection> selection =
+      SelectGrid(block, std::nullopt, parameters, {}, 60.0, 47, 1e-3, options);
+  ASSERT_TRUE(selection.ok()) << selection.status().ToString();
+  ASSERT_EQ(selection->trials.size(), 2u);
+  EXPECT_FALSE(selection->within_tolerance);
+  // Before the first impact (it falls 4 cm: about 5 frames) the runs agree.
+  for (const GridTrial& trial : selection->trials) {
+    EXPECT_GT(trial.frames_within_tolerance, 3);
+    EXPECT_LT(trial.frames_within_tolerance, 48);
+  }
+  EXPECT_EQ(ToJson(*selection)["trials"][1]["frames_within_tolerance"],
+            selection->trials[1].frames_within_tolerance);
 }
 
 TEST_F(SelectGridTest, NeverSimulatesAGridAboveTheNodeBudget) {
