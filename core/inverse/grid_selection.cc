@@ -87,9 +87,11 @@ Status RefineGridUntilConverged(const geometry::TriangleMesh& rest_mesh,
     trial.seconds = std::chrono::duration<double>(Clock::now() - started).count();
     started = Clock::now();
     selection->trials.push_back(trial);
-    spdlog::info("grid: {} vs {} cells along the longest side: surface differs by {:.3g} mm{}",
-                 trial.cells, trial.finer_cells, 1e3 * trial.difference_m,
-                 trial.diverged ? " (a run diverged)" : "");
+    spdlog::info(
+        "grid: {} vs {} cells along the longest side: surface differs by {:.3g} mm at frame {}, "
+        "within tolerance on the first {} frames{}",
+        trial.cells, trial.finer_cells, 1e3 * trial.difference_m, trial.worst_frame,
+        trial.frames_within_tolerance, trial.diverged ? " (a run diverged)" : "");
     if (!trial.diverged && trial.difference_m <= selection->tolerance_m) {
       selection->within_tolerance = true;
       break;

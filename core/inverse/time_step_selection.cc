@@ -97,8 +97,11 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
     }
     const SubstepTrial trial = CompareSubsteps(substeps, coarse, fine, selection->tolerance_m);
     selection->trials.push_back(trial);
-    spdlog::info("time step: {} vs {} substeps per frame: surface differs by {:.3g} mm{}", substeps,
-                 finer, 1e3 * trial.difference_m, trial.diverged ? " (a run diverged)" : "");
+    spdlog::info(
+        "time step: {} vs {} substeps per frame: surface differs by {:.3g} mm at frame {}, within "
+        "tolerance on the first {} frames{}",
+        substeps, finer, 1e3 * trial.difference_m, trial.worst_frame, trial.frames_within_tolerance,
+        trial.diverged ? " (a run diverged)" : "");
     if (!trial.diverged && trial.difference_m <= selection->tolerance_m) {
       selection->substeps = substeps;
       selection->within_tolerance = true;
