@@ -81,6 +81,13 @@ def number(entry, *keys):
     return entry if isinstance(entry, (int, float)) else math.nan
 
 
+def agreeing_frames(discretisation):
+    """Leading frames on which the last grid or time-step trial agreed with the finer run (the
+    part of the motion the model predicts at the start parameters), or None without a choice."""
+    trials = discretisation.get("selection", {}).get("trials", [])
+    return trials[-1].get("frames_within_tolerance") if trials else None
+
+
 def run_case(case, args):
     folder = ensure_capture(case, args.resolution, args.out)
     with open(os.path.join(folder, "truth.json")) as f:
@@ -116,6 +123,8 @@ def run_case(case, args):
            # None: the result reports no finite band (an undetermined sigma), which is no success.
            "truth_in_band": abs(fitted - e_eff) <= band if math.isfinite(band) else None,
            "grid_cells": result["grid"]["cells"], "substeps": result["time_step"]["substeps"],
+           "grid_agrees_frames": agreeing_frames(result["grid"]),
+           "step_agrees_frames": agreeing_frames(result["time_step"]),
            "seconds": round(seconds, 1), "config": config}
     if "friction_coefficient" in result["parameters"]:
         row["fitted_friction"] = result["parameters"]["friction_coefficient"]["value"]
@@ -136,11 +145,15 @@ def percent(x):
     return f"{100 * x:+.1f} %" if math.isfinite(x) else "-"
 
 
+def dash(x):
+    return "-" if x is None else str(x)
+
+
 def print_table(rows):
     print("| case | E fitted [kPa] | vs reference mesh | vs nominal | sigma | discretisation "
           "| truth in band | corrected vs reference | grid / substeps "
-          "| launch velocity error [m/s] | friction | time [s] |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+          "| frames agreeing (grid / step) | launch velocity error [m/s] | friction | time [s] |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
         e = r["fitted_youngs_modulus"]
         friction = (f"{r['fitted_friction']:.3f} (truth {r['friction']})" if "friction" in r else "-")
@@ -148,7 +161,9 @@ def print_table(rows):
               f"| {percent(r['error_vs_nominal'])} | {magnitude(r['standard_uncertainty'] / e)} "
               f"| {magnitude(r['discretisation_error'] / e)} | {BAND_WORDS[r['truth_in_band']]} "
               f"| {percent(r['corrected_error_vs_reference'])} "
-              f"| {r['grid_cells']} / {r['substeps']} | {r['velocity_error_m_s']:.3f} | {friction} "
+              f"| {r['grid_cells']} / {r['substeps']} "
+              f"| {dash(r['grid_agrees_frames'])} / {dash(r['step_agrees_frames'])} "
+              f"| {r['velocity_error_m_s']:.3f} | {friction} "
               f"| {r['seconds']:.0f} |")
 
 
