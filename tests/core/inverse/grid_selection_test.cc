@@ -8,6 +8,7 @@
 
 #include "core/geometry/primitives.h"
 #include "core/scenes/scene.h"
+#include "tests/core/inverse/tilted_block_drop.h"
 
 namespace softid::inverse {
 namespace {
@@ -70,22 +71,8 @@ TEST_F(SelectGridTest, RefinesUntilTheSurfaceMovesLessThanTheNoise) {
 // the runs on two grids agree until it lands and part after the first impacts: the trials say from
 // which frame on.
 TEST(SelectGrid, TrialsSayUntilWhichFrameTheGridsAgree) {
-  geometry::TriangleMesh block = geometry::MakeBox(Eigen::Vector3d(0.12, 0.08, 0.06), 0.02);
-  const Eigen::Matrix3d tilt = (Eigen::AngleAxisd(0.35, Eigen::Vector3d::UnitY()) *
-                                Eigen::AngleAxisd(0.17, Eigen::Vector3d::UnitX()))
-                                   .toRotationMatrix();
-  double lowest = 0.0;
-  for (Eigen::Vector3d& v : block.vertices) {
-    v = tilt * v;
-    lowest = std::min(lowest, v.z());
-  }
-  for (Eigen::Vector3d& v : block.vertices) v.z() += 0.04 - lowest;  // 4 cm above the floor
-  fem::PhysicalParameters parameters;
-  parameters.youngs_modulus = 86e3;
-  parameters.poisson_ratio = 0.35;
-  parameters.density = 400.0;
-  parameters.gravity = Eigen::Vector3d(0.0, 0.0, -9.81);
-  parameters.ground = fem::GroundPlane{};
+  const geometry::TriangleMesh block = testing::TiltedBlock();
+  const fem::PhysicalParameters parameters = testing::UndampedBlockOnAFloor();
   GridSelectionOptions options;
   options.candidates = {6, 9, 13};
   options.min_tolerance_fraction = 0.0;

@@ -7,6 +7,7 @@
 
 #include "core/geometry/primitives.h"
 #include "core/scenes/scene.h"
+#include "tests/core/inverse/tilted_block_drop.h"
 
 namespace softid::inverse {
 namespace {
@@ -69,22 +70,8 @@ TEST(SelectSubsteps, StepDoublingDifferencesShrinkAndTheChoiceMeetsTheTolerance)
 // a chaotic motion, in which the runs at s and 2 s substeps part after the first impacts whatever
 // s is. The selection says so instead of blaming the step.
 TEST(SelectSubsteps, ChaoticRockingIsToldFromAStepError) {
-  geometry::TriangleMesh block = geometry::MakeBox(Eigen::Vector3d(0.12, 0.08, 0.06), 0.02);
-  const Eigen::Matrix3d tilt = (Eigen::AngleAxisd(0.35, Eigen::Vector3d::UnitY()) *
-                                Eigen::AngleAxisd(0.17, Eigen::Vector3d::UnitX()))
-                                   .toRotationMatrix();
-  double lowest = 0.0;
-  for (Eigen::Vector3d& v : block.vertices) {
-    v = tilt * v;
-    lowest = std::min(lowest, v.z());
-  }
-  for (Eigen::Vector3d& v : block.vertices) v.z() += 0.04 - lowest;  // 4 cm above the floor
-  fem::PhysicalParameters parameters;
-  parameters.youngs_modulus = 86e3;
-  parameters.poisson_ratio = 0.35;
-  parameters.density = 400.0;
-  parameters.gravity = Eigen::Vector3d(0.0, 0.0, -9.81);
-  parameters.ground = fem::GroundPlane{};
+  const geometry::TriangleMesh block = testing::TiltedBlock();
+  const fem::PhysicalParameters parameters = testing::UndampedBlockOnAFloor();
   SubstepSelectionOptions options;
   options.min_substeps = 8;
   options.max_substeps = 32;
