@@ -50,9 +50,7 @@ GridTrial CompareGrids(int cells, int finer_cells, const SurfaceRun& coarse, con
         coarse.frames, fine.frames, static_cast<int>(rest_mesh.vertices.size()));
     trial.difference_m = difference.difference_m;
     trial.worst_frame = difference.worst_frame;
-    while (trial.frames_within_tolerance < static_cast<int>(difference.per_frame_m.size()) &&
-           difference.per_frame_m[trial.frames_within_tolerance] <= tolerance_m)
-      ++trial.frames_within_tolerance;
+    trial.frames_within_tolerance = difference.LeadingFramesWithin(tolerance_m);
   }
   return trial;
 }

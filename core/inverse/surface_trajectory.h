@@ -35,6 +35,14 @@ struct TrajectoryDifference {
   double difference_m = 0.0;        // max over frames of the RMS distance over surface vertices [m]
   int worst_frame = 0;              // where that maximum is
   std::vector<double> per_frame_m;  // the RMS distance of each frame [m]
+
+  // The number of leading frames whose distance is at most tolerance_m [m].
+  int LeadingFramesWithin(double tolerance_m) const {
+    int count = 0;
+    while (count < static_cast<int>(per_frame_m.size()) && per_frame_m[count] <= tolerance_m)
+      ++count;
+    return count;
+  }
 };
 
 // Compares the first `vertices` vertices of each frame (-1: all; both trajectories must then have

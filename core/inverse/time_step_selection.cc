@@ -48,9 +48,7 @@ SubstepTrial CompareSubsteps(int substeps, const SurfaceTrajectory& coarse,
     const TrajectoryDifference difference = CompareTrajectories(coarse, fine);
     trial.difference_m = difference.difference_m;
     trial.worst_frame = difference.worst_frame;
-    while (trial.frames_within_tolerance < static_cast<int>(difference.per_frame_m.size()) &&
-           difference.per_frame_m[trial.frames_within_tolerance] <= tolerance_m)
-      ++trial.frames_within_tolerance;
+    trial.frames_within_tolerance = difference.LeadingFramesWithin(tolerance_m);
   }
   return trial;
 }
