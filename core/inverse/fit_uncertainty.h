@@ -4,10 +4,10 @@
 // (a number, [x, y, z], the plane's normal and offset), propagated from the covariance of the
 // optimiser's variables through the parameter space's transforms.
 //
-// The statistical uncertainty assumes independent depth residuals; where the model itself is off
-// they are correlated and the figure is a lower bound (identifiability.h). The residual sigma has
-// a floor at the capture's depth quantisation (depth_scale / sqrt(12)), so a noise-free synthetic
-// fit does not claim zero uncertainty.
+// The statistical uncertainty is the Laplace figure, widened where the residuals are correlated
+// within and across frames (the model itself is off: identifiability.h, step 2b). The residual
+// sigma has a floor at the capture's depth quantisation (depth_scale / sqrt(12)), so a noise-free
+// synthetic fit does not claim zero uncertainty.
 #pragma once
 
 #include <nlohmann/json.hpp>

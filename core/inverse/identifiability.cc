@@ -14,6 +14,7 @@
 #include "core/capture/capture.h"
 #include "core/common/check.h"
 #include "core/common/json_fields.h"
+#include "core/inverse/correlated_residuals.h"
 #include "core/inverse/objective_settings.h"
 #include "core/inverse/observed_frames.h"
 
@@ -263,6 +264,8 @@ struct Curvature {
   double asymmetry = 0.0;    // |H - H^T| / |H| before symmetrising [-]
   int num_points = 0;        // observed points in the fitted frames
   int evaluations = 0;
+  // Gauss-Newton only: each fitted frame's share J_k^T r_k of the gradient, in time order.
+  std::vector<Eigen::VectorXd> frame_gradients;
 };
 
 // Runs tasks 0..num_tasks-1 on `threads` workers, each with an objective of its own (objectives
@@ -357,6 +360,17 @@ int PointsInFittedFrames(const TrajectoryObjective& objective) {
   return n;
 }
 
+// How many residuals each frame contributes to TrajectoryObjective::EvaluateResiduals, in its
+// order (the fitted frames with points, among the active ones).
+std::vector<int> ResidualsPerFrame(const TrajectoryObjective& objective) {
+  std::vector<int> sizes;
+  for (int k = 0; k < objective.active_frames(); ++k) {
+    const ObservedFrame& frame = objective.frames()[k];
+    if (!frame.heldout && !frame.points.empty()) sizes.push_back(int(frame.points.size()));
+  }
+  return sizes;
+}
+
 int Threads(const IdentifiabilityOptions& options) {
   return options.threads > 0 ? options.threads
                              : static_cast<int>(std::thread::hardware_concurrency());
@@ -410,6 +424,7 @@ Result<Curvature> CurvatureByGaussNewton(const ObjectiveFactory& make_objective,
   const double s = stencil.s;
   const int num_tasks = 1 + p;  // the centre, then x0 + s e_j
   std::vector<Eigen::VectorXd> residuals(num_tasks);
+  std::vector<int> frame_sizes;
   Curvature out;
   SOFTID_RETURN_IF_ERROR(RunOnObjectives(
       make_objective, num_tasks, Threads(options), [&](TrajectoryObjective& objective, int task) {
@@ -421,6 +436,7 @@ Result<Curvature> CurvatureByGaussNewton(const ObjectiveFactory& make_objective,
         if (task == 0) {
           out.cost = evaluation.cost;
           out.num_points = PointsInFittedFrames(objective);
+          frame_sizes = ResidualsPerFrame(objective);
         }
         return Status::Ok();
       }));
@@ -429,6 +445,7 @@ Result<Curvature> CurvatureByGaussNewton(const ObjectiveFactory& make_objective,
   out.evaluations = num_tasks;
   out.hessian = jacobian.transpose() * jacobian;
   out.gradient = jacobian.transpose() * residuals[0];
+  out.frame_gradients = FrameGradients(jacobian, residuals[0], frame_sizes);
   return out;
 }
 
@@ -444,6 +461,32 @@ double SetNoiseScale(const IdentifiabilityOptions& options, int num_points, int 
                                  options.min_residual_sigma * options.min_residual_sigma);
   report->residual_sigma = std::sqrt(sigma2);
   return sigma2 / std::max(n_eff, 1.0);  // Cov = variance_scale * H^-1
+}
+
+// Step 2b: each variable's variance widened to the frame-correlated estimate where that is larger,
+// Cov <- D Cov D (the Laplace correlations stay). Variables without a finite variance keep it.
+void WidenForCorrelatedResiduals(const Curvature& curvature, double variance_scale,
+                                 IdentifiabilityReport* report) {
+  Eigen::MatrixXd& covariance = report->covariance;
+  const int p = static_cast<int>(covariance.rows());
+  if (!(variance_scale > 0.0) || curvature.frame_gradients.size() < 2) return;
+  std::vector<int> finite;
+  for (int i = 0; i < p; ++i)
+    if (std::isfinite(covariance(i, i)) && covariance(i, i) > 0.0) finite.push_back(i);
+  Eigen::MatrixXd h_pinv = Eigen::MatrixXd::Zero(p, p);  // Cov / variance_scale = H^+
+  for (int i : finite)
+    for (int j : finite) h_pinv(i, j) = covariance(i, j) / variance_scale;
+  const int frames = static_cast<int>(curvature.frame_gradients.size());
+  int bandwidth = 0;
+  const Eigen::MatrixXd sandwich =
+      CorrelatedResidualCovariance(h_pinv, curvature.frame_gradients, &bandwidth);
+  report->correlated_residual_frames = frames;
+  report->correlated_residual_bandwidth = bandwidth;
+  Eigen::VectorXd factor = Eigen::VectorXd::Ones(p);
+  for (int i : finite) factor[i] = std::max(1.0, std::sqrt(sandwich(i, i) / covariance(i, i)));
+  for (int i : finite)
+    for (int j : finite) covariance(i, j) *= factor[i] * factor[j];
+  for (int i = 0; i < p; ++i) report->variables[i].correlated_residual_factor = factor[i];
 }
 
 // Per-variable uncertainties in physical units (d value / d x by central differences of the
@@ -466,6 +509,7 @@ void SetUncertainties(const Stencil& stencil, const IdentifiabilityOptions& opti
     v.variable_uncertainty = std::sqrt(report->covariance(i, i));
     v.standard_uncertainty =
         std::isfinite(v.variable_uncertainty) ? slope * v.variable_uncertainty : kInfinity;
+    v.independent_uncertainty = v.standard_uncertainty / v.correlated_residual_factor;
     v.relative_uncertainty = value.scale > 0.0 ? v.standard_uncertainty / value.scale : -1.0;
     if (v.relative_uncertainty > options.max_relative_uncertainty &&
         v.flags.empty()) {  // (no sensitivity already says more)
@@ -566,6 +610,7 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const ObjectiveFactory& mak
       report.variables[i].flags.push_back(IdentifiabilityFlag::kNoSensitivity);
   }
   report.covariance = laplace.covariance;
+  WidenForCorrelatedResiduals(curvature, variance_scale, &report);
   report.correlation = laplace.correlation;
   report.scaled_eigenvalues = laplace.scaled_eigenvalues;
   report.scaled_eigenvectors = laplace.scaled_eigenvectors;
@@ -648,6 +693,8 @@ nlohmann::json VariableJson(const VariableIdentifiability& v) {
       {"standard_uncertainty", FiniteOrNull(v.standard_uncertainty)},
       {"relative_uncertainty", v.relative_uncertainty >= 0.0 ? FiniteOrNull(v.relative_uncertainty)
                                                              : nlohmann::json(nullptr)},
+      {"independent_uncertainty", FiniteOrNull(v.independent_uncertainty)},
+      {"correlated_residual_factor", FiniteOrNull(v.correlated_residual_factor)},
       {"identifiable", v.identifiable()},
       {"flags", flags}};
 }
@@ -675,7 +722,14 @@ nlohmann::json ToJson(const IdentifiabilityReport& report) {
                      (report.curvature == CurvatureMethod::kGaussNewton
                           ? "= J^T J (Gauss-Newton, forward differences of the residuals)"
                           : "by central differences of adjoint gradients") +
-                     " in the optimiser's variables (log for positive quantities)"},
+                     " in the optimiser's variables (log for positive quantities)" +
+                     (report.correlated_residual_frames > 0
+                          ? "; each variance widened to the frame-correlated (Newey-West) "
+                            "sandwich estimate where that is larger"
+                          : "")},
+      {"correlated_residuals",
+       {{"frames", report.correlated_residual_frames},
+        {"bandwidth_frames", report.correlated_residual_bandwidth}}},
       {"cost", FiniteOrNull(report.cost)},
       {"residual_sigma", FiniteOrNull(report.residual_sigma)},
       {"num_effective_samples", FiniteOrNull(report.num_effective_samples)},

@@ -14,8 +14,13 @@
 //              = 2 C_min / (N_eff - p) * H^-1.
 //     N_eff defaults to the number of observed points in the fitted frames. Depth pixels are not
 //     independent where the model itself is off (discretisation, left-out physics: neighbouring
-//     residuals share the error), so these uncertainties are lower bounds; the scale-free flags
-//     below (correlation, degenerate combinations) do not depend on sigma.
+//     residuals share the error), so these uncertainties are lower bounds (2b widens them); the
+//     scale-free flags below (correlation, degenerate combinations) do not depend on sigma.
+//  2b. With the Gauss-Newton curvature, whose residual Jacobian is at hand: each variable's
+//     variance is widened to the frame-correlated (sandwich) estimate of correlated_residuals.h
+//     where that is larger, Cov <- D Cov D with D = diag(max(1, sigma_sandwich / sigma_laplace)),
+//     which keeps the Laplace correlations. Measured on independent CalculiX captures (see
+//     docs/benchmarks.md).
 //  3. Degenerate combinations: the eigen-decomposition of the unit-diagonal Hessian
 //       H~ = D^-1/2 H D^-1/2,   D = diag(H),
 //     whose eigenvalues lie in [0, p] and equal 1 +- rho for two variables with correlation rho. A
@@ -118,6 +123,12 @@ struct VariableIdentifiability {
   // standard_uncertainty / scale (positive quantities: their value; vector entries: the vector's
   // norm); negative when the variable has no natural scale (ground plane, linear stiffness field).
   double relative_uncertainty = -1.0;
+  // With the Gauss-Newton curvature (step 2b): standard_uncertainty / independent_uncertainty,
+  // >= 1, where independent_uncertainty is the Laplace figure that treats every observed point as
+  // an independent sample; > 1 when the residuals are correlated within and across frames
+  // (correlated_residuals.h). 1 otherwise.
+  double correlated_residual_factor = 1.0;
+  double independent_uncertainty = 0.0;
   std::vector<IdentifiabilityFlag> flags;
   bool identifiable() const { return flags.empty(); }
 };
@@ -159,6 +170,10 @@ struct IdentifiabilityReport {
   Eigen::VectorXd gradient;            // dC/dx at x* [m^2] (should be ~0 at an optimum)
   double num_effective_samples = 0.0;  // N_eff used [-]
   double residual_sigma = 0.0;         // sigma [m]
+  // Step 2b (Gauss-Newton only): the frames the correlated-residual covariance clustered by and
+  // its Bartlett window (AutomaticBandwidth) [frames]; 0 when it did not run.
+  int correlated_residual_frames = 0;
+  int correlated_residual_bandwidth = 0;
   CurvatureMethod curvature = CurvatureMethod::kGradientDifferences;  // how H was measured
   Eigen::MatrixXd hessian;                                            // H [m^2], symmetrised
   double hessian_asymmetry = 0.0;  // |H - H^T| / |H| before symmetrising (FD noise) [-]
