@@ -10,20 +10,41 @@ namespace softid::inverse {
 // An AR(1) fit of a persistent drift can come out at 1; beyond this the rule's window explodes.
 constexpr double kMaxAutocorrelation = 0.97;
 
+namespace {
+
+// Variable c's AR(1) coefficient in `series`, capped at +-kMaxAutocorrelation; NaN when the
+// series is zero but for its last term (no variation to fit).
+double Autocorrelation(const std::vector<Eigen::VectorXd>& series, int c) {
+  double lagged = 0.0, previous_square = 0.0;
+  for (size_t k = 1; k < series.size(); ++k) {
+    lagged += series[k][c] * series[k - 1][c];
+    previous_square += series[k - 1][c] * series[k - 1][c];
+  }
+  if (!(previous_square > 0.0)) return std::nan("");
+  return std::clamp(lagged / previous_square, -kMaxAutocorrelation, kMaxAutocorrelation);
+}
+
+// Each variable's AR(1) coefficient, capped at +-kMaxAutocorrelation (0 without variation).
+Eigen::VectorXd Autocorrelations(const std::vector<Eigen::VectorXd>& series) {
+  const int p = static_cast<int>(series[0].size());
+  Eigen::VectorXd rho(p);
+  for (int c = 0; c < p; ++c) {
+    const double value = Autocorrelation(series, c);
+    rho[c] = std::isnan(value) ? 0.0 : value;
+  }
+  return rho;
+}
+
+}  // namespace
+
 int AutomaticBandwidth(const std::vector<Eigen::VectorXd>& frame_gradients) {
   const int frames = static_cast<int>(frame_gradients.size());
   if (frames < 3) return 0;
   const int p = static_cast<int>(frame_gradients[0].size());
   double numerator = 0.0, denominator = 0.0;
   for (int c = 0; c < p; ++c) {
-    double lagged = 0.0, previous_square = 0.0;
-    for (int k = 1; k < frames; ++k) {
-      lagged += frame_gradients[k][c] * frame_gradients[k - 1][c];
-      previous_square += frame_gradients[k - 1][c] * frame_gradients[k - 1][c];
-    }
-    if (!(previous_square > 0.0)) continue;
-    const double rho =
-        std::clamp(lagged / previous_square, -kMaxAutocorrelation, kMaxAutocorrelation);
+    const double rho = Autocorrelation(frame_gradients, c);
+    if (std::isnan(rho)) continue;
     double innovation = 0.0;
     for (int k = 1; k < frames; ++k) {
       const double e = frame_gradients[k][c] - rho * frame_gradients[k - 1][c];
@@ -56,22 +77,6 @@ std::vector<Eigen::VectorXd> FrameGradients(const Eigen::MatrixXd& jacobian,
 }
 
 namespace {
-
-// Each variable's AR(1) coefficient, capped at +-kMaxAutocorrelation (0 without variation).
-Eigen::VectorXd Autocorrelations(const std::vector<Eigen::VectorXd>& series) {
-  const int p = static_cast<int>(series[0].size());
-  Eigen::VectorXd rho = Eigen::VectorXd::Zero(p);
-  for (int c = 0; c < p; ++c) {
-    double lagged = 0.0, previous_square = 0.0;
-    for (size_t k = 1; k < series.size(); ++k) {
-      lagged += series[k][c] * series[k - 1][c];
-      previous_square += series[k - 1][c] * series[k - 1][c];
-    }
-    if (previous_square > 0.0)
-      rho[c] = std::clamp(lagged / previous_square, -kMaxAutocorrelation, kMaxAutocorrelation);
-  }
-  return rho;
-}
 
 // The Bartlett-weighted sum of the series' auto- and cross-covariances up to `bandwidth` lags.
 Eigen::MatrixXd BartlettSum(const std::vector<Eigen::VectorXd>& series, int bandwidth) {

@@ -14,8 +14,10 @@
 //   S = G / (G - 1) [sum_k g_k g_k^T + sum_{l=1..L} (1 - l / (L + 1)) sum_k (g_k g_{k+l}^T +
 //   g_{k+l} g_k^T)],
 // where g_k = J_k^T r_k is frame k's share of the gradient (J_k, r_k: its rows of the residual
-// Jacobian and its residuals), G the number of frames and L the window in frames; in practice
-// prewhitened and with a window chosen from the data (LongRunCovariance). With independent
+// Jacobian and its residuals), G the number of frames and L the window in frames. As computed
+// (LongRunCovariance) the g_k are centred, prewhitened by an AR(1) filter per variable before the
+// sum and recoloured after it, and L is chosen from the data (AutomaticBandwidth): the plain sum
+// above underestimates long-lived errors with the few frames a capture has. With independent
 // residuals it agrees with the Laplace covariance on average; with G frames it is itself an
 // estimate from G samples, so callers use it to widen the Laplace figure, never to narrow it.
 #pragma once
