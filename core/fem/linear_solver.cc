@@ -334,7 +334,30 @@ class RotatedFactorPreconditioner final : public LinearOperator {
   ThreadTeam* team_;
   Eigen::VectorXd* rotated_;
 };
+
+// Multiplicative Schwarz: the factor's estimate x1 = P^-1 r, then an exact solve of the
+// remaining residual on the correction's nodes (subdomain_correction.h).
+class CorrectedPreconditioner final : public LinearOperator {
+ public:
+  CorrectedPreconditioner(RotatedFactorPreconditioner& factor, SubdomainCorrection& correction)
+      : factor_(factor), correction_(correction) {}
+  Eigen::Index size() const override { return factor_.size(); }
+  void Apply(const Eigen::Ref<const Eigen::VectorXd>& r, Eigen::VectorXd* z) override {
+    factor_.Apply(r, z);
+    correction_.Correct(r, z);
+  }
+  double ApplyWork() const override { return factor_.ApplyWork() + correction_.CorrectWork(); }
+
+ private:
+  RotatedFactorPreconditioner& factor_;
+  SubdomainCorrection& correction_;
+};
 }  // namespace
+
+bool LinearSolver::SetCorrection(const std::vector<int>& nodes,
+                                 SubdomainCorrection::RowMatrix rows) {
+  return correction_.Assign(nodes, std::move(rows));
+}
 
 void LinearSolver::Precondition(const Eigen::VectorXd& b, const Eigen::Matrix3d& rotation,
                                 Eigen::VectorXd* x) {
@@ -396,7 +419,10 @@ LinearSolver::Summary LinearSolver::Solve(LinearOperator& a, const Eigen::Vector
   // b = 0 is no solve: it would set the refactorisation rule's baseline at 0 iterations.
   if (b.norm() == 0.0) return SolvedByZero(x);
   RotatedFactorPreconditioner preconditioner(*current_, rotation, team_, b.size(), &rotated_);
-  const GmresSummary gmres = gmres_.Solve(a, preconditioner, b, options, x);
+  CorrectedPreconditioner corrected(preconditioner, correction_);
+  LinearOperator& chosen = correction_.empty() ? static_cast<LinearOperator&>(preconditioner)
+                                               : static_cast<LinearOperator&>(corrected);
+  const GmresSummary gmres = gmres_.Solve(a, chosen, b, options, x);
   if (pending_ != nullptr) pending_->overlapped_work += gmres.work;
   refactor_rule_.RecordSolve(gmres.iterations, gmres.work);
   Summary summary;

@@ -20,6 +20,7 @@
 #include "core/fem/linear_operator.h"
 #include "core/fem/refactorisation_rule.h"
 #include "core/fem/sparse_matrix_operator.h"
+#include "core/fem/subdomain_correction.h"
 
 namespace softid::fem {
 
@@ -114,6 +115,15 @@ class LinearSolver {
   Summary Solve(LinearOperator& a, const Eigen::VectorXd& b, const Eigen::Matrix3d& rotation,
                 const Options& options, Eigen::VectorXd* x);
 
+  // Corrects the preconditioner of the following solves on the unknowns of `nodes` with `rows`,
+  // the solved operator's rows on them (subdomain_correction.h): each application then costs a
+  // product with those rows and a pair of small triangular solves. Returns false (no correction)
+  // when their block on the nodes is singular. Until ClearCorrection or the next call.
+  bool SetCorrection(const std::vector<int>& nodes, SubdomainCorrection::RowMatrix rows);
+  void ClearCorrection() { correction_.Clear(); }
+  // Unknowns' nodes the current correction covers (0: none).
+  int CorrectionNodes() const { return correction_.num_nodes(); }
+
   // Solves op(a) x = b by sparse LU (Eigen's SparseLU, COLAMD ordering), without the factor: the
   // fallback for the rare system GMRES stagnates on, e.g. the exact (indefinite, non-symmetric)
   // tangent of a block sticking under strong friction. Slow (a fresh LU each call) but exact; the
@@ -158,6 +168,7 @@ class LinearSolver {
   RefactorisationRule refactor_rule_;  // for the current factor
   FlexibleGmres gmres_;
   Eigen::VectorXd rotated_;  // the preconditioner's work storage
+  SubdomainCorrection correction_;
   // Products with a matrix passed to Solve, on team_.
   SparseMatrixOperator matrix_operator_;
 };

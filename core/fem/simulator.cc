@@ -47,6 +47,14 @@ constexpr int kMaxFactorizationSteps = 3;
 // 1e-4 h (0.6): the stick-slip law amplifies velocity errors as position errors are not.
 constexpr double kFrictionVelocityTolerance = 0.05;
 
+// GMRES iterations a solve may take on the plain factor before it switches to the contact
+// correction (SimulationOptions::contact_correction) for the rest of the step. The correction's
+// setup, the contact nodes' rows and their sparse LU, costs about 2-5 plain iterations per Newton
+// iteration (cube on a ramp, 16 cells: ~1.3 ms beside ~1 ms per iteration; pillow-ramp ~4.5 ms):
+// it pays in a friction landing (~30 iterations per solve on a factor a few iterations old, ~5
+// corrected), not on a body resting or sliding (2-5 iterations, which it made 2-3x slower).
+constexpr int kPlainIterationsBeforeCorrection = 10;
+
 // Splits the elements among `threads` ranges (range_of[e]): per range the elements that share no
 // node with another range (ascending), and the rest, which touch two ranges (ascending).
 std::pair<std::vector<std::vector<int>>, std::vector<int>> SplitElements(
@@ -405,6 +413,8 @@ struct Simulator::NewtonRun {
   Eigen::Matrix3d AssembleAtIterate(bool residual_only, bool reuse_rotations);
   const LinearSolver::Matrix& StepMatrix();
   LinearSolver::Summary SolveStep();
+  LinearSolver::Summary SolveCorrected(const std::vector<int>& nodes,
+                                       const LinearSolver::Summary& plain);
   bool SolveForUpdate();
   void TakeUpdate(int iteration, double full_step, bool small);
   double EstimateUpdate();
@@ -431,6 +441,8 @@ struct Simulator::NewtonRun {
   StepSummary summary;
   Eigen::Matrix3d body_rotation;
   double residual_norm = 0.0;
+  // Once a solve of this step outgrew the plain factor, the rest use the contact correction.
+  bool contact_correction = false;
 };
 
 Simulator::NewtonRun::NewtonRun(Simulator& simulator, Mode mode)
@@ -525,13 +537,40 @@ const LinearSolver::Matrix& Simulator::NewtonRun::StepMatrix() {
   return sim.assembler_.matrix();
 }
 
-// GMRES on Newton's system for update_ (its initial guess on entry).
+// GMRES on Newton's system for update_ (its initial guess on entry). With nodes in contact: on the
+// plain factor first, then, once that takes more than kPlainIterationsBeforeCorrection
+// iterations, with the contact correction from where it stopped (a restart of GMRES, which is
+// why a solve without contact is never cut short).
 LinearSolver::Summary Simulator::NewtonRun::SolveStep() {
   if (!matrix_free)
     return sim.solver_.Solve(sim.assembler_.matrix(), sim.rhs_, body_rotation, linear,
                              &sim.update_);
   sim.step_tangent_.Bind(sim.TangentViews());
-  return sim.solver_.Solve(sim.step_tangent_, sim.rhs_, body_rotation, linear, &sim.update_);
+  const std::vector<int> contact_nodes =
+      sim.options_.contact_correction ? sim.ContactNodes() : std::vector<int>();
+  LinearSolver::Summary plain;
+  if (!contact_correction || contact_nodes.empty()) {
+    LinearSolver::Options first = linear;
+    if (!contact_nodes.empty())
+      first.max_iterations = std::min(linear.max_iterations, kPlainIterationsBeforeCorrection);
+    plain = sim.solver_.Solve(sim.step_tangent_, sim.rhs_, body_rotation, first, &sim.update_);
+    if (plain.converged || first.max_iterations == linear.max_iterations) return plain;
+    contact_correction = true;
+  }
+  return SolveCorrected(contact_nodes, plain);
+}
+
+// The rest of a solve (`plain`: what the plain factor did) with the correction on `nodes`.
+LinearSolver::Summary Simulator::NewtonRun::SolveCorrected(const std::vector<int>& nodes,
+                                                           const LinearSolver::Summary& plain) {
+  sim.solver_.SetCorrection(nodes, sim.step_tangent_.NodeRows(nodes));
+  LinearSolver::Options rest = linear;
+  rest.max_iterations = std::max(0, linear.max_iterations - plain.iterations);
+  LinearSolver::Summary solve =
+      sim.solver_.Solve(sim.step_tangent_, sim.rhs_, body_rotation, rest, &sim.update_);
+  sim.solver_.ClearCorrection();
+  solve.iterations += plain.iterations;
+  return solve;
 }
 
 // The first assembly of the step. After a step that converged with one Newton update (free
@@ -679,6 +718,27 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
   }
   if (!newton.ResidualFinite()) return newton.Diverged();
   return newton.Finish();
+}
+
+std::vector<int> Simulator::ContactNodes() const {
+  // A point whose Jacobian is below a tenth of its interpolated inertia c_m m_p barely changes the
+  // step matrix: what the reference factor misses there, GMRES corrects in an iteration or two.
+  constexpr double kRelevantShare = 0.1;
+  std::vector<char> member(mesh_.NumNodes(), 0);
+  for (int p = 0; p < static_cast<int>(point_active_.size()); ++p) {
+    if (!point_active_[p]) continue;
+    const auto& nodes = mesh_.element_nodes[force_embedding_.element[p]];
+    const auto& w = force_embedding_.weights[p];
+    double point_mass = 0.0;
+    for (int k = 0; k < 8; ++k) point_mass += w[k] * mass_[nodes[k]];
+    const double inertia = tangent_mass_coefficient_ * point_mass;
+    if (point_jacobians_[p].norm() < kRelevantShare * inertia) continue;
+    for (int node : nodes) member[node] = 1;
+  }
+  std::vector<int> nodes;
+  for (int i = 0; i < mesh_.NumNodes(); ++i)
+    if (member[i] && !fixed_[i]) nodes.push_back(i);
+  return nodes;
 }
 
 StepTangentOperator::Views Simulator::TangentViews() {

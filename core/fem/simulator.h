@@ -350,6 +350,10 @@ class Simulator {
   double tangent_mass_coefficient_ = 0.0;
   StepTangentOperator::Views TangentViews();
   StepTangentOperator step_tangent_;  // bound to TangentViews() for each solve
+  // SimulationOptions::contact_correction: the nodes of the elements holding a surface point whose
+  // recorded step Jacobian is comparable to its inertia there (contact and friction, not air drag),
+  // ascending, clamped nodes left out.
+  std::vector<int> ContactNodes() const;
   // The team running the parallel loops (one member per element chunk), shared with solver_;
   // declared before solver_, which must finish its background work on it before it goes.
   std::unique_ptr<ThreadTeam> team_;

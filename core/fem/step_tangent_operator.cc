@@ -99,4 +99,70 @@ void StepTangentOperator::Apply(const Eigen::Ref<const Eigen::VectorXd>& x, Eige
     if (fixed[i]) y->segment<3>(3 * i) = x.segment<3>(3 * i);
 }
 
+StepTangentOperator::RowMatrix StepTangentOperator::NodeRows(const std::vector<int>& nodes) {
+  const std::vector<char>& fixed = *views_.fixed;
+  const auto& element_nodes = *views_.element_nodes;
+  local_index_.assign(fixed.size(), -1);
+  for (size_t k = 0; k < nodes.size(); ++k)
+    if (!fixed[nodes[k]]) local_index_[nodes[k]] = static_cast<int>(k);
+  // The elements with a corner among the nodes, each with a 24x24 buffer for its points' blocks.
+  element_slot_.assign(element_nodes.size(), -1);
+  touched_elements_.clear();
+  for (size_t e = 0; e < element_nodes.size(); ++e) {
+    const auto& corners = element_nodes[e];
+    if (std::any_of(corners.begin(), corners.end(), [&](int i) { return local_index_[i] >= 0; })) {
+      element_slot_[e] = static_cast<int>(touched_elements_.size());
+      touched_elements_.push_back(static_cast<int>(e));
+    }
+  }
+  point_blocks_.resize(touched_elements_.size());
+  for (Matrix24d& block : point_blocks_) block.setZero();
+  const auto& active = *views_.point_active;
+  const auto& jacobians = *views_.point_jacobians;
+  const SurfaceEmbedding& embedding = *views_.points;
+  for (size_t p = 0; p < embedding.element.size(); ++p) {
+    const int slot = element_slot_[embedding.element[p]];
+    if (!active[p] || slot < 0) continue;
+    const auto& w = embedding.weights[p];
+    for (int a = 0; a < 8; ++a)
+      for (int b = 0; b < 8; ++b)
+        point_blocks_[slot].block<3, 3>(3 * a, 3 * b) += (w[a] * w[b]) * jacobians[p];
+  }
+  // Each element's blocks from one of the nodes to any free corner: c R K_ab R^T plus its points'
+  // blocks (a clamped corner's column is eliminated).
+  const auto& rotations = *views_.rotations;
+  const auto& stiffness = *views_.stiffness_matrices;
+  const auto& stiffness_index = *views_.stiffness_index;
+  entries_.clear();
+  for (size_t slot = 0; slot < touched_elements_.size(); ++slot) {
+    const int e = touched_elements_[slot];
+    const auto& corners = element_nodes[e];
+    const Eigen::Matrix3d r = rotations[e];
+    const Eigen::Matrix3d cr = views_.stiffness_coefficient * r;
+    const Matrix24d& k = stiffness[stiffness_index[e]];
+    for (int a = 0; a < 8; ++a) {
+      const int row = local_index_[corners[a]];
+      if (row < 0) continue;
+      for (int b = 0; b < 8; ++b) {
+        const int column = corners[b];
+        if (fixed[column]) continue;
+        const Eigen::Matrix3d block = cr * k.block<3, 3>(3 * a, 3 * b) * r.transpose() +
+                                      point_blocks_[slot].block<3, 3>(3 * a, 3 * b);
+        for (int i = 0; i < 3; ++i)
+          for (int j = 0; j < 3; ++j)
+            entries_.emplace_back(3 * row + i, 3 * column + j, block(i, j));
+      }
+    }
+  }
+  const Eigen::VectorXd& mass = *views_.mass;
+  for (size_t k = 0; k < nodes.size(); ++k) {
+    const int node = nodes[k];
+    const double diagonal = fixed[node] ? 1.0 : views_.mass_coefficient * mass[node];
+    for (int i = 0; i < 3; ++i) entries_.emplace_back(3 * k + i, 3 * node + i, diagonal);
+  }
+  RowMatrix rows(3 * static_cast<Eigen::Index>(nodes.size()), size());
+  rows.setFromTriplets(entries_.begin(), entries_.end());
+  return rows;
+}
+
 }  // namespace softid::fem

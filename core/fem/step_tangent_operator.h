@@ -17,6 +17,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/SparseCore>
 #include <Eigen/StdVector>
 #include <array>
 #include <vector>
@@ -71,12 +72,24 @@ class StepTangentOperator final : public LinearOperator {
   void Apply(const Eigen::Ref<const Eigen::VectorXd>& x, Eigen::VectorXd* y) override;
   double ApplyWork() const override { return 2.0 * views_.assembled_nonzeros; }
 
+  // The operator's rows on the unknowns of `nodes` (ascending; node i has unknowns 3 i .. 3 i + 2),
+  // ordered as `nodes`, all columns: the rows of the assembled matrix, without assembling it.
+  // Visits every element once; rotates element blocks only in rows of `nodes`.
+  using RowMatrix = Eigen::SparseMatrix<double, Eigen::RowMajor, int>;
+  RowMatrix NodeRows(const std::vector<int>& nodes);
+
  private:
   void ApplyElements(const std::vector<int>& elements, const double* x, double* y) const;
   void ApplyPoints(const std::vector<int>& points, const double* x, double* y) const;
   Views views_;
   bool has_fixed_ = false;
   Eigen::VectorXd masked_;  // x with the clamped nodes' entries zeroed
+  // NodeBlock's work storage: node -> position in `nodes` (-1 elsewhere), element -> slot among
+  // the elements touching them (-1 elsewhere), those elements, their points' 24x24 blocks, and
+  // the block's entries.
+  std::vector<int> local_index_, element_slot_, touched_elements_;
+  std::vector<Matrix24d, Eigen::aligned_allocator<Matrix24d>> point_blocks_;
+  std::vector<Eigen::Triplet<double, int>> entries_;
 };
 
 }  // namespace softid::fem

@@ -591,12 +591,14 @@ struct NewtonRun {
 // are computed, not the motion: on a team of two, a torus tumbling onto the ground with friction
 // (non-symmetric contact blocks, the preconditioner renewed in contact) and a clamped bar swinging
 // down under gravity (eliminated nodes) end where the assembled tangent puts them, to far less
-// than Newton's tolerance, after as many Newton and GMRES iterations and refactorisations.
+// than Newton's tolerance, after as many Newton and GMRES iterations and refactorisations. (The
+// contact correction of the preconditioner, which only matrix-free Newton has, is off in both.)
 TEST(Simulator, MatrixFreeNewtonFollowsTheAssembledTangent) {
   const auto run = [](auto make, bool matrix_free, int steps) {
     SimulationOptions options;
     options.threads = 2;
     options.matrix_free_newton = matrix_free;
+    options.contact_correction = false;
     Simulator sim = make(options);
     EXPECT_EQ(sim.num_threads(), 2);
     NewtonRun out;
@@ -645,6 +647,38 @@ TEST(Simulator, MatrixFreeNewtonFollowsTheAssembledTangent) {
       EXPECT_GT(free.refactorizations, 0);  // the factor is assembled for
     }
   }
+}
+
+// The contact correction of the preconditioner (SimulationOptions::contact_correction) changes the
+// solver's work, not the motion: a torus tumbling onto the ground with friction ends within
+// Newton's tolerance of the run without it, on far fewer GMRES iterations (measured 1828 vs 3470,
+// final states 6e-6 m apart at h = 1.75 cm).
+TEST(Simulator, ContactCorrectionSavesIterationsNotAccuracy) {
+  const auto run = [](bool correction) {
+    PhysicalParameters p;
+    p.youngs_modulus = 2e5;
+    p.friction_coefficient = 0.4;
+    p.initial_velocity = Eigen::Vector3d(0.5, 0.0, -1.0);
+    p.initial_angular_velocity = Eigen::Vector3d(1.0, 2.0, 0.0);
+    p.ground = GroundPlane{Eigen::Vector3d::UnitZ(), -0.06};
+    SimulationOptions options;
+    options.cells_along_longest_side = 16;
+    options.contact_correction = correction;
+    Simulator sim(MakeTorus(0.1, 0.04, 24, 12), p, options);
+    NewtonRun out;
+    for (int step = 0; step < 60; ++step) {
+      const StepSummary summary = sim.Step();
+      EXPECT_TRUE(summary.converged) << "step " << step;
+      out.linear_iterations += summary.linear_iterations;
+    }
+    out.state = sim.state();
+    return std::make_pair(out, sim.hex_mesh().CellSize());
+  };
+  const auto [corrected, h] = run(true);
+  const auto [plain, h2] = run(false);
+  EXPECT_GT(corrected.state.u.lpNorm<Eigen::Infinity>(), 2.0 * h);  // it moved
+  EXPECT_LT((corrected.state.u - plain.state.u).lpNorm<Eigen::Infinity>(), 3e-3 * h);
+  EXPECT_LT(corrected.linear_iterations, 0.75 * plain.linear_iterations);
 }
 
 }  // namespace

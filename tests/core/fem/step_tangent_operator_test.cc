@@ -149,6 +149,25 @@ TEST(StepTangentOperator, EqualsTheAssembledMatrix) {
   EXPECT_TRUE(z == z_again);  // bitwise: a fixed summation order
 }
 
+// NodeRows are the assembled matrix's rows on the nodes' unknowns, in their order: element blocks
+// of elements partly inside, contact blocks, mass, a clamped node's identity and eliminated column.
+TEST(StepTangentOperator, NodeRowsAreTheAssembledMatrixsRows) {
+  const RowOfCells cells;
+  const Eigen::MatrixXd dense = cells.Dense();
+  const std::vector<std::vector<int>> all = {{0, 1, 2}};
+  const std::vector<int> none;
+  StepTangentOperator op(cells.Views(all, none, all, none, nullptr));
+  const std::vector<int> nodes = {0, 2, 5, 6, 11, 15};  // across all three cells; 5 clamped
+  const Eigen::MatrixXd rows = Eigen::MatrixXd(op.NodeRows(nodes));
+  ASSERT_EQ(rows.rows(), 18);
+  ASSERT_EQ(rows.cols(), 48);
+  Eigen::MatrixXd expected(18, 48);
+  for (size_t k = 0; k < nodes.size(); ++k)
+    expected.middleRows<3>(3 * k) = dense.middleRows<3>(3 * nodes[k]);
+  EXPECT_LT((rows - expected).norm(), 1e-12 * expected.norm());
+  EXPECT_GT((expected.block<3, 3>(0, 3).norm()), 0.0);  // coupled nodes: the test sees off-blocks
+}
+
 TEST(StepTangentOperator, RejectsMissingViewsAndMismatchedSizes) {
   const RowOfCells cells;
   const std::vector<std::vector<int>> all = {{0, 1, 2}};
