@@ -100,6 +100,8 @@ class Simulator {
   double solver_parallel_share() const { return solver_.ParallelShare(); }
   // Factorisations of step matrices so far (forward and adjoint passes, and new parameters).
   int num_factorizations() const { return solver_.num_factorizations(); }
+  // GMRES iterations of the adjoint's transposed solves so far (BackpropagateStep).
+  int backward_linear_iterations() const { return backward_linear_iterations_; }
 
   // Replaces the physical parameters, keeping the grid, the embedding and the surface (which
   // depend only on the rest mesh and the options), and resets to t = 0. Much cheaper than a new
@@ -389,6 +391,7 @@ class Simulator {
   // Whether a pending factorisation (LinearSolver::StartFactorize) was begun by the adjoint pass;
   // one the forward pass left pending is dropped when the adjoint reuses the forward's factors.
   bool backward_factorization_pending_ = false;
+  int backward_linear_iterations_ = 0;
   void RecordFactor();
   void UseForwardFactor(double step_start_time);
   SimulationState state_;

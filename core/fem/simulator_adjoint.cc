@@ -377,8 +377,22 @@ struct Simulator::AdjointStep {
     sim.SetState(previous);
     sim.UpdateLaggedNormalForces();
     sim.newton_tangent_ = false;
+    // The contact points' Jacobians, to find the nodes of the preconditioner's contact correction.
+    sim.record_tangent_ = sim.options_.contact_correction;
     rotation = sim.AssembleStep(next.u, next.v, next.a);
+    sim.record_tangent_ = false;
     sim.newton_tangent_ = true;
+  }
+
+  // The preconditioner's correction on the contact nodes (subdomain_correction.h) for this step's
+  // transposed solve: one setup per step, beside the 10-40 iterations an adjoint solve to its
+  // tighter tolerance takes in contact.
+  void CorrectOnContactNodes() {
+    if (!sim.options_.contact_correction) return;
+    const std::vector<int> nodes = sim.ContactNodes();
+    if (nodes.empty()) return;
+    sim.solver_.SetCorrection(
+        nodes, SubdomainCorrection::Rows(sim.assembler_.matrix(), nodes, /*transposed=*/true));
   }
 
   // lambda from J^T lambda = rhs (the assembled matrix is J / (1 - alpha_f), see AssembleStep: the
@@ -393,12 +407,16 @@ struct Simulator::AdjointStep {
     LinearSolver& solver = sim.solver_;
     const LinearSolver::Matrix& jacobian = sim.assembler_.matrix();
     constexpr auto kTransposed = LinearSolver::Operator::kTransposed;
+    CorrectOnContactNodes();
     LinearSolver::Summary solve =
         solver.Solve(jacobian, rhs, rotation, linear, &lambda, kTransposed);
+    solver.ClearCorrection();
+    sim.backward_linear_iterations_ += solve.iterations;
     if (!solve.converged) {
       if (solver.Factorize(jacobian, rotation).ok()) {
         lambda.setZero();
         solve = solver.Solve(jacobian, rhs, rotation, linear, &lambda, kTransposed);
+        sim.backward_linear_iterations_ += solve.iterations;
       }
       // GMRES can stagnate on the exact tangent (indefinite and non-symmetric where strong
       // friction sticks); a direct LU solves it.

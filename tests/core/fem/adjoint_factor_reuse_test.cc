@@ -6,6 +6,7 @@
 
 #include "core/fem/simulator.h"
 #include "core/geometry/primitives.h"
+#include "tests/core/fem/simulator_test_util.h"
 
 namespace softid::fem {
 namespace {
@@ -41,17 +42,8 @@ BackwardRun RunBackward(bool reuse) {
     states.push_back(sim.state());
   }
   run.forward_factorizations = sim.num_factorizations() - after_parameters;
-  const int size = static_cast<int>(states[0].u.size());
-  Eigen::VectorXd heights = Eigen::VectorXd::Zero(size);
-  for (int i = 2; i < size; i += 3) heights[i] = 1.0;
-  StateAdjoint adjoint{Eigen::VectorXd::Zero(size), Eigen::VectorXd::Zero(size),
-                       Eigen::VectorXd::Zero(size)};
   const int before_backward = sim.num_factorizations();
-  for (size_t k = states.size() - 1; k >= 1; --k) {
-    adjoint.u += heights;
-    EXPECT_TRUE(sim.BackpropagateStep(states[k - 1], states[k], &adjoint, &run.gradient).ok());
-  }
-  sim.BackpropagateInitialState(states[0], adjoint, &run.gradient);
+  EXPECT_TRUE(testing::BackpropagateHeights(sim, states, &run.gradient));
   run.backward_factorizations = sim.num_factorizations() - before_backward;
   return run;
 }

@@ -1,4 +1,4 @@
-// Helpers shared by the simulator tests: a clamped bar and time-series analysis.
+// Helpers shared by the simulator tests: a clamped bar, time-series analysis and a backward pass.
 #pragma once
 
 #include <Eigen/Core>
@@ -66,6 +66,24 @@ inline std::vector<double> PeakTimes(const std::vector<double>& y, double dt,
     }
   }
   return times;
+}
+
+// The backward pass over `states` (a forward run's, from t = 0) for the loss "sum of the nodes'
+// heights over the run", into *gradient; false when a step's adjoint failed.
+inline bool BackpropagateHeights(Simulator& sim, const std::vector<SimulationState>& states,
+                                 ParameterGradient* gradient) {
+  const int size = static_cast<int>(states[0].u.size());
+  Eigen::VectorXd heights = Eigen::VectorXd::Zero(size);
+  for (int i = 2; i < size; i += 3) heights[i] = 1.0;
+  StateAdjoint adjoint{Eigen::VectorXd::Zero(size), Eigen::VectorXd::Zero(size),
+                       Eigen::VectorXd::Zero(size)};
+  bool ok = true;
+  for (size_t k = states.size() - 1; k >= 1; --k) {
+    adjoint.u += heights;
+    ok = sim.BackpropagateStep(states[k - 1], states[k], &adjoint, gradient).ok() && ok;
+  }
+  sim.BackpropagateInitialState(states[0], adjoint, gradient);
+  return ok;
 }
 
 }  // namespace softid::fem::testing
