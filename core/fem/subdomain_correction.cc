@@ -1,5 +1,7 @@
 #include "core/fem/subdomain_correction.h"
 
+#include <algorithm>
+
 #include "core/common/check.h"
 
 namespace softid::fem {
@@ -27,14 +29,36 @@ SubdomainCorrection::Matrix BlockOnNodes(const SubdomainCorrection::RowMatrix& r
 
 }  // namespace
 
+bool SubdomainCorrection::Pattern::Matches(const Matrix& block) const {
+  return block.isCompressed() && block.rows() == size &&
+         std::equal(outer.begin(), outer.end(), block.outerIndexPtr(),
+                    block.outerIndexPtr() + block.outerSize() + 1) &&
+         std::equal(inner.begin(), inner.end(), block.innerIndexPtr(),
+                    block.innerIndexPtr() + block.nonZeros());
+}
+
+void SubdomainCorrection::Pattern::Assign(const Matrix& block) {
+  size = block.rows();
+  outer.assign(block.outerIndexPtr(), block.outerIndexPtr() + block.outerSize() + 1);
+  inner.assign(block.innerIndexPtr(), block.innerIndexPtr() + block.nonZeros());
+}
+
 bool SubdomainCorrection::Assign(const std::vector<int>& nodes, RowMatrix rows) {
   Clear();
   if (nodes.empty()) return false;
   const Eigen::Index n = 3 * static_cast<Eigen::Index>(nodes.size());
   SOFTID_DEMAND(rows.rows() == n && rows.cols() > 3 * nodes.back());
   if (lu_ == nullptr) lu_ = std::make_unique<Eigen::SparseLU<Matrix, Eigen::COLAMDOrdering<int>>>();
-  lu_->compute(BlockOnNodes(rows, nodes));
-  if (lu_->info() != Eigen::Success) return false;
+  const Matrix block = BlockOnNodes(rows, nodes);
+  if (!pattern_.Matches(block)) {
+    lu_->analyzePattern(block);
+    pattern_.Assign(block);
+  }
+  lu_->factorize(block);
+  if (lu_->info() != Eigen::Success) {
+    pattern_ = Pattern();  // a failed factorisation may leave the analysis unusable
+    return false;
+  }
   nodes_ = nodes;
   rows_ = std::move(rows);
   local_.resize(n);
@@ -60,11 +84,16 @@ SubdomainCorrection::RowMatrix SubdomainCorrection::Rows(const Matrix& a,
     rows.setFromTriplets(entries.begin(), entries.end());
     return rows;
   }
-  const RowMatrix row_major = a;
+  // Rows of a on the nodes: one pass over a's entries, keeping those whose row is a node's.
+  std::vector<int> local(a.rows() / 3, -1);
+  for (size_t k = 0; k < nodes.size(); ++k) local[nodes[k]] = static_cast<int>(k);
   std::vector<Eigen::Triplet<double, int>> entries;
-  for (int k = 0; k < n; ++k) {
-    for (RowMatrix::InnerIterator it(row_major, 3 * nodes[k / 3] + k % 3); it; ++it)
-      entries.emplace_back(k, static_cast<int>(it.col()), it.value());
+  for (int column = 0; column < a.outerSize(); ++column) {
+    for (Matrix::InnerIterator it(a, column); it; ++it) {
+      const int row = static_cast<int>(it.row());
+      const int node = local[row / 3];
+      if (node >= 0) entries.emplace_back(3 * node + row % 3, column, it.value());
+    }
   }
   rows.setFromTriplets(entries.begin(), entries.end());
   return rows;

@@ -50,8 +50,18 @@ class SubdomainCorrection {
   double CorrectWork() const { return work_; }
 
  private:
+  // The sparsity of the last block analysed: a Newton step's contact nodes rarely change between
+  // its iterations, and then the LU's ordering and elimination tree are reused (factorize only).
+  struct Pattern {
+    Eigen::Index size = -1;
+    std::vector<int> outer, inner;
+    bool Matches(const Matrix& block) const;
+    void Assign(const Matrix& block);
+  };
+
   std::vector<int> nodes_;
   RowMatrix rows_;
+  Pattern pattern_;
   // On the heap: Eigen's SparseLU cannot be moved, and the solver owning this must be.
   std::unique_ptr<Eigen::SparseLU<Matrix, Eigen::COLAMDOrdering<int>>> lu_;
   Eigen::VectorXd local_, solution_;  // the local residual and its solve
