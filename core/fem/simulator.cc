@@ -546,8 +546,7 @@ LinearSolver::Summary Simulator::NewtonRun::SolveStep() {
     return sim.solver_.Solve(sim.assembler_.matrix(), sim.rhs_, body_rotation, linear,
                              &sim.update_);
   sim.step_tangent_.Bind(sim.TangentViews());
-  const std::vector<int> contact_nodes =
-      sim.options_.contact_correction ? sim.ContactNodes() : std::vector<int>();
+  const std::vector<int>& contact_nodes = sim.ContactNodes();
   LinearSolver::Summary plain;
   if (!contact_correction || contact_nodes.empty()) {
     LinearSolver::Options first = linear;
@@ -720,11 +719,14 @@ StepSummary Simulator::NewtonSolve(Mode mode) {
   return newton.Finish();
 }
 
-std::vector<int> Simulator::ContactNodes() const {
+const std::vector<int>& Simulator::ContactNodes() {
+  contact_nodes_.clear();
+  if (!options_.contact_correction) return contact_nodes_;
   // A point whose Jacobian is below a tenth of its interpolated inertia c_m m_p barely changes the
   // step matrix: what the reference factor misses there, GMRES corrects in an iteration or two.
   constexpr double kRelevantShare = 0.1;
-  std::vector<char> member(mesh_.NumNodes(), 0);
+  std::vector<char>& member = contact_member_;
+  member.assign(mesh_.NumNodes(), 0);
   for (int p = 0; p < static_cast<int>(point_active_.size()); ++p) {
     if (!point_active_[p]) continue;
     const auto& nodes = mesh_.element_nodes[force_embedding_.element[p]];
@@ -735,10 +737,9 @@ std::vector<int> Simulator::ContactNodes() const {
     if (point_jacobians_[p].norm() < kRelevantShare * inertia) continue;
     for (int node : nodes) member[node] = 1;
   }
-  std::vector<int> nodes;
   for (int i = 0; i < mesh_.NumNodes(); ++i)
-    if (member[i] && !fixed_[i]) nodes.push_back(i);
-  return nodes;
+    if (member[i] && !fixed_[i]) contact_nodes_.push_back(i);
+  return contact_nodes_;
 }
 
 StepTangentOperator::Views Simulator::TangentViews() {

@@ -354,8 +354,11 @@ class Simulator {
   StepTangentOperator step_tangent_;  // bound to TangentViews() for each solve
   // SimulationOptions::contact_correction: the nodes of the elements holding a surface point whose
   // recorded step Jacobian is comparable to its inertia there (contact and friction, not air drag),
-  // ascending, clamped nodes left out.
-  std::vector<int> ContactNodes() const;
+  // ascending, clamped nodes left out; none with the option off. Kept in contact_nodes_, which the
+  // next call overwrites.
+  const std::vector<int>& ContactNodes();
+  std::vector<char> contact_member_;  // work storage of ContactNodes, per node
+  std::vector<int> contact_nodes_;
   // The team running the parallel loops (one member per element chunk), shared with solver_;
   // declared before solver_, which must finish its background work on it before it goes.
   std::unique_ptr<ThreadTeam> team_;

@@ -388,8 +388,7 @@ struct Simulator::AdjointStep {
   // transposed solve: one setup per step, beside the 10-40 iterations an adjoint solve to its
   // tighter tolerance takes in contact.
   void CorrectOnContactNodes() {
-    if (!sim.options_.contact_correction) return;
-    const std::vector<int> nodes = sim.ContactNodes();
+    const std::vector<int>& nodes = sim.ContactNodes();
     if (nodes.empty()) return;
     sim.solver_.SetCorrection(
         nodes, SubdomainCorrection::Rows(sim.assembler_.matrix(), nodes, /*transposed=*/true));
