@@ -587,6 +587,33 @@ struct NewtonRun {
   int refactorizations = 0;
 };
 
+// Runs `steps` steps, each expected to converge, and sums their solver work.
+NewtonRun RunSteps(Simulator& sim, int steps) {
+  NewtonRun out;
+  for (int step = 0; step < steps; ++step) {
+    const StepSummary summary = sim.Step();
+    EXPECT_TRUE(summary.converged) << "step " << step;
+    out.linear_iterations += summary.linear_iterations;
+    out.newton_iterations += summary.newton_iterations;
+    out.refactorizations += summary.refactorized ? 1 : 0;
+  }
+  out.state = sim.state();
+  return out;
+}
+
+// A torus tumbling onto the ground with friction: non-symmetric contact blocks that change as
+// points stick and slip.
+Simulator TumblingTorusWithFriction(SimulationOptions options) {
+  PhysicalParameters p;
+  p.youngs_modulus = 2e5;
+  p.friction_coefficient = 0.4;
+  p.initial_velocity = Eigen::Vector3d(0.5, 0.0, -1.0);
+  p.initial_angular_velocity = Eigen::Vector3d(1.0, 2.0, 0.0);
+  p.ground = GroundPlane{Eigen::Vector3d::UnitZ(), -0.06};
+  options.cells_along_longest_side = 16;
+  return Simulator(MakeTorus(0.1, 0.04, 24, 12), p, options);
+}
+
 // Newton's matrix-free tangent (SimulationOptions::matrix_free_newton) changes how the products
 // are computed, not the motion: on a team of two, a torus tumbling onto the ground with friction
 // (non-symmetric contact blocks, the preconditioner renewed in contact) and a clamped bar swinging
@@ -601,27 +628,10 @@ TEST(Simulator, MatrixFreeNewtonFollowsTheAssembledTangent) {
     options.contact_correction = false;
     Simulator sim = make(options);
     EXPECT_EQ(sim.num_threads(), 2);
-    NewtonRun out;
-    for (int step = 0; step < steps; ++step) {
-      const StepSummary summary = sim.Step();
-      EXPECT_TRUE(summary.converged) << "step " << step;
-      out.linear_iterations += summary.linear_iterations;
-      out.newton_iterations += summary.newton_iterations;
-      out.refactorizations += summary.refactorized ? 1 : 0;
-    }
-    out.state = sim.state();
+    const NewtonRun out = RunSteps(sim, steps);
     return std::make_pair(out, sim.hex_mesh().CellSize());
   };
-  const auto torus = [](SimulationOptions options) {
-    PhysicalParameters p;
-    p.youngs_modulus = 2e5;
-    p.friction_coefficient = 0.4;
-    p.initial_velocity = Eigen::Vector3d(0.5, 0.0, -1.0);
-    p.initial_angular_velocity = Eigen::Vector3d(1.0, 2.0, 0.0);
-    p.ground = GroundPlane{Eigen::Vector3d::UnitZ(), -0.06};
-    options.cells_along_longest_side = 16;
-    return Simulator(MakeTorus(0.1, 0.04, 24, 12), p, options);
-  };
+  const auto torus = TumblingTorusWithFriction;
   const auto bar = [](SimulationOptions options) {
     PhysicalParameters p;
     p.youngs_modulus = 1e5;
@@ -655,23 +665,10 @@ TEST(Simulator, MatrixFreeNewtonFollowsTheAssembledTangent) {
 // final states 6e-6 m apart at h = 1.75 cm).
 TEST(Simulator, ContactCorrectionSavesIterationsNotAccuracy) {
   const auto run = [](bool correction) {
-    PhysicalParameters p;
-    p.youngs_modulus = 2e5;
-    p.friction_coefficient = 0.4;
-    p.initial_velocity = Eigen::Vector3d(0.5, 0.0, -1.0);
-    p.initial_angular_velocity = Eigen::Vector3d(1.0, 2.0, 0.0);
-    p.ground = GroundPlane{Eigen::Vector3d::UnitZ(), -0.06};
     SimulationOptions options;
-    options.cells_along_longest_side = 16;
     options.contact_correction = correction;
-    Simulator sim(MakeTorus(0.1, 0.04, 24, 12), p, options);
-    NewtonRun out;
-    for (int step = 0; step < 60; ++step) {
-      const StepSummary summary = sim.Step();
-      EXPECT_TRUE(summary.converged) << "step " << step;
-      out.linear_iterations += summary.linear_iterations;
-    }
-    out.state = sim.state();
+    Simulator sim = TumblingTorusWithFriction(options);
+    const NewtonRun out = RunSteps(sim, 60);
     return std::make_pair(out, sim.hex_mesh().CellSize());
   };
   const auto [corrected, h] = run(true);
