@@ -47,31 +47,6 @@ std::vector<int> SnapshotIndices(const ResidualMap& map, int count) {
   return out;
 }
 
-// The simulated surface at each wanted observed frame (ascending indices), stepping as
-// SplitMotionPhases does: each frame at the simulation step nearest its time.
-Result<std::vector<geometry::TriangleMesh>> SurfacesAt(fem::Simulator& sim,
-                                                       const fem::PhysicalParameters& p,
-                                                       const Observations& observations,
-                                                       const std::vector<int>& wanted) {
-  try {
-    sim.SetParameters(p);
-  } catch (const std::invalid_argument& e) {
-    return Status::InvalidArgument(e.what());
-  }
-  std::vector<geometry::TriangleMesh> out;
-  int64_t step = 0;
-  for (int k : wanted) {
-    const int64_t frame_step = std::llround(observations.frames[k].time / sim.options().time_step);
-    for (; step < frame_step; ++step) {
-      if (sim.Step().diverged || !sim.state().u.allFinite())
-        return Status::FailedPrecondition("the simulation diverged at step " +
-                                          std::to_string(step + 1) + " of the fitted parameters");
-    }
-    out.push_back(sim.DeformedSurface());
-  }
-  return out;
-}
-
 // The first camera's direction of sight (the "front" view), or the world's y when level with up.
 Eigen::Vector3d FrontDirection(const capture::Capture& capture, const Eigen::Vector3d& up) {
   if (capture.cameras.empty()) return up.unitOrthogonal();
@@ -109,21 +84,40 @@ Result<std::unique_ptr<inverse::TrajectoryObjective>> MakeObjective(
   }
 }
 
-// The misfit of every frame in noise floors, over the motion phases: residual_per_frame.png.
-Status WriteMisfitPlot(fem::Simulator& sim, const fem::PhysicalParameters& p,
-                       const ResidualMap& map, const NoiseFloor& floor,
-                       const FitReportOptions& options, const std::filesystem::path& dir,
-                       FitReport* report) {
+// The fitted parameters simulated once over the observed frames: the motion phase of each, and
+// the simulated surface at each snapshot frame (ascending indices into the frames).
+struct FittedRun {
+  std::vector<FrameMotion> motion;
+  std::vector<geometry::TriangleMesh> surfaces;
+};
+
+Result<FittedRun> RunFitted(fem::Simulator& sim, const fem::PhysicalParameters& p,
+                            const ResidualMap& map, const std::vector<int>& snapshots,
+                            const MotionPhaseOptions& options) {
   std::vector<FrameAt> times;
+  for (const FrameResiduals& f : map.frames) times.push_back({f.frame, f.time});
+  FittedRun run;
+  size_t next = 0;
+  const FrameVisitor keep_snapshots = [&](size_t index, const fem::Simulator& at_frame) {
+    if (next < snapshots.size() && static_cast<size_t>(snapshots[next]) == index) {
+      run.surfaces.push_back(at_frame.DeformedSurface());
+      ++next;
+    }
+  };
+  SOFTID_ASSIGN_OR_RETURN(run.motion, SplitMotionPhases(sim, p, times, options, keep_snapshots));
+  return run;
+}
+
+// The misfit of every frame in noise floors, over the motion phases: residual_per_frame.png.
+Status WriteMisfitPlot(const std::vector<FrameMotion>& motion, const ResidualMap& map,
+                       const NoiseFloor& floor, const FitReportOptions& options,
+                       const std::filesystem::path& dir, FitReport* report) {
   std::vector<int> frames;
   std::vector<double> normalised;
   for (const FrameResiduals& f : map.frames) {
-    times.push_back({f.frame, f.time});
     frames.push_back(f.frame);
     normalised.push_back(f.misfit / floor.sigma);
   }
-  SOFTID_ASSIGN_OR_RETURN(const std::vector<FrameMotion> motion,
-                          SplitMotionPhases(sim, p, times, options.phases));
   SOFTID_RETURN_IF_ERROR(WriteFrameMisfitPlot(dir / "residual_per_frame.png", frames, normalised,
                                               {}, motion, options.misfit_threshold,
                                               "fitted simulation"));
@@ -131,16 +125,13 @@ Status WriteMisfitPlot(fem::Simulator& sim, const fem::PhysicalParameters& p,
   return Status::Ok();
 }
 
-// The simulated surface over the observed points at a few frames, the worst-fitting among them:
-// surface_overlay.png.
-Status WriteSnapshots(const capture::Capture& capture, fem::Simulator& sim,
-                      const fem::PhysicalParameters& p, const Observations& observations,
-                      const ResidualMap& map, const NoiseFloor& floor, const Eigen::Vector3d& up,
-                      const FitReportOptions& options, const std::filesystem::path& dir,
-                      FitReport* report) {
-  const std::vector<int> wanted = SnapshotIndices(map, options.snapshots);
-  SOFTID_ASSIGN_OR_RETURN(std::vector<geometry::TriangleMesh> surfaces,
-                          SurfacesAt(sim, p, observations, wanted));
+// The simulated surface over the observed points at the snapshot frames (`wanted`, with their
+// `surfaces`), the worst-fitting among them: surface_overlay.png.
+Status WriteSnapshots(const capture::Capture& capture, const fem::PhysicalParameters& p,
+                      const Observations& observations, const ResidualMap& map,
+                      const NoiseFloor& floor, const Eigen::Vector3d& up,
+                      const std::vector<int>& wanted, std::vector<geometry::TriangleMesh> surfaces,
+                      const std::filesystem::path& dir, FitReport* report) {
   std::vector<SurfaceSnapshot> snapshots;
   for (size_t i = 0; i < wanted.size(); ++i) {
     const FrameResiduals& f = map.frames[wanted[i]];
@@ -197,9 +188,11 @@ Result<FitReport> WriteFitReport(const capture::Capture& capture,
   SOFTID_ASSIGN_OR_RETURN(const NoiseFloor floor, EstimateNoiseFloor(map, options.noise_floor));
   report.noise_floor_m = floor.sigma;
 
-  SOFTID_RETURN_IF_ERROR(WriteMisfitPlot(sim, p, map, floor, options, dir, &report));
-  SOFTID_RETURN_IF_ERROR(
-      WriteSnapshots(capture, sim, p, observations, map, floor, up, options, dir, &report));
+  const std::vector<int> wanted = SnapshotIndices(map, options.snapshots);
+  SOFTID_ASSIGN_OR_RETURN(FittedRun run, RunFitted(sim, p, map, wanted, options.phases));
+  SOFTID_RETURN_IF_ERROR(WriteMisfitPlot(run.motion, map, floor, options, dir, &report));
+  SOFTID_RETURN_IF_ERROR(WriteSnapshots(capture, p, observations, map, floor, up, wanted,
+                                        std::move(run.surfaces), dir, &report));
   report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
   return report;
 }

@@ -30,7 +30,8 @@ Status MotionPhaseOptions::Validate() const {
 Result<std::vector<FrameMotion>> SplitMotionPhases(fem::Simulator& sim,
                                                    const fem::PhysicalParameters& parameters,
                                                    const std::vector<FrameAt>& frames,
-                                                   const MotionPhaseOptions& options) {
+                                                   const MotionPhaseOptions& options,
+                                                   const FrameVisitor& visit) {
   SOFTID_RETURN_IF_ERROR(options.Validate());
   try {
     sim.SetParameters(parameters);
@@ -53,6 +54,7 @@ Result<std::vector<FrameMotion>> SplitMotionPhases(fem::Simulator& sim,
                                           std::to_string(step + 1) + ": no motion phases");
       }
     }
+    if (visit) visit(out.size(), sim);
     FrameMotion m;
     m.frame = frame.frame;
     m.time = frame.time_s;

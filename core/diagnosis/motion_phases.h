@@ -13,6 +13,7 @@
 // 1.2x over all flight frames). The threshold and the other phases are unchanged.
 #pragma once
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -53,12 +54,18 @@ struct FrameAt {
   double time_s = 0.0;
 };
 
+// Called at each of the frames (its index into `frames`) with the simulator at that frame's step:
+// lets a caller read other things off the same run (a report's surfaces) instead of simulating
+// again.
+using FrameVisitor = std::function<void(size_t index, const fem::Simulator& simulator)>;
+
 // Simulates `parameters` on `simulator` (which it resets) up to the last of `frames` (ascending
 // times; each classified at the simulation step nearest its time, with the simulator's own time
 // step), and classifies each frame. FailedPrecondition when the simulation diverges.
 Result<std::vector<FrameMotion>> SplitMotionPhases(fem::Simulator& simulator,
                                                    const fem::PhysicalParameters& parameters,
                                                    const std::vector<FrameAt>& frames,
-                                                   const MotionPhaseOptions& options = {});
+                                                   const MotionPhaseOptions& options = {},
+                                                   const FrameVisitor& visit = {});
 
 }  // namespace softid::diagnosis

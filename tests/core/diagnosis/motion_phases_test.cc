@@ -60,6 +60,30 @@ TEST(MotionPhases, RampIsImpactThenSliding) {
   EXPECT_NE(std::find(phases.begin(), phases.end(), Phase::kImpact), phases.end());
 }
 
+// The visitor (what a report reads off the same run) sees every frame once, in order, with the
+// simulator at the step nearest that frame's time, including frames between simulation steps.
+TEST(MotionPhases, VisitorSeesEachFrameAtItsStep) {
+  Result<scenes::ConcealedScene> scene =
+      scenes::MakeDiagnosisScene("halves-drop", scenes::ConcealedEffect::kNone, 0.0);
+  ASSERT_TRUE(scene.ok());
+  fem::SimulationOptions options;
+  options.cells_along_longest_side = 6;
+  options.time_step = 1.0 / 120.0;
+  fem::Simulator sim(scene->scene.mesh, scene->scene.parameters, options);
+  // Uneven times, as a device clock gives them.
+  const std::vector<FrameAt> frames = {{0, 0.0}, {1, 0.017}, {3, 0.051}, {4, 0.0655}, {7, 0.12}};
+  std::vector<size_t> seen;
+  std::vector<double> times;
+  const FrameVisitor visit = [&](size_t index, const fem::Simulator& at_frame) {
+    seen.push_back(index);
+    times.push_back(at_frame.state().time);
+  };
+  ASSERT_TRUE(SplitMotionPhases(sim, scene->scene.parameters, frames, {}, visit).ok());
+  ASSERT_EQ(seen, (std::vector<size_t>{0, 1, 2, 3, 4}));
+  for (size_t i = 0; i < frames.size(); ++i)
+    EXPECT_LE(std::abs(times[i] - frames[i].time_s), 0.5 * options.time_step + 1e-12) << i;
+}
+
 TEST(MotionPhases, OptionsNameTheField) {
   MotionPhaseOptions options;
   options.contact_cells = 0.0;
