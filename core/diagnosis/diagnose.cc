@@ -314,9 +314,12 @@ struct DiagnosisRun {
       base_identifiability = {{"error", base_id.status().message()}};
     }
     Stage("screening " + std::to_string(CandidateLibrary().size()) + " candidates");
+    const auto screening_begin = Clock::now();
     SOFTID_ASSIGN_OR_RETURN(report.screening,
                             ScreenCandidates(*context.objective, screening_base, report.motion,
                                              excess, options.screening));
+    report.screening_seconds =
+        std::chrono::duration<double>(Clock::now() - screening_begin).count();
     return Status::Ok();
   }
 

@@ -112,6 +112,7 @@ struct DiagnosisReport {
   nlohmann::json identifiability;  // of the final model, or null
   std::vector<std::string> plots;
   double seconds = 0.0;
+  double screening_seconds = 0.0;  // of `seconds`: the screening's forward and adjoint runs
 };
 
 // Runs the diagnosis. The config's fit set is the base model; heldout_every 0 is replaced by

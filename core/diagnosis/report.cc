@@ -229,6 +229,7 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
   out["identifiability"] = r.identifiability;
   out["plots"] = r.plots;
   out["seconds"] = r.seconds;
+  out["screening_seconds"] = r.screening_seconds;
   return out;
 }
 

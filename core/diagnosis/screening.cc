@@ -1,5 +1,7 @@
 #include "core/diagnosis/screening.h"
 
+#include <spdlog/spdlog.h>
+
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <array>
@@ -446,10 +448,12 @@ struct Screening {
     s.start_cost = std::numeric_limits<double>::infinity();
     std::vector<double> try_costs(tries.size(), std::numeric_limits<double>::infinity());
     double start_theta = 0.0;
+    int steps = 0;
     for (size_t i = 0; i < tries.size(); ++i) {
       const fem::PhysicalParameters& p = tries[i].second;
       if (!p.Validate().ok()) continue;
       Result<inverse::ObjectiveEvaluation> e = objective.Evaluate(p, false);
+      if (e.ok()) steps += e->steps;
       if (!e.ok() || e->diverged) continue;
       try_costs[i] = e->cost;
       if (e->cost < s.start_cost) {
@@ -458,6 +462,8 @@ struct Screening {
         start_theta = tries[i].first;
       }
     }
+    spdlog::debug("screening {}: {} refit tries, {} steps simulated", ToString(v.extension),
+                  tries.size(), steps);
     // Two-sided variables: the best start on each side, far enough from the null; the side
     // with the lower forward cost first.
     s.refit_starts = {s.start};

@@ -98,6 +98,10 @@ TEST(Diagnose, FindsConcealedFrictionOnARamp) {
   EXPECT_EQ(json["findings"][0]["physics"], "friction");
   EXPECT_EQ(json["base_fit"]["format"], "softid-result/1");
   EXPECT_TRUE(json["final_fit"]["parameters"].contains("friction_coefficient"));
+  // The screening's share of the wall time.
+  EXPECT_GT(report->screening_seconds, 0.0);
+  EXPECT_LT(report->screening_seconds, report->seconds);
+  EXPECT_EQ(json["screening_seconds"], report->screening_seconds);
 }
 
 // The refits run in batches through options.run_fits; a runner that runs each batch's fits in
