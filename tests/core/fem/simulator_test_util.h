@@ -1,8 +1,11 @@
 // Helpers shared by the simulator tests: a clamped bar, time-series analysis and a backward pass.
 #pragma once
 
+#include <gtest/gtest.h>
+
 #include <Eigen/Core>
 #include <cmath>
+#include <string>
 #include <vector>
 
 #include "core/fem/simulator.h"
@@ -84,6 +87,44 @@ inline bool BackpropagateHeights(Simulator& sim, const std::vector<SimulationSta
   }
   sim.BackpropagateInitialState(states[0], adjoint, gradient);
   return ok;
+}
+
+// Expects every field of `actual` within `relative` of the same field of `expected` (a vector
+// field as a whole: |a - e| <= relative |e|), e.g. two backward passes that differ only in how
+// their linear systems were solved.
+inline void ExpectGradientsNear(const ParameterGradient& actual, const ParameterGradient& expected,
+                                double relative) {
+  const auto scalar = [relative](const char* name, double a, double e) {
+    EXPECT_NEAR(a, e, relative * std::abs(e)) << name;
+  };
+  const auto vector = [relative](const char* name, const Eigen::Vector3d& a,
+                                 const Eigen::Vector3d& e) {
+    EXPECT_LE((a - e).norm(), relative * e.norm()) << name << ": " << a.transpose() << " vs "
+                                                   << e.transpose();
+  };
+  scalar("youngs_modulus", actual.youngs_modulus, expected.youngs_modulus);
+  scalar("poisson_ratio", actual.poisson_ratio, expected.poisson_ratio);
+  scalar("density", actual.density, expected.density);
+  scalar("mass_damping", actual.mass_damping, expected.mass_damping);
+  scalar("stiffness_damping", actual.stiffness_damping, expected.stiffness_damping);
+  vector("gravity", actual.gravity, expected.gravity);
+  vector("initial_velocity", actual.initial_velocity, expected.initial_velocity);
+  vector("initial_angular_velocity", actual.initial_angular_velocity,
+         expected.initial_angular_velocity);
+  vector("initial_pose_rotation", actual.initial_pose_rotation, expected.initial_pose_rotation);
+  vector("initial_pose_translation", actual.initial_pose_translation,
+         expected.initial_pose_translation);
+  vector("ground_normal", actual.ground_normal, expected.ground_normal);
+  scalar("ground_offset", actual.ground_offset, expected.ground_offset);
+  scalar("contact_stiffness", actual.contact_stiffness, expected.contact_stiffness);
+  scalar("contact_damping", actual.contact_damping, expected.contact_damping);
+  scalar("friction_coefficient", actual.friction_coefficient, expected.friction_coefficient);
+  scalar("drag_linear", actual.drag_linear, expected.drag_linear);
+  scalar("drag_quadratic", actual.drag_quadratic, expected.drag_quadratic);
+  ASSERT_EQ(actual.stiffness_field.size(), expected.stiffness_field.size());
+  for (size_t i = 0; i < expected.stiffness_field.size(); ++i) {
+    scalar("stiffness_field", actual.stiffness_field[i], expected.stiffness_field[i]);
+  }
 }
 
 }  // namespace softid::fem::testing
