@@ -15,6 +15,7 @@
 #include "core/common/check.h"
 #include "core/common/json_fields.h"
 #include "core/inverse/correlated_residuals.h"
+#include "core/inverse/objective_pool.h"
 #include "core/inverse/objective_settings.h"
 #include "core/inverse/observed_frames.h"
 
@@ -267,49 +268,6 @@ struct Curvature {
   // Gauss-Newton only: each fitted frame's share J_k^T r_k of the gradient, in time order.
   std::vector<Eigen::VectorXd> frame_gradients;
 };
-
-// Runs tasks 0..num_tasks-1 on `threads` workers, each with an objective of its own (objectives
-// are not thread-safe); the first error stops the others and is returned.
-Status RunOnObjectives(const ObjectiveFactory& make_objective, int num_tasks, int threads,
-                       const std::function<Status(TrajectoryObjective&, int)>& task_fn) {
-  std::atomic<int> next{0};
-  std::mutex error_mutex;
-  Status error;
-  const auto fail = [&](Status status) {
-    std::lock_guard lock(error_mutex);
-    if (error.ok()) error = std::move(status);
-  };
-  const auto failed = [&] {
-    std::lock_guard lock(error_mutex);
-    return !error.ok();
-  };
-  auto worker = [&]() {
-    std::unique_ptr<TrajectoryObjective> objective;
-    try {
-      objective = make_objective();
-    } catch (const std::invalid_argument& e) {
-      fail(Status::InvalidArgument(e.what()));
-      return;
-    }
-    if (objective == nullptr) {
-      fail(Status::Internal("identifiability: the objective factory returned null"));
-      return;
-    }
-    for (int task = next++; task < num_tasks && !failed(); task = next++) {
-      if (Status done = task_fn(*objective, task); !done.ok()) {
-        fail(std::move(done));
-        return;
-      }
-    }
-  };
-  threads = std::clamp(threads, 1, num_tasks);
-  {
-    std::vector<std::jthread> pool;
-    for (int t = 1; t < threads; ++t) pool.emplace_back(worker);
-    worker();
-  }
-  return error;
-}
 
 // The difference stencil around the optimum: the optimiser's variables there (x0) and the step.
 struct Stencil {

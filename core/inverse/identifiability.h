@@ -53,6 +53,7 @@
 #include "core/fem/physical_parameters.h"
 #include "core/inverse/fit.h"
 #include "core/inverse/job_config.h"
+#include "core/inverse/objective_pool.h"
 #include "core/inverse/parameter_space.h"
 #include "core/inverse/trajectory_objective.h"
 
@@ -190,9 +191,6 @@ struct IdentifiabilityReport {
   // The entry of variable `name`, or null.
   const VariableIdentifiability* Find(const std::string& name) const;
 };
-
-// Builds a fresh objective; called once per worker thread.
-using ObjectiveFactory = std::function<std::unique_ptr<TrajectoryObjective>()>;
 
 // The analysis at `parameters` (base values with the fitted ones at the optimum) for the variables
 // of `space`. InvalidArgument for invalid options; FailedPrecondition when the simulation diverges
