@@ -8,6 +8,7 @@
 #include <optional>
 #include <sstream>
 
+#include "core/common/for_each_index.h"
 #include "core/common/json_fields.h"
 #include "core/diagnosis/fit_batch.h"
 #include "core/diagnosis/likelihood_ratio.h"
@@ -27,6 +28,7 @@ struct Context {
   geometry::TriangleMesh mesh;
   Observations observations;
   std::unique_ptr<inverse::TrajectoryObjective> objective;
+  inverse::ObjectiveFactory make_objective;  // another objective like `objective`
   Eigen::AlignedBox3d rest_bounds;
   Patches patches;
   double truncation = 0.0;
@@ -185,6 +187,8 @@ struct DiagnosisRun {
   DiagnosisRun(const capture::Capture& capture, inverse::JobConfig config,
                const DiagnoseOptions& options)
       : capture(capture), options(options), rule(options.decision), config(std::move(config)) {}
+  DiagnosisRun(const DiagnosisRun&) = delete;  // context.make_objective holds `this`
+  DiagnosisRun& operator=(const DiagnosisRun&) = delete;
 
   void Stage(const std::string& message) const {
     if (options.on_stage) options.on_stage(message);
@@ -240,14 +244,20 @@ struct DiagnosisRun {
         LoadObservations(capture, config.frames.first, config.frames.last, config.heldout_every));
     auto frames =
         std::make_shared<const std::vector<inverse::ObservedFrame>>(context.observations.frames);
-    try {
-      context.objective = std::make_unique<inverse::TrajectoryObjective>(
+    // Each objective simulates on one thread (SimulationOptions' default): parallel work runs
+    // whole evaluations side by side (the screening's tries), which scales better.
+    context.make_objective = [this, frames] {
+      auto objective = std::make_unique<inverse::TrajectoryObjective>(
           context.mesh, capture.fixed_region, p0, inverse::SimulationOptionsFor(config.solver),
           inverse::CostOptionsFor(config.solver), frames, capture.fps, config.solver.substeps);
+      objective->SetCancelFlag(options.fit.cancel);
+      return objective;
+    };
+    try {
+      context.objective = context.make_objective();
     } catch (const std::invalid_argument& e) {
       return Status::InvalidArgument(e.what());
     }
-    context.objective->SetCancelFlag(options.fit.cancel);
     context.rest_bounds = context.mesh.Bounds();
     const double h = context.objective->simulator().hex_mesh().CellSize();
     context.truncation = config.solver.cost.truncation_cells * h;
@@ -304,6 +314,8 @@ struct DiagnosisRun {
     screening_base.n_eff = ess0.n_eff;
     screening_base.floor_cost = 0.5 * sigma * sigma;
     screening_base.rest_bounds = context.rest_bounds;
+    screening_base.make_objective = context.make_objective;
+    screening_base.workers = Cores();
     Stage("curvature of the base fit (identifiability)");
     Result<inverse::IdentifiabilityReport> base_id = inverse::AnalyzeIdentifiability(
         capture, config, base, IdentifiabilityOptionsFor(config, ess0.n_eff));
@@ -323,12 +335,19 @@ struct DiagnosisRun {
     return Status::Ok();
   }
 
-  // The fits of `configs`, in their order: by options.run_fits (another worker may run them),
-  // here one after the other by default.
-  std::vector<Result<inverse::FitResult>> RunFits(
-      const std::vector<inverse::JobConfig>& configs) const {
+  // The cores the diagnosis may use: the job's threads, or every core.
+  int Cores() const { return config.solver.threads > 0 ? config.solver.threads : CoreCount(); }
+
+  // The fits of `configs`, in their order: by options.run_fits (another worker may run them), by
+  // default here, side by side on the cores, each given an equal share of them (whole fits in
+  // parallel scale better than one fit's simulation on several threads).
+  std::vector<Result<inverse::FitResult>> RunFits(std::vector<inverse::JobConfig> configs) const {
     if (configs.empty()) return {};
-    if (!options.run_fits) return RunFitsInProcess(capture, configs, options.fit);
+    if (!options.run_fits) {
+      const int per_fit = std::max(1, Cores() / static_cast<int>(configs.size()));
+      for (inverse::JobConfig& fit_config : configs) fit_config.solver.threads = per_fit;
+      return RunFitsInProcess(capture, configs, options.fit, Cores() / per_fit);
+    }
     std::vector<Result<inverse::FitResult>> results = options.run_fits(configs);
     if (results.size() == configs.size()) return results;
     const Status wrong =

@@ -2,9 +2,9 @@
 // config of its own (one start each), so a batch of them can run anywhere, in any order, at once.
 // The diagnosis hands every batch it can form (the candidates' refits, the joint refits, the base
 // model refitted from the refits) to a FitBatchRunner and reads the results in the order of the
-// configs. By default the batch runs here, one fit after the other (RunFitsInProcess); the server
-// runs it as tasks that any worker claims (server/start_tasks.h). A runner must return what
-// inverse::Fit(capture, config, options) returns for each config, so the diagnosis does not
+// configs. By default the batch runs here, its fits side by side on the cores (RunFitsInProcess);
+// the server runs it as tasks that any worker claims (server/start_tasks.h). A runner must return
+// what inverse::Fit(capture, config, options) returns for each config, so the diagnosis does not
 // depend on where its refits ran.
 #pragma once
 
@@ -22,10 +22,11 @@ namespace softid::diagnosis {
 using FitBatchRunner = std::function<std::vector<Result<inverse::FitResult>>(
     const std::vector<inverse::JobConfig>& configs)>;
 
-// inverse::Fit of each config in turn; after a cancel (options.cancel) the rest report Cancelled
-// without running.
+// inverse::Fit of each config, up to `workers` of them at once (>= 1; each fit takes the cores its
+// config's threads say); after a cancel (options.cancel) the fits not yet begun report Cancelled
+// without running. options' callbacks are called from one fit at a time.
 std::vector<Result<inverse::FitResult>> RunFitsInProcess(
     const capture::Capture& capture, const std::vector<inverse::JobConfig>& configs,
-    const inverse::FitOptions& options);
+    const inverse::FitOptions& options, int workers = 1);
 
 }  // namespace softid::diagnosis

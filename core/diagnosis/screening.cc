@@ -8,11 +8,13 @@
 #include <cmath>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <utility>
 
 #include "core/common/check.h"
 #include "core/common/json_fields.h"
 #include "core/diagnosis/likelihood_ratio.h"
+#include "core/inverse/objective_pool.h"
 
 namespace softid::diagnosis {
 namespace {
@@ -38,6 +40,17 @@ struct Variant {
   std::vector<std::function<fem::PhysicalParameters(fem::PhysicalParameters, double)>>
       alternative_rebalances;
   std::function<double(const fem::ParameterGradient&, const fem::PhysicalParameters&)> dtheta;
+};
+
+// A refit start to try: its theta (the side of the null it lies on) and parameters.
+using Try = std::pair<double, fem::PhysicalParameters>;
+
+// A variant screened up to its refit tries, which run for all variants at once.
+struct PreparedVariant {
+  ScreenedCandidate screened;
+  std::vector<fem::PhysicalParameters> slope_points;  // empty: the variant does not apply
+  double predicted_drop = 0.0;                        // by the profiled quadratic model [m^2]
+  std::vector<Try> tries;                             // empty: `screened` is final
 };
 
 struct Point {
@@ -198,15 +211,21 @@ struct Screening {
     return Status::Ok();
   }
 
-  Result<bool> Evaluate(const fem::PhysicalParameters& p, const Variant& v, Point* out) {
-    if (!p.Validate().ok()) return false;
-    SOFTID_ASSIGN_OR_RETURN(inverse::ObjectiveEvaluation e, objective.Evaluate(p, true));
-    if (e.diverged) return false;
-    out->cost = e.cost;
-    out->dtheta = v.dtheta(e.gradient, p);
+  // The point of a slope run at p (empty: invalid parameters or a diverged simulation).
+  bool ToPoint(const std::optional<inverse::ObjectiveEvaluation>& e,
+               const fem::PhysicalParameters& p, const Variant& v, Point* out) const {
+    if (!e) return false;
+    out->cost = e->cost;
+    out->dtheta = v.dtheta(e->gradient, p);
     out->gx.resize(nb);
-    if (nb > 0) space.ChainGradient(e.gradient, x0.data(), out->gx.data());
+    if (nb > 0) space.ChainGradient(e->gradient, x0.data(), out->gx.data());
     return true;
+  }
+
+  // Where the slope and curvature of v are measured: theta = +-delta (central), else delta.
+  std::vector<fem::PhysicalParameters> SlopePoints(const Variant& v) const {
+    if (v.central) return {v.make(p0, -v.step), v.make(p0, v.step)};
+    return {v.make(p0, v.step)};
   }
 
   // Every way of leaving the null: friction, drag, the stiffness halves along each axis, contact
@@ -342,23 +361,23 @@ struct Screening {
     return s->applicable;
   }
 
-  // Score (slope at the null) and curvatures, raw and with the base variables profiled out;
-  // *absorb is how the base variables move per unit of theta. False when the simulation diverges
-  // next to the null.
-  Result<bool> MeasureSlope(const Variant& v, ScreenedCandidate* s, Eigen::VectorXd* absorb) {
+  // Score (slope at the null) and curvatures, raw and with the base variables profiled out, from
+  // the runs at SlopePoints(v); *absorb is how the base variables move per unit of theta. False
+  // when the simulation diverges next to the null.
+  bool MeasureSlope(const Variant& v,
+                    const std::vector<std::optional<inverse::ObjectiveEvaluation>>& runs,
+                    ScreenedCandidate* s, Eigen::VectorXd* absorb) const {
+    const std::vector<fem::PhysicalParameters> at = SlopePoints(v);
     Point a, b;
     double separation = v.step;
     if (v.central) {
-      SOFTID_ASSIGN_OR_RETURN(bool ok_a, Evaluate(v.make(p0, -v.step), v, &a));
-      SOFTID_ASSIGN_OR_RETURN(bool ok_b, Evaluate(v.make(p0, v.step), v, &b));
-      if (!ok_a || !ok_b) return false;
+      if (!ToPoint(runs[0], at[0], v, &a) || !ToPoint(runs[1], at[1], v, &b)) return false;
       separation = 2.0 * v.step;
       s->gradient = 0.5 * (a.dtheta + b.dtheta);
     } else {
       a = null_point;
       a.dtheta = v.dtheta(g0, p0);
-      SOFTID_ASSIGN_OR_RETURN(bool ok_b, Evaluate(v.make(p0, v.step), v, &b));
-      if (!ok_b) return false;
+      if (!ToPoint(runs[0], at[0], v, &b)) return false;
       s->gradient = a.dtheta;
     }
     s->curvature = (b.dtheta - a.dtheta) / separation;
@@ -372,10 +391,9 @@ struct Screening {
   // Refit starts to try, each with its theta (the side of the null it lies on): the best of the
   // joint Newton step (base variables re-adjusted), the extension alone, and half the joint step,
   // then ladders over the start range.
-  std::vector<std::pair<double, fem::PhysicalParameters>> RefitTries(
-      const Variant& v, const ScreenedCandidate& s, double theta,
-      const Eigen::VectorXd& absorb) const {
-    std::vector<std::pair<double, fem::PhysicalParameters>> tries;
+  std::vector<Try> RefitTries(const Variant& v, const ScreenedCandidate& s, double theta,
+                              const Eigen::VectorXd& absorb) const {
+    std::vector<Try> tries;
     Eigen::VectorXd dx = nb > 0 ? Eigen::VectorXd(-absorb * theta) : Eigen::VectorXd();
     for (int i = 0; i < nb; ++i) dx[i] = std::clamp(dx[i], -1.0, 1.0);
     auto with_base = [&](double t, double fraction) {
@@ -440,30 +458,20 @@ struct Screening {
     return tries;
   }
 
-  // The refit's start(s) from the tries by their forward cost, and the fallbacks.
-  void ChooseStarts(const Variant& v,
-                    const std::vector<std::pair<double, fem::PhysicalParameters>>& tries,
-                    ScreenedCandidate* s_ptr) {
+  // The refit's start(s) from the tries by their forward cost (infinite: invalid or diverged),
+  // and the fallbacks.
+  void ChooseStarts(const Variant& v, const std::vector<Try>& tries,
+                    const std::vector<double>& try_costs, ScreenedCandidate* s_ptr) const {
     ScreenedCandidate& s = *s_ptr;
     s.start_cost = std::numeric_limits<double>::infinity();
-    std::vector<double> try_costs(tries.size(), std::numeric_limits<double>::infinity());
     double start_theta = 0.0;
-    int steps = 0;
     for (size_t i = 0; i < tries.size(); ++i) {
-      const fem::PhysicalParameters& p = tries[i].second;
-      if (!p.Validate().ok()) continue;
-      Result<inverse::ObjectiveEvaluation> e = objective.Evaluate(p, false);
-      if (e.ok()) steps += e->steps;
-      if (!e.ok() || e->diverged) continue;
-      try_costs[i] = e->cost;
-      if (e->cost < s.start_cost) {
-        s.start_cost = e->cost;
-        s.start = p;
+      if (try_costs[i] < s.start_cost) {
+        s.start_cost = try_costs[i];
+        s.start = tries[i].second;
         start_theta = tries[i].first;
       }
     }
-    spdlog::debug("screening {}: {} refit tries, {} steps simulated", ToString(v.extension),
-                  tries.size(), steps);
     // Two-sided variables: the best start on each side, far enough from the null; the side
     // with the lower forward cost first.
     s.refit_starts = {s.start};
@@ -511,27 +519,37 @@ struct Screening {
     }
   }
 
-  // Screens one variant: applicability, slope and curvature, refit starts, predicted LR, score.
-  Result<ScreenedCandidate> ScreenVariant(const Variant& v, const std::vector<FrameMotion>& motion,
-                                          const std::vector<double>& excess, double total_excess) {
-    const Candidate& candidate = GetCandidate(v.extension);
-    ScreenedCandidate s;
+  // A variant's screening begins: applicability, and where its slope is measured (none when it
+  // does not apply).
+  PreparedVariant Begin(const Variant& v) const {
+    PreparedVariant prepared;
+    ScreenedCandidate& s = prepared.screened;
     s.extension = v.extension;
     s.axis = v.axis;
     s.start = p0;
     s.start_cost = base.cost;
     if (v.extension == Extension::kInitialSpin) s.direction = spin_direction;
-    if (!CheckApplicable(v, candidate, &s)) return s;
+    if (CheckApplicable(v, GetCandidate(v.extension), &s)) prepared.slope_points = SlopePoints(v);
+    return prepared;
+  }
+
+  // ... continues from the slope runs: slope and curvature, and the refit tries to run (none when
+  // the variant is settled already).
+  void Prepare(const Variant& v,
+               const std::vector<std::optional<inverse::ObjectiveEvaluation>>& runs,
+               PreparedVariant* prepared_ptr) const {
+    PreparedVariant& prepared = *prepared_ptr;
+    ScreenedCandidate& s = prepared.screened;
+    if (prepared.slope_points.empty()) return;
     Eigen::VectorXd absorb;
-    SOFTID_ASSIGN_OR_RETURN(const bool measured, MeasureSlope(v, &s, &absorb));
-    if (!measured) {
+    if (!MeasureSlope(v, runs, &s, &absorb)) {
       s.applicable = false;
       s.note = "the simulation diverges next to the null";
-      return s;
+      return;
     }
     if (v.boundary && !(s.gradient < 0.0)) {
       s.note = "score: the cost rises as the parameter leaves 0";
-      return s;
+      return;
     }
     // Newton's step on the profiled quadratic model, or a few steps downhill without curvature.
     double curvature = s.efficient_curvature;
@@ -542,9 +560,20 @@ struct Screening {
     double theta =
         curvature > 0.0 ? -s.gradient / curvature : -4.0 * v.step * (s.gradient > 0 ? 1 : -1);
     theta = std::clamp(theta, v.boundary ? 0.5 * v.step : -v.max_start, v.max_start);
-    const double predicted_drop =
+    prepared.predicted_drop =
         curvature > 0.0 ? 0.5 * s.gradient * s.gradient / curvature : std::abs(s.gradient * theta);
-    ChooseStarts(v, RefitTries(v, s, theta, absorb), &s);
+    prepared.tries = RefitTries(v, s, theta, absorb);
+  }
+
+  // The second half: the refit starts from the tries' forward costs, predicted LR and score.
+  ScreenedCandidate Finish(const Variant& v, PreparedVariant prepared,
+                           const std::vector<double>& try_costs,
+                           const std::vector<FrameMotion>& motion,
+                           const std::vector<double>& excess, double total_excess) const {
+    ScreenedCandidate& s = prepared.screened;
+    if (prepared.tries.empty()) return s;
+    const Candidate& candidate = GetCandidate(v.extension);
+    ChooseStarts(v, prepared.tries, try_costs, &s);
     if (!std::isfinite(s.start_cost)) {
       s.applicable = false;
       s.note = "the simulation diverges at every refit start";
@@ -568,8 +597,9 @@ struct Screening {
     // fall below the noise floor), otherwise only what the start actually achieved.
     const bool quadratic = s.efficient_curvature > 0.01 * std::abs(s.curvature);
     const double predicted_cost =
-        quadratic ? std::min(std::max(base.cost - predicted_drop, base.floor_cost), s.start_cost)
-                  : s.start_cost;
+        quadratic
+            ? std::min(std::max(base.cost - prepared.predicted_drop, base.floor_cost), s.start_cost)
+            : s.start_cost;
     s.predicted_lr =
         LikelihoodRatioStatistic(base.cost, std::max(predicted_cost, 1e-30), base.n_eff);
     if (total_excess > 0.0) {
@@ -585,6 +615,55 @@ struct Screening {
   }
 };
 
+// Runs `tasks` tasks on base.make_objective's objectives over base.workers threads when
+// given, else one after another on `objective`.
+Status RunTasks(inverse::TrajectoryObjective& objective, const ScreeningBase& base, int tasks,
+                const std::function<Status(inverse::TrajectoryObjective&, int)>& run) {
+  if (base.make_objective)
+    return inverse::RunOnObjectives(base.make_objective, tasks, base.workers, run);
+  for (int i = 0; i < tasks; ++i) SOFTID_RETURN_IF_ERROR(run(objective, i));
+  return Status::Ok();
+}
+
+// Forward and adjoint runs at the slope points (empty where the parameters are invalid or the
+// simulation diverges); an error of the adjoint is passed on.
+Result<std::vector<std::optional<inverse::ObjectiveEvaluation>>> SlopeRuns(
+    inverse::TrajectoryObjective& objective, const ScreeningBase& base,
+    const std::vector<fem::PhysicalParameters>& points) {
+  std::vector<std::optional<inverse::ObjectiveEvaluation>> runs(points.size());
+  const auto run = [&](inverse::TrajectoryObjective& on, int i) {
+    if (!points[i].Validate().ok()) return Status::Ok();
+    SOFTID_ASSIGN_OR_RETURN(inverse::ObjectiveEvaluation e, on.Evaluate(points[i], true));
+    if (!e.diverged) runs[i] = std::move(e);
+    return Status::Ok();
+  };
+  SOFTID_RETURN_IF_ERROR(RunTasks(objective, base, static_cast<int>(points.size()), run));
+  return runs;
+}
+
+// The forward cost of each try (infinite where the parameters are invalid, the simulation
+// diverges or fails).
+Result<std::vector<double>> ForwardCosts(inverse::TrajectoryObjective& objective,
+                                         const ScreeningBase& base, const std::vector<Try>& tries) {
+  std::vector<double> costs(tries.size(), std::numeric_limits<double>::infinity());
+  std::vector<int> steps(tries.size(), 0);
+  const auto run = [&](inverse::TrajectoryObjective& on, int i) {
+    if (!tries[i].second.Validate().ok()) return Status::Ok();
+    Result<inverse::ObjectiveEvaluation> e = on.Evaluate(tries[i].second, false);
+    if (!e.ok()) return Status::Ok();
+    steps[i] = e->steps;
+    if (!e->diverged) costs[i] = e->cost;
+    return Status::Ok();
+  };
+  const int n = static_cast<int>(tries.size());
+  SOFTID_RETURN_IF_ERROR(RunTasks(objective, base, n, run));
+  long long total_steps = 0;
+  for (int s : steps) total_steps += s;
+  spdlog::debug("screening: {} refit tries, {} steps simulated on {} worker(s)", n, total_steps,
+                base.make_objective ? base.workers : 1);
+  return costs;
+}
+
 }  // namespace
 
 Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjective& objective,
@@ -598,11 +677,32 @@ Result<std::vector<ScreenedCandidate>> ScreenCandidates(inverse::TrajectoryObjec
   SOFTID_RETURN_IF_ERROR(screening.EvaluateNull());
   double total_excess = 0.0;
   for (double e : excess) total_excess += e;
+  const std::vector<Variant> variants = screening.Variants();
+  std::vector<PreparedVariant> prepared;
+  std::vector<fem::PhysicalParameters> slope_points;  // every variant's, in order
+  for (const Variant& v : variants) {
+    prepared.push_back(screening.Begin(v));
+    const auto& points = prepared.back().slope_points;
+    slope_points.insert(slope_points.end(), points.begin(), points.end());
+  }
+  SOFTID_ASSIGN_OR_RETURN(const auto slope_runs, SlopeRuns(objective, base, slope_points));
+  std::vector<Try> tries;  // every variant's, in order
+  for (size_t i = 0, first = 0; i < variants.size(); ++i) {
+    const size_t count = prepared[i].slope_points.size();
+    screening.Prepare(variants[i], {slope_runs.begin() + first, slope_runs.begin() + first + count},
+                      &prepared[i]);
+    first += count;
+    tries.insert(tries.end(), prepared[i].tries.begin(), prepared[i].tries.end());
+  }
+  SOFTID_ASSIGN_OR_RETURN(const std::vector<double> costs, ForwardCosts(objective, base, tries));
   std::vector<ScreenedCandidate> out;
-  for (const Variant& v : screening.Variants()) {
-    SOFTID_ASSIGN_OR_RETURN(ScreenedCandidate s,
-                            screening.ScreenVariant(v, motion, excess, total_excess));
-    out.push_back(std::move(s));
+  size_t first = 0;
+  for (size_t i = 0; i < variants.size(); ++i) {
+    const size_t count = prepared[i].tries.size();
+    const std::vector<double> variant_costs(costs.begin() + first, costs.begin() + first + count);
+    first += count;
+    out.push_back(screening.Finish(variants[i], std::move(prepared[i]), variant_costs, motion,
+                                   excess, total_excess));
   }
   std::stable_sort(
       out.begin(), out.end(),

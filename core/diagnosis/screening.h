@@ -38,6 +38,7 @@
 #include "core/diagnosis/motion_phases.h"
 #include "core/fem/hex_mesh.h"
 #include "core/fem/physical_parameters.h"
+#include "core/inverse/objective_pool.h"
 #include "core/inverse/parameter_space.h"
 #include "core/inverse/trajectory_objective.h"
 
@@ -112,6 +113,13 @@ struct ScreeningBase {
   double n_eff = 0.0;
   double floor_cost = 0.0;  // sigma^2 / 2, the cost of a perfect model [m^2]
   Eigen::AlignedBox3d rest_bounds;
+  // Builds objectives like the screened one (frames, grid, time step, cost) for the variants'
+  // slope runs and their refit tries, which then run `workers` at a time, each worker on an
+  // objective of its own (the null stays on the screened objective). Objectives with one
+  // simulation thread make the screening the same whatever the number of workers. Empty: every
+  // run one after another on the screened objective.
+  inverse::ObjectiveFactory make_objective;
+  int workers = 1;  // >= 1
 };
 
 // Screens every candidate of CandidateLibrary() (the stiffness split once per axis) around

@@ -3,9 +3,12 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <filesystem>
 
+#include "core/diagnosis/fit_batch.h"
 #include "core/diagnosis/report.h"
 #include "core/inverse/fit.h"
 #include "core/scenes/diagnosis_scenes.h"
@@ -140,6 +143,69 @@ TEST(Diagnose, RefitsRunInBatchesAnywhereWithTheSameReport) {
   ASSERT_FALSE(broken->tested.empty());
   EXPECT_NE(broken->tested[0].test.refit_error.find("returned 0 results"), std::string::npos);
   EXPECT_EQ(broken->decision, "unexplained");
+}
+
+// The screening's refit tries run side by side, each worker on an objective of its own with one
+// simulation thread: the screening comes out the same on two workers as on one, and still puts
+// the concealed friction first, with a refit start that lowers the cost.
+TEST(Diagnose, ScreeningIsTheSameOnTwoWorkersAsOnOne) {
+  RampCapture ramp(0.3);
+  inverse::JobConfig one = ramp.BaseConfig();
+  one.solver.threads = 1;
+  inverse::JobConfig two = one;
+  two.solver.threads = 2;
+  const Result<inverse::FitResult> base = inverse::Fit(ramp.capture, one);
+  ASSERT_TRUE(base.ok()) << base.status().ToString();
+  DiagnoseOptions options = SmallOptions();
+  options.run_fits = [](const std::vector<inverse::JobConfig>& configs) {  // the screening only
+    return std::vector<Result<inverse::FitResult>>(configs.size(),
+                                                   Status::Cancelled("screening only"));
+  };
+  Result<DiagnosisReport> on_one = Diagnose(ramp.capture, one, options, &*base);
+  Result<DiagnosisReport> on_two = Diagnose(ramp.capture, two, options, &*base);
+  ASSERT_TRUE(on_one.ok()) << on_one.status().ToString();
+  ASSERT_TRUE(on_two.ok()) << on_two.status().ToString();
+  const nlohmann::json screened = ToJson(*on_one)["screening"];
+  ASSERT_FALSE(screened.empty());
+  EXPECT_EQ(ToJson(*on_two)["screening"], screened);
+  EXPECT_EQ(screened[0]["extension"], "friction");
+  EXPECT_GT(screened[0]["start_theta"].get<double>(), 0.0);
+  EXPECT_LT(screened[0]["start_cost"].get<double>(), on_one->base_cost);
+}
+
+// A batch of refits run side by side gives each config the result it gets alone, in the configs'
+// order, and the caller's progress callback sees one fit at a time.
+TEST(RunFitsInProcess, SideBySideGivesEachConfigItsOwnResult) {
+  RampCapture ramp(0.3);
+  std::vector<inverse::JobConfig> configs;
+  for (const double e : {6e3, 1.2e4, 2.4e4}) {
+    inverse::JobConfig config = ramp.BaseConfig();
+    config.initial["youngs_modulus"].value = e;
+    config.solver.max_iterations = 3;
+    configs.push_back(config);
+  }
+  const auto one_by_one = RunFitsInProcess(ramp.capture, configs, inverse::FitOptions(), 1);
+  std::atomic<int> inside{0}, most_inside{0}, calls{0};
+  inverse::FitOptions options;
+  options.on_progress = [&](const inverse::FitProgress&) {
+    const int now = ++inside;
+    most_inside = std::max(most_inside.load(), now);
+    ++calls;
+    --inside;
+  };
+  const auto side_by_side = RunFitsInProcess(ramp.capture, configs, options, 2);
+  ASSERT_EQ(side_by_side.size(), configs.size());
+  for (size_t i = 0; i < configs.size(); ++i) {
+    ASSERT_TRUE(one_by_one[i].ok()) << one_by_one[i].status().ToString();
+    ASSERT_TRUE(side_by_side[i].ok()) << side_by_side[i].status().ToString();
+    EXPECT_EQ(side_by_side[i]->Best().final.youngs_modulus,
+              one_by_one[i]->Best().final.youngs_modulus);
+    EXPECT_EQ(side_by_side[i]->Best().final_cost, one_by_one[i]->Best().final_cost);
+  }
+  EXPECT_NE(one_by_one[0]->Best().final.youngs_modulus, one_by_one[2]->Best().final.youngs_modulus)
+      << "the starts differ, so the order of the results matters";
+  EXPECT_GE(calls.load(), 3);
+  EXPECT_EQ(most_inside.load(), 1);
 }
 
 // The same ramp without friction: the base model is the truth, the decision is "none".
