@@ -99,8 +99,8 @@ inline void ExpectGradientsNear(const ParameterGradient& actual, const Parameter
   };
   const auto vector = [relative](const char* name, const Eigen::Vector3d& a,
                                  const Eigen::Vector3d& e) {
-    EXPECT_LE((a - e).norm(), relative * e.norm()) << name << ": " << a.transpose() << " vs "
-                                                   << e.transpose();
+    EXPECT_LE((a - e).norm(), relative * e.norm())
+        << name << ": " << a.transpose() << " vs " << e.transpose();
   };
   scalar("youngs_modulus", actual.youngs_modulus, expected.youngs_modulus);
   scalar("poisson_ratio", actual.poisson_ratio, expected.poisson_ratio);
