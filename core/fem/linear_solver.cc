@@ -138,6 +138,19 @@ void LinearSolver::SymmetricPart(const Matrix& a, Symmetry symmetry, Matrix* out
     symmetric[p] = 0.5 * (values[p] + values[transpose_position_[p]]);
 }
 
+namespace {
+// CHOLMOD's analysis tries METIS beside AMD once AMD's fill is poor (a few thousand unknowns), and
+// the METIS inside Debian's CHOLMOD keeps its random-number state in globals: two analyses at
+// once (concurrent optimiser starts) interleaved their draws, so the same matrix got another
+// ordering (402 vs 410 supernodes at 8,370 unknowns), another factor, and two runs of one fit
+// parted in the fifth digit after a few iterations. METIS reseeds on every call, so one analysis
+// at a time makes the ordering a function of the matrix alone.
+std::mutex& AnalysisMutex() {
+  static std::mutex mutex;
+  return mutex;
+}
+}  // namespace
+
 void LinearSolver::PrepareWorkspace(const Matrix& symmetric) {
   // The assembly pattern is fixed, so the fill-reducing ordering and symbolic analysis (METIS
   // dominates a factorisation at ~10^4 unknowns) are done once and reused.
@@ -148,7 +161,10 @@ void LinearSolver::PrepareWorkspace(const Matrix& symmetric) {
   if (workspace_ == nullptr) {
     workspace_ = std::make_unique<Factor>();
     workspace_->llt.cholmod().print = 0;  // failures are handled below, not printed to stderr
-    workspace_->llt.analyzePattern(symmetric);
+    {
+      const std::lock_guard<std::mutex> lock(AnalysisMutex());
+      workspace_->llt.analyzePattern(symmetric);
+    }
     workspace_->flops = workspace_->llt.cholmod().fl;
     workspace_->factor_nonzeros = workspace_->llt.cholmod().lnz;
   }
