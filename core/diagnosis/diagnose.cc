@@ -166,6 +166,44 @@ inverse::IdentifiabilityOptions IdentifiabilityOptionsFor(const inverse::JobConf
   return options;
 }
 
+// The job's config with its grid and time step capped at the options' comparison discretisation.
+// A coarsened config skips the fit's own uncertainty: the final refit at the job's discretisation
+// estimates it.
+inverse::JobConfig ComparisonConfig(inverse::JobConfig config, const DiagnoseOptions& options) {
+  inverse::SolverOptions& solver = config.solver;
+  bool coarsened = false;
+  if (options.comparison_cells > 0 && solver.cell_size_m == 0.0 &&
+      (solver.cells == inverse::kAutoCells || solver.cells > options.comparison_cells)) {
+    solver.cells = options.comparison_cells;
+    coarsened = true;
+  }
+  if (options.comparison_substeps > 0 && (solver.substeps == inverse::kAutoSubsteps ||
+                                          solver.substeps > options.comparison_substeps)) {
+    solver.substeps = options.comparison_substeps;
+    coarsened = true;
+  }
+  if (coarsened) config.uncertainty = false;
+  return config;
+}
+
+bool SameDiscretisation(const inverse::SolverOptions& a, const inverse::SolverOptions& b) {
+  return a.cells == b.cells && a.cell_size_m == b.cell_size_m && a.substeps == b.substeps;
+}
+
+// Whether `fit` ran on the grid and time step `solver` asks for ("auto" accepts any).
+bool RanAt(const inverse::FitResult& fit, const inverse::SolverOptions& solver) {
+  const bool grid =
+      solver.cells == inverse::kAutoCells || solver.cell_size_m > 0.0 || fit.cells == solver.cells;
+  const bool step = solver.substeps == inverse::kAutoSubsteps || fit.substeps == solver.substeps;
+  return grid && step;
+}
+
+// The diagnosis of `job` with the models compared under `compared` (ComparisonConfig); a base
+// restart runs it again from a better base.
+Result<DiagnosisReport> DiagnoseAt(const capture::Capture& capture, const inverse::JobConfig& job,
+                                   inverse::JobConfig compared, const DiagnoseOptions& options,
+                                   const inverse::FitResult* base_fit);
+
 // One diagnosis: the base fit and the evaluation context every later stage shares, the report it
 // fills, and the stages (numbered as in diagnose.h) as methods.
 struct DiagnosisRun {
@@ -173,7 +211,8 @@ struct DiagnosisRun {
   const DiagnoseOptions& options;
   const DecisionOptions& rule;
   const Clock::time_point begin = Clock::now();
-  inverse::JobConfig config;  // the base config, "auto" resolved after the base fit
+  const inverse::JobConfig job;  // as the job gave it: its discretisation is the final model's
+  inverse::JobConfig config;     // the base config compared on, "auto" resolved after the base fit
   DiagnosisReport report;
   inverse::FitResult base;
   fem::PhysicalParameters p0;  // the base fit's parameters
@@ -184,9 +223,13 @@ struct DiagnosisRun {
   ModelResiduals final_residuals;
   nlohmann::json base_identifiability;  // computed when the base misfits (screening needs H_bb)
 
-  DiagnosisRun(const capture::Capture& capture, inverse::JobConfig config,
+  DiagnosisRun(const capture::Capture& capture, inverse::JobConfig job, inverse::JobConfig config,
                const DiagnoseOptions& options)
-      : capture(capture), options(options), rule(options.decision), config(std::move(config)) {}
+      : capture(capture),
+        options(options),
+        rule(options.decision),
+        job(std::move(job)),
+        config(std::move(config)) {}
   DiagnosisRun(const DiagnosisRun&) = delete;  // context.make_objective holds `this`
   DiagnosisRun& operator=(const DiagnosisRun&) = delete;
 
@@ -215,6 +258,7 @@ struct DiagnosisRun {
     ListNuisances();
     SOFTID_RETURN_IF_ERROR(SettleFinalModel());
     SOFTID_RETURN_IF_ERROR(WritePlots());
+    RefitAtTheJobsDiscretisation();
     report.seconds = std::chrono::duration<double>(Clock::now() - begin).count();
     return report;
   }
@@ -575,6 +619,7 @@ struct DiagnosisRun {
       tested.starts = nlohmann::json::array();
       inverse::JobConfig used = config;
       const Result<inverse::FitResult> fit = BestRefit(plan, &tested.starts, &used);
+      tested.fitted = used.fit;
       Judge(*plan.candidate, fit, used, &tested);
       report.tested.push_back(std::move(tested));
     }
@@ -638,6 +683,7 @@ struct DiagnosisRun {
       tested.starts = nlohmann::json::array();
       inverse::JobConfig used = config;
       const Result<inverse::FitResult> fit = BestRefit(plans[j], &tested.starts, &used);
+      tested.fitted = used.fit;
       Judge(candidate, fit, used, &tested);
       if (tested.test.refit_error.empty()) {
         tested.test.nuisance_lr = LikelihoodRatioStatistic(
@@ -751,7 +797,7 @@ struct DiagnosisRun {
         DiagnoseOptions next = options;
         next.max_base_restarts = options.max_base_restarts - 1;
         SOFTID_ASSIGN_OR_RETURN(DiagnosisReport restarted,
-                                Diagnose(capture, config, next, &*better));
+                                DiagnoseAt(capture, job, config, next, &*better));
         report.seconds = std::chrono::duration<double>(Clock::now() - begin).count();
         nlohmann::json restart = {{"reason", "base fit in a local minimum"},
                                   {"via", via},
@@ -820,6 +866,35 @@ struct DiagnosisRun {
     return Status::Ok();
   }
 
+  // 7. The final model refitted at the job's own discretisation from the compared optimum, when
+  // the models were compared on a coarser one: the report's final parameters are then the job's
+  // grid's and time step's. A failed refit leaves the compared final fit, with the error.
+  void RefitAtTheJobsDiscretisation() {
+    report.compared_at = {{"cells", config.solver.cells}, {"substeps", config.solver.substeps}};
+    if (SameDiscretisation(job.solver, config.solver) || Cancelled()) return;
+    const TestedCandidate* winner = report.winner >= 0 ? &report.tested[report.winner] : nullptr;
+    const inverse::JobConfig final_config =
+        RefitConfig(job, winner != nullptr ? winner->fitted : base.fitted,
+                    winner != nullptr ? winner->parameters : p0);
+    Stage("final model refitted at the job's discretisation (compared at " +
+          std::to_string(config.solver.cells) + " cells, " +
+          std::to_string(config.solver.substeps) + " substeps per frame)");
+    const auto refit_begin = Clock::now();
+    Result<inverse::FitResult> fit = std::move(RunFits({final_config}).front());
+    const double seconds = std::chrono::duration<double>(Clock::now() - refit_begin).count();
+    if (!fit.ok()) {
+      report.compared_at["final_refit"] = {{"error", fit.status().message()}, {"seconds", seconds}};
+      return;
+    }
+    report.final_fit = inverse::ToJson(*fit);
+    if (winner != nullptr) {
+      report.final_values =
+          ExtensionValues(winner->test.extension, fit->Best().final, DefaultK(fit->Best().final));
+    }
+    report.compared_at["final_refit"] = {
+        {"cells", fit->cells}, {"substeps", fit->substeps}, {"seconds", seconds}};
+  }
+
   // The PNG plots, when a folder is given.
   Status WritePlots() {
     if (options.plot_directory.empty()) return Status::Ok();
@@ -878,8 +953,23 @@ Status DiagnoseOptions::Validate() const {
   if (patches < 1) return json::Invalid("patches", patches, "must be >= 1");
   if (default_heldout_every < 2)
     return json::Invalid("default_heldout_every", default_heldout_every, "must be >= 2");
+  if (comparison_cells != 0 && comparison_cells < 2)
+    return json::Invalid("comparison_cells", comparison_cells, "must be 0 (the job's) or >= 2");
+  if (comparison_substeps < 0)
+    return json::Invalid("comparison_substeps", comparison_substeps, "must be >= 0");
   return Status::Ok();
 }
+
+namespace {
+
+Result<DiagnosisReport> DiagnoseAt(const capture::Capture& capture, const inverse::JobConfig& job,
+                                   inverse::JobConfig compared, const DiagnoseOptions& options,
+                                   const inverse::FitResult* base_fit) {
+  DiagnosisRun run(capture, job, std::move(compared), options);
+  return run.Run(base_fit, base_fit != nullptr);
+}
+
+}  // namespace
 
 Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
                                  const inverse::JobConfig& config_in,
@@ -890,9 +980,12 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
   config.diagnose = false;
   if (config.heldout_every == 0) config.heldout_every = options.default_heldout_every;
   SOFTID_RETURN_IF_ERROR(config.Validate());
-  DiagnosisRun run(capture, std::move(config), options);
-  // A given fit serves only when it held out the frames the diagnosis holds out.
-  return run.Run(base_fit, config_in.heldout_every > 0);
+  inverse::JobConfig compared = ComparisonConfig(config, options);
+  // A given fit serves only when it held out the frames the diagnosis holds out, on the grid and
+  // time step the models are compared on.
+  const bool usable =
+      base_fit != nullptr && config_in.heldout_every > 0 && RanAt(*base_fit, compared.solver);
+  return DiagnoseAt(capture, config, std::move(compared), options, usable ? base_fit : nullptr);
 }
 
 }  // namespace softid::diagnosis

@@ -8,8 +8,10 @@
 //   ignores the key.
 //
 // Cost: the base fit, one adjoint and ~20 forward runs of screening, max_refits fits, and the
-// identifiability analysis (2 adjoint runs per fitted variable) of the final model. A capture whose
-// base fit is at the noise floor stops after the base fit and its identifiability.
+// identifiability analysis (2 adjoint runs per fitted variable) of the final model, all on the
+// comparison discretisation (DiagnoseOptions::comparison_cells), then one fit of the final model on
+// the job's when that is finer. A capture whose base fit is at the noise floor stops after the
+// base fit and its identifiability (and that refit).
 #pragma once
 
 #include <atomic>
@@ -50,6 +52,16 @@ struct DiagnoseOptions {
   int max_base_restarts = 1;
   // Run the identifiability analysis of the final model (2 adjoint runs per fitted variable).
   bool identifiability = true;
+  // The grid (cells along the longest side) and time step (substeps per frame) the models are
+  // compared on, at most [-], >= 0; 0 = the job's own. Comparing models needs one discretisation
+  // for all of them, not a converged one, and a fit's "auto" choice on a contact-rich capture
+  // (16 cells x 16 substeps on a cube sliding down a ramp) makes each of the diagnosis' few
+  // hundred simulations ~16x dearer than 10 x 4, which is what the concealed-effect benchmark runs
+  // (softid-lab prove-diagnosis: 6 of 6 effects named, 0 of 21 false alarms). When the job's
+  // discretisation is finer (or "auto"), the final model is refitted at the job's own from the
+  // compared optimum, and that fit is the report's final_fit.
+  int comparison_cells = 10;
+  int comparison_substeps = 4;
   // Folder for the PNG plots; empty = no plots.
   std::filesystem::path plot_directory;
   // Stage messages ("base fit", "screening", ...), and the fits' progress and cancellation.
@@ -84,6 +96,8 @@ struct TestedCandidate {
   // extension at its null, {"cost", "heldout", "replaced_null"} (or {"error"}); a lower cost
   // replaces the null's (cost_before, heldout_before, LR) and the gates are applied again.
   nlohmann::json null_refit;
+  // The refit's free parameters (the base model's and the extension's; with a nuisance's too).
+  std::vector<std::string> fitted;
   // That null refit itself, when it fitted the base model's parameters only (a base restart then
   // reuses it instead of fitting the same start again).
   std::optional<inverse::FitResult> null_fit;
@@ -105,6 +119,12 @@ struct DiagnosisReport {
   std::vector<TestedCandidate> tested;
   nlohmann::json nuisances = nlohmann::json::array();
   nlohmann::json base_fit, final_fit;  // result.json
+  // The discretisation the models were compared on, {"cells", "substeps"}, and when the final
+  // model was then refitted at the job's own (DiagnoseOptions::comparison_cells), that refit's
+  // {"cells", "substeps", "seconds"} as "final_refit"; final_fit is then that refit.
+  nlohmann::json compared_at;
+  // The winner's extension values in that final refit (null without one): the finding's values.
+  nlohmann::json final_values;
   // Earlier base fits left because a refit showed a lower null (DiagnoseOptions::
   // max_base_restarts): {"reason", "via", "cost_before", "cost_after", "first_decision",
   // "first_report" (the diagnosis.json of that base)}, oldest first.

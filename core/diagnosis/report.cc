@@ -83,9 +83,13 @@ std::string Join(const std::vector<std::string>& v) {
 }
 
 // The missing physics the diagnosis found, with where the base model missed.
+// The finding's values are the final refit's on the job's discretisation when there was one
+// ("compared_parameters": the refit's on the comparison's).
 nlohmann::json FindingJson(const DiagnosisReport& r, const TestedCandidate& w) {
+  const bool refitted = !r.final_values.is_null();
   return {{"physics", ToString(w.test.extension)},
-          {"parameters", w.values},
+          {"parameters", refitted ? r.final_values : w.values},
+          {"compared_parameters", w.values},
           {"uncertainty", w.uncertainty},
           {"profile", w.profile},
           {"cost_before", w.test.cost_before},
@@ -226,6 +230,7 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
   out["base_restarts"] = r.base_restarts;
   out["base_fit"] = r.base_fit;
   out["final_fit"] = r.final_fit;
+  out["compared_at"] = r.compared_at;
   out["identifiability"] = r.identifiability;
   out["plots"] = r.plots;
   out["seconds"] = r.seconds;

@@ -241,6 +241,10 @@ Result<diagnosis::DiagnosisReport> DiagnoseCase(const Case& c, const scenes::Con
   FixGround(scene.scene, &config);
   diagnosis::DiagnoseOptions options = DiagnoseOptionsForLab(config, "[" + c.name + "] ");
   options.decision.max_refits = flags.max_refits;
+  // The models are compared on the fit's grid and time step (--fit-cells, --fit-substeps), which
+  // the defaults (10, 4) make the diagnosis' own comparison discretisation.
+  options.comparison_cells = 0;
+  options.comparison_substeps = 0;
   options.plot_directory = dir / "diagnosis_plots";
   return diagnosis::Diagnose(capture, config, options);
 }

@@ -101,10 +101,47 @@ TEST(Diagnose, FindsConcealedFrictionOnARamp) {
   EXPECT_EQ(json["findings"][0]["physics"], "friction");
   EXPECT_EQ(json["base_fit"]["format"], "softid-result/1");
   EXPECT_TRUE(json["final_fit"]["parameters"].contains("friction_coefficient"));
+  // The job's discretisation is no finer than the comparison's: the models are compared on it and
+  // the final fit is the winner's refit.
+  EXPECT_EQ(json["compared_at"]["cells"], 8);
+  EXPECT_EQ(json["compared_at"]["substeps"], 2);
+  EXPECT_FALSE(json["compared_at"].contains("final_refit"));
   // The screening's share of the wall time.
   EXPECT_GT(report->screening_seconds, 0.0);
   EXPECT_LT(report->screening_seconds, report->seconds);
   EXPECT_EQ(json["screening_seconds"], report->screening_seconds);
+}
+
+// A job on a finer grid and time step than the comparison's: the models are compared on the
+// comparison's, and the final model is refitted on the job's from the compared optimum, which
+// names friction and values it near the truth on the job's discretisation.
+TEST(Diagnose, AFinerJobIsComparedCoarserAndRefittedOnItsOwnDiscretisation) {
+  RampCapture ramp(0.3);
+  inverse::JobConfig config = ramp.BaseConfig();
+  config.solver.cells = 10;
+  config.solver.substeps = 4;
+  DiagnoseOptions options = SmallOptions();
+  options.comparison_cells = 8;
+  options.comparison_substeps = 2;
+  Result<DiagnosisReport> report = Diagnose(ramp.capture, config, options);
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  EXPECT_EQ(report->decision, "friction") << ToText(*report);
+  const nlohmann::json json = ToJson(*report);
+  EXPECT_EQ(json["base_fit"]["grid"]["cells"], 8);
+  EXPECT_EQ(json["base_fit"]["time_step"]["substeps"], 2);
+  EXPECT_EQ(json["compared_at"]["cells"], 8);
+  EXPECT_EQ(json["compared_at"]["substeps"], 2);
+  ASSERT_TRUE(json["compared_at"].contains("final_refit")) << json["compared_at"].dump();
+  EXPECT_EQ(json["compared_at"]["final_refit"]["cells"], 10);
+  EXPECT_EQ(json["compared_at"]["final_refit"]["substeps"], 4);
+  EXPECT_EQ(json["final_fit"]["grid"]["cells"], 10);
+  EXPECT_EQ(json["final_fit"]["time_step"]["substeps"], 4);
+  const double mu = json["final_fit"]["parameters"]["friction_coefficient"]["value"];
+  EXPECT_NEAR(mu, 0.3, 0.1);
+  // The finding gives the final refit's value, and the compared one beside it.
+  ASSERT_EQ(json["findings"].size(), 1u);
+  EXPECT_EQ(json["findings"][0]["parameters"]["friction_coefficient"].get<double>(), mu);
+  EXPECT_EQ(json["findings"][0]["compared_parameters"], report->tested[report->winner].values);
 }
 
 // The refits run in batches through options.run_fits; a runner that runs each batch's fits in
@@ -398,6 +435,13 @@ TEST(Diagnose, RejectsBadOptionsAndConfigs) {
                 .status()
                 .message()
                 .find("default_heldout_every = 1"),
+            std::string::npos);
+  options = DiagnoseOptions();
+  options.comparison_cells = 1;
+  EXPECT_NE(Diagnose(empty, inverse::JobConfig(), options)
+                .status()
+                .message()
+                .find("comparison_cells = 1"),
             std::string::npos);
   options = DiagnoseOptions();
   options.max_base_restarts = -1;
