@@ -199,10 +199,12 @@ bool RanAt(const inverse::FitResult& fit, const inverse::SolverOptions& solver) 
 }
 
 // The diagnosis of `job` with the models compared under `compared` (ComparisonConfig); a base
-// restart runs it again from a better base.
+// restart runs it again from a better base. `job_fit`: the job's own fit, if given, on the job's
+// discretisation (the final model when that is the base model).
 Result<DiagnosisReport> DiagnoseAt(const capture::Capture& capture, const inverse::JobConfig& job,
                                    inverse::JobConfig compared, const DiagnoseOptions& options,
-                                   const inverse::FitResult* base_fit);
+                                   const inverse::FitResult* base_fit,
+                                   const inverse::FitResult* job_fit);
 
 // One diagnosis: the base fit and the evaluation context every later stage shares, the report it
 // fills, and the stages (numbered as in diagnose.h) as methods.
@@ -212,7 +214,8 @@ struct DiagnosisRun {
   const DecisionOptions& rule;
   const Clock::time_point begin = Clock::now();
   const inverse::JobConfig job;  // as the job gave it: its discretisation is the final model's
-  inverse::JobConfig config;     // the base config compared on, "auto" resolved after the base fit
+  const inverse::FitResult* job_fit = nullptr;  // the job's own fit of the base model, if given
+  inverse::JobConfig config;  // the base config compared on, "auto" resolved after the base fit
   DiagnosisReport report;
   inverse::FitResult base;
   fem::PhysicalParameters p0;  // the base fit's parameters
@@ -797,7 +800,7 @@ struct DiagnosisRun {
         DiagnoseOptions next = options;
         next.max_base_restarts = options.max_base_restarts - 1;
         SOFTID_ASSIGN_OR_RETURN(DiagnosisReport restarted,
-                                DiagnoseAt(capture, job, config, next, &*better));
+                                DiagnoseAt(capture, job, config, next, &*better, nullptr));
         report.seconds = std::chrono::duration<double>(Clock::now() - begin).count();
         nlohmann::json restart = {{"reason", "base fit in a local minimum"},
                                   {"via", via},
@@ -873,6 +876,15 @@ struct DiagnosisRun {
     report.compared_at = {{"cells", config.solver.cells}, {"substeps", config.solver.substeps}};
     if (SameDiscretisation(job.solver, config.solver) || Cancelled()) return;
     const TestedCandidate* winner = report.winner >= 0 ? &report.tested[report.winner] : nullptr;
+    if (winner == nullptr && job_fit != nullptr) {
+      // The final model is the base model, which the job has just fitted on its discretisation.
+      report.final_fit = inverse::ToJson(*job_fit);
+      report.compared_at["final_refit"] = {{"cells", job_fit->cells},
+                                           {"substeps", job_fit->substeps},
+                                           {"seconds", 0.0},
+                                           {"reused", "the job's fit"}};
+      return;
+    }
     const inverse::JobConfig final_config =
         RefitConfig(job, winner != nullptr ? winner->fitted : base.fitted,
                     winner != nullptr ? winner->parameters : p0);
@@ -964,8 +976,10 @@ namespace {
 
 Result<DiagnosisReport> DiagnoseAt(const capture::Capture& capture, const inverse::JobConfig& job,
                                    inverse::JobConfig compared, const DiagnoseOptions& options,
-                                   const inverse::FitResult* base_fit) {
+                                   const inverse::FitResult* base_fit,
+                                   const inverse::FitResult* job_fit) {
   DiagnosisRun run(capture, job, std::move(compared), options);
+  run.job_fit = job_fit;
   return run.Run(base_fit, base_fit != nullptr);
 }
 
@@ -985,7 +999,10 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
   // time step the models are compared on.
   const bool usable =
       base_fit != nullptr && config_in.heldout_every > 0 && RanAt(*base_fit, compared.solver);
-  return DiagnoseAt(capture, config, std::move(compared), options, usable ? base_fit : nullptr);
+  const inverse::FitResult* job_fit =
+      base_fit != nullptr && RanAt(*base_fit, config.solver) ? base_fit : nullptr;
+  return DiagnoseAt(capture, config, std::move(compared), options, usable ? base_fit : nullptr,
+                    job_fit);
 }
 
 }  // namespace softid::diagnosis

@@ -138,8 +138,10 @@ struct DiagnosisReport {
 // Runs the diagnosis. The config's fit set is the base model; heldout_every 0 is replaced by
 // options.default_heldout_every; config.diagnose is ignored.
 // @param base_fit optional: the finished fit of `capture` under `config` (a caller that has just
-//   run it, like the service); used as the base model when config.heldout_every > 0, otherwise
-//   the base is refitted with held-out frames (the decision needs frames the fits did not see).
+//   run it, like the service); used as the base model when config.heldout_every > 0 and it ran on
+//   the comparison discretisation, otherwise the base is refitted (the decision needs frames the
+//   fits did not see, and models compared on one discretisation). When the final model is the
+//   base model, it is the final fit (instead of a refit on the job's discretisation).
 // Errors: InvalidArgument for invalid options or a config that does not fit the capture (as
 // inverse::Fit), FailedPrecondition when the base fit fails.
 Result<DiagnosisReport> Diagnose(const capture::Capture& capture, const inverse::JobConfig& config,

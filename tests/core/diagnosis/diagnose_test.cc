@@ -252,6 +252,25 @@ TEST(Diagnose, ControlWithoutEffectGivesNone) {
   ASSERT_TRUE(report.ok()) << report.status().ToString();
   EXPECT_EQ(report->decision, "none") << ToText(*report);
   EXPECT_TRUE(ToJson(*report)["findings"].empty());
+
+  // A job on a finer discretisation than the comparison's, diagnosed after its own fit (as the
+  // service and "diagnose": true do): the models are compared on the comparison's, and as the
+  // final model is the base model, the job's fit is the final fit (not refitted).
+  inverse::JobConfig job = ramp.BaseConfig();
+  job.solver.cells = 10;
+  job.solver.substeps = 4;
+  Result<inverse::FitResult> job_fit = inverse::Fit(ramp.capture, job);
+  ASSERT_TRUE(job_fit.ok()) << job_fit.status().ToString();
+  DiagnoseOptions options = SmallOptions();
+  options.comparison_cells = 8;
+  options.comparison_substeps = 2;
+  report = Diagnose(ramp.capture, job, options, &*job_fit);
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  EXPECT_EQ(report->decision, "none") << ToText(*report);
+  const nlohmann::json json = ToJson(*report);
+  EXPECT_EQ(json["base_fit"]["grid"]["cells"], 8);
+  EXPECT_EQ(json["compared_at"]["final_refit"]["reused"], "the job's fit");
+  EXPECT_EQ(json["final_fit"], inverse::ToJson(*job_fit));
 }
 
 // The same control diagnosed from a base fit stopped far from its optimum (one iteration from
