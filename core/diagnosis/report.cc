@@ -203,6 +203,28 @@ void WriteRefitText(const TestedCandidate& t, std::ostream& out) {
   }
 }
 
+// "models compared on 10 cells, 4 substeps; final model refitted on 16 cells, 16 substeps (309 s)".
+void WriteComparedAtText(const nlohmann::json& compared_at, std::ostream& out) {
+  if (!compared_at.is_object()) return;
+  out << "models compared on " << compared_at.value("cells", 0) << " cells, "
+      << compared_at.value("substeps", 0) << " substeps per frame";
+  if (compared_at.contains("final_refit")) {
+    const nlohmann::json& refit = compared_at["final_refit"];
+    if (refit.contains("error")) {
+      out << "; the final refit on the job's discretisation failed: "
+          << refit["error"].get<std::string>();
+    } else if (refit.contains("reused")) {
+      out << "; final model: " << refit["reused"].get<std::string>() << " on "
+          << refit.value("cells", 0) << " cells, " << refit.value("substeps", 0) << " substeps";
+    } else {
+      out << "; final model refitted on " << refit.value("cells", 0) << " cells, "
+          << refit.value("substeps", 0) << " substeps (" << Fixed(refit.value("seconds", 0.0))
+          << " s)";
+    }
+  }
+  out << "\n";
+}
+
 }  // namespace
 
 nlohmann::json ToJson(const DiagnosisReport& r) {
@@ -249,7 +271,8 @@ std::string ToText(const DiagnosisReport& r) {
   for (size_t i = 0; i < r.tested.size(); ++i) WriteRefitText(r.tested[i], out);
   if (r.winner >= 0 && !r.tested[r.winner].test.nuisance) {
     const TestedCandidate& w = r.tested[r.winner];
-    out << "missing physics: " << ToString(w.test.extension) << " " << w.values.dump()
+    out << "missing physics: " << ToString(w.test.extension) << " "
+        << (r.final_values.is_null() ? w.values : r.final_values).dump()
         << (w.test.conditional ? std::string(" (given ") + ToString(w.test.given) + ")"
                                : std::string())
         << "; held-out cost down " << Fixed(100.0 * (1.0 - w.test.heldout_after / r.base_heldout))
@@ -262,6 +285,7 @@ std::string ToText(const DiagnosisReport& r) {
         << b.value("via", std::string()) << " refit; first decision "
         << b.value("first_decision", std::string()) << ")\n";
   }
+  WriteComparedAtText(r.compared_at, out);
   if (!r.plots.empty()) out << "plots: " << Join(r.plots) << "\n";
   return out.str();
 }

@@ -142,6 +142,10 @@ TEST(Diagnose, AFinerJobIsComparedCoarserAndRefittedOnItsOwnDiscretisation) {
   ASSERT_EQ(json["findings"].size(), 1u);
   EXPECT_EQ(json["findings"][0]["parameters"]["friction_coefficient"].get<double>(), mu);
   EXPECT_EQ(json["findings"][0]["compared_parameters"], report->tested[report->winner].values);
+  EXPECT_NE(ToText(*report).find("models compared on 8 cells, 2 substeps per frame; final model "
+                                 "refitted on 10 cells, 4 substeps"),
+            std::string::npos)
+      << ToText(*report);
 }
 
 // The refits run in batches through options.run_fits; a runner that runs each batch's fits in
@@ -270,6 +274,10 @@ TEST(Diagnose, ControlWithoutEffectGivesNone) {
   const nlohmann::json json = ToJson(*report);
   EXPECT_EQ(json["base_fit"]["grid"]["cells"], 8);
   EXPECT_EQ(json["compared_at"]["final_refit"]["reused"], "the job's fit");
+  EXPECT_NE(ToText(*report).find("models compared on 8 cells, 2 substeps per frame; final model: "
+                                 "the job's fit on 10 cells, 4 substeps"),
+            std::string::npos)
+      << ToText(*report);
   EXPECT_EQ(json["final_fit"], inverse::ToJson(*job_fit));
 }
 
