@@ -167,22 +167,16 @@ inverse::IdentifiabilityOptions IdentifiabilityOptionsFor(const inverse::JobConf
 }
 
 // The job's config with its grid and time step capped at the options' comparison discretisation.
-// A coarsened config skips the fit's own uncertainty: the final refit at the job's discretisation
-// estimates it.
 inverse::JobConfig ComparisonConfig(inverse::JobConfig config, const DiagnoseOptions& options) {
   inverse::SolverOptions& solver = config.solver;
-  bool coarsened = false;
   if (options.comparison_cells > 0 && solver.cell_size_m == 0.0 &&
       (solver.cells == inverse::kAutoCells || solver.cells > options.comparison_cells)) {
     solver.cells = options.comparison_cells;
-    coarsened = true;
   }
   if (options.comparison_substeps > 0 && (solver.substeps == inverse::kAutoSubsteps ||
                                           solver.substeps > options.comparison_substeps)) {
     solver.substeps = options.comparison_substeps;
-    coarsened = true;
   }
-  if (coarsened) config.uncertainty = false;
   return config;
 }
 
@@ -199,10 +193,13 @@ bool RanAt(const inverse::FitResult& fit, const inverse::SolverOptions& solver) 
 }
 
 // The diagnosis of `job` with the models compared under `compared` (ComparisonConfig); a base
-// restart runs it again from a better base. `job_fit`: the job's own fit, if given, on the job's
-// discretisation (the final model when that is the base model).
+// restart runs it again from a better base. `compared_coarser`: whether ComparisonConfig changed
+// the job's grid or time step (decided before "auto" resolves, so a restart passes it on).
+// `job_fit`: the job's own fit, if given, on the job's discretisation (the final model when that
+// is the base model).
 Result<DiagnosisReport> DiagnoseAt(const capture::Capture& capture, const inverse::JobConfig& job,
-                                   inverse::JobConfig compared, const DiagnoseOptions& options,
+                                   inverse::JobConfig compared, bool compared_coarser,
+                                   const DiagnoseOptions& options,
                                    const inverse::FitResult* base_fit,
                                    const inverse::FitResult* job_fit);
 
@@ -213,7 +210,8 @@ struct DiagnosisRun {
   const DiagnoseOptions& options;
   const DecisionOptions& rule;
   const Clock::time_point begin = Clock::now();
-  const inverse::JobConfig job;  // as the job gave it: its discretisation is the final model's
+  const inverse::JobConfig job;   // as the job gave it: its discretisation is the final model's
+  bool compared_coarser = false;  // the models are compared on a coarser grid or time step
   const inverse::FitResult* job_fit = nullptr;  // the job's own fit of the base model, if given
   inverse::JobConfig config;  // the base config compared on, "auto" resolved after the base fit
   DiagnosisReport report;
@@ -245,8 +243,8 @@ struct DiagnosisRun {
   }
 
   // The whole diagnosis, or the diagnosis restarted from a better base fit (4b).
-  Result<DiagnosisReport> Run(const inverse::FitResult* base_fit, bool base_fit_usable) {
-    SOFTID_RETURN_IF_ERROR(FitBase(base_fit_usable ? base_fit : nullptr));
+  Result<DiagnosisReport> Run(const inverse::FitResult* base_fit) {
+    SOFTID_RETURN_IF_ERROR(FitBase(base_fit));
     SOFTID_RETURN_IF_ERROR(BuildContext());
     SOFTID_RETURN_IF_ERROR(LocateMismatch());
     final_residuals = r0;
@@ -799,8 +797,9 @@ struct DiagnosisRun {
         Stage(why.str());
         DiagnoseOptions next = options;
         next.max_base_restarts = options.max_base_restarts - 1;
-        SOFTID_ASSIGN_OR_RETURN(DiagnosisReport restarted,
-                                DiagnoseAt(capture, job, config, next, &*better, nullptr));
+        SOFTID_ASSIGN_OR_RETURN(
+            DiagnosisReport restarted,
+            DiagnoseAt(capture, job, config, compared_coarser, next, &*better, nullptr));
         report.seconds = std::chrono::duration<double>(Clock::now() - begin).count();
         nlohmann::json restart = {{"reason", "base fit in a local minimum"},
                                   {"via", via},
@@ -874,7 +873,7 @@ struct DiagnosisRun {
   // grid's and time step's. A failed refit leaves the compared final fit, with the error.
   void RefitAtTheJobsDiscretisation() {
     report.compared_at = {{"cells", config.solver.cells}, {"substeps", config.solver.substeps}};
-    if (SameDiscretisation(job.solver, config.solver) || Cancelled()) return;
+    if (!compared_coarser || Cancelled()) return;
     const TestedCandidate* winner = report.winner >= 0 ? &report.tested[report.winner] : nullptr;
     if (winner == nullptr && job_fit != nullptr) {
       // The final model is the base model, which the job has just fitted on its discretisation.
@@ -975,12 +974,14 @@ Status DiagnoseOptions::Validate() const {
 namespace {
 
 Result<DiagnosisReport> DiagnoseAt(const capture::Capture& capture, const inverse::JobConfig& job,
-                                   inverse::JobConfig compared, const DiagnoseOptions& options,
+                                   inverse::JobConfig compared, bool compared_coarser,
+                                   const DiagnoseOptions& options,
                                    const inverse::FitResult* base_fit,
                                    const inverse::FitResult* job_fit) {
   DiagnosisRun run(capture, job, std::move(compared), options);
+  run.compared_coarser = compared_coarser;
   run.job_fit = job_fit;
-  return run.Run(base_fit, base_fit != nullptr);
+  return run.Run(base_fit);
 }
 
 }  // namespace
@@ -995,14 +996,15 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
   if (config.heldout_every == 0) config.heldout_every = options.default_heldout_every;
   SOFTID_RETURN_IF_ERROR(config.Validate());
   inverse::JobConfig compared = ComparisonConfig(config, options);
+  const bool compared_coarser = !SameDiscretisation(config.solver, compared.solver);
   // A given fit serves only when it held out the frames the diagnosis holds out, on the grid and
   // time step the models are compared on.
   const bool usable =
       base_fit != nullptr && config_in.heldout_every > 0 && RanAt(*base_fit, compared.solver);
   const inverse::FitResult* job_fit =
       base_fit != nullptr && RanAt(*base_fit, config.solver) ? base_fit : nullptr;
-  return DiagnoseAt(capture, config, std::move(compared), options, usable ? base_fit : nullptr,
-                    job_fit);
+  return DiagnoseAt(capture, config, std::move(compared), compared_coarser, options,
+                    usable ? base_fit : nullptr, job_fit);
 }
 
 }  // namespace softid::diagnosis

@@ -279,6 +279,18 @@ TEST(Diagnose, ControlWithoutEffectGivesNone) {
             std::string::npos)
       << ToText(*report);
   EXPECT_EQ(json["final_fit"], inverse::ToJson(*job_fit));
+
+  // Compared on the job's own discretisation (comparison 0 / 0) with its time step "auto": the
+  // resolved step is the job's, so nothing is refitted after the comparison.
+  job = ramp.BaseConfig();
+  job.solver.substeps = inverse::kAutoSubsteps;
+  options.comparison_cells = 0;
+  options.comparison_substeps = 0;
+  report = Diagnose(ramp.capture, job, options);
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  EXPECT_EQ(report->decision, "none") << ToText(*report);
+  EXPECT_FALSE(ToJson(*report)["compared_at"].contains("final_refit"))
+      << ToJson(*report)["compared_at"].dump();
 }
 
 // The same control diagnosed from a base fit stopped far from its optimum (one iteration from
