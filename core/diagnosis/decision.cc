@@ -20,6 +20,9 @@ Status DecisionOptions::Validate() const {
     return json::Invalid("decision.min_phase_frames", min_phase_frames, "must be >= 1");
   if (min_patch_points < 1)
     return json::Invalid("decision.min_patch_points", min_patch_points, "must be >= 1");
+  if (!(min_excess_explained > 0.0 && min_excess_explained <= 1.0))
+    return json::Invalid("decision.min_excess_explained", min_excess_explained,
+                         "must lie in (0, 1]");
   if (max_refits < 1) return json::Invalid("decision.max_refits", max_refits, "must be >= 1");
   return Status::Ok();
 }
@@ -34,9 +37,10 @@ std::string CandidateTest::Reason() const {
     why << sep() << "held-out cost changed by "
         << (heldout_before > 0 ? 100.0 * (heldout_after / heldout_before - 1.0) : 0.0) << " %";
   }
-  if (!returned_to_noise) {
+  if (!misfit_passed) {
     why << sep() << "still above the noise level:";
     for (const std::string& s : still_flagged) why << " " << s;
+    why << " (" << 100.0 * excess_explained << " % of the misfit above the noise removed)";
   }
   if (!plausible) why << sep() << "implausible: " << plausibility_note;
   if (!identifiable) why << sep() << "not identifiable: " << identifiability_note;
@@ -53,9 +57,14 @@ void ApplyDecisionRule(const DecisionOptions& options, const Candidate& candidat
   test->heldout_passed =
       test->heldout_before > 0.0 &&
       test->heldout_after <= (1.0 - options.min_heldout_improvement) * test->heldout_before;
+  const double excess = test->cost_before - test->floor_cost;
+  test->excess_explained = excess > 0.0 ? (test->cost_before - test->cost_after) / excess : 0.0;
   test->returned_to_noise = test->refit_error.empty() && test->still_flagged.empty();
+  test->misfit_passed =
+      test->returned_to_noise ||
+      (test->refit_error.empty() && test->excess_explained >= options.min_excess_explained);
   test->accepted = test->refit_error.empty() && test->lr_passed && test->heldout_passed &&
-                   test->returned_to_noise && test->plausible && test->identifiable;
+                   test->misfit_passed && test->plausible && test->identifiable;
 }
 
 void ApplyNuisanceCheck(const DecisionOptions& options, const Candidate& nuisance,

@@ -616,6 +616,7 @@ struct DiagnosisRun {
       TestedCandidate tested;
       tested.test.extension = plan.candidate->extension;
       tested.test.cost_before = r0.cost;
+      tested.test.floor_cost = 0.5 * sigma * sigma;
       tested.test.heldout_before = r0.heldout;
       tested.starts = nlohmann::json::array();
       inverse::JobConfig used = config;
@@ -678,6 +679,7 @@ struct DiagnosisRun {
       tested.test.conditional = true;
       tested.test.given = nuisance_candidate.extension;
       tested.test.cost_before = nuisance.test.cost_after;
+      tested.test.floor_cost = 0.5 * sigma * sigma;
       tested.test.heldout_before = nuisance.test.heldout_after;
       tested.test.physics_cost = physics.test.cost_after;
       tested.test.physics_heldout = physics.test.heldout_after;

@@ -48,6 +48,8 @@ nlohmann::json ToJson(const CandidateTest& t) {
           {"lr_passed", t.lr_passed},
           {"heldout_passed", t.heldout_passed},
           {"returned_to_noise", t.returned_to_noise},
+          {"excess_explained", t.excess_explained},
+          {"misfit_passed", t.misfit_passed},
           {"still_flagged", t.still_flagged},
           {"plausible", t.plausible},
           {"plausibility_note", t.plausibility_note},
@@ -192,7 +194,14 @@ void WriteRefitText(const TestedCandidate& t, std::ostream& out) {
   out << "\n    cost " << Fixed(t.test.cost_before) << " -> " << Fixed(t.test.cost_after)
       << " m^2, held-out " << Fixed(t.test.heldout_before) << " -> " << Fixed(t.test.heldout_after)
       << " m^2, LR " << Fixed(t.test.lr) << " (critical " << Fixed(t.test.critical_value) << ")"
-      << (t.test.accepted ? ": accepted" : ": rejected: " + t.test.Reason()) << "\n";
+      << (t.test.accepted ? ": accepted" : ": rejected: " + t.test.Reason());
+  if (t.test.accepted && !t.test.returned_to_noise) {
+    out << " (removes " << Fixed(100.0 * t.test.excess_explained)
+        << " % of the misfit above the noise; still above it:";
+    for (const std::string& s : t.test.still_flagged) out << " " << s;
+    out << ")";
+  }
+  out << "\n";
   if (t.test.conditional) {
     out << "    " << ToString(t.test.given) << " given " << ToString(t.test.extension) << ": "
         << t.nuisance_values.dump() << ", cost " << Fixed(t.test.physics_cost) << " -> "

@@ -57,6 +57,47 @@ TEST(DecisionRule, EachGateRejects) {
   EXPECT_FALSE(vague.accepted);
 }
 
+// Gate c on physics another code wrote: cells the codes' own difference keeps above the threshold
+// do not reject a candidate that removes most of the base's misfit above the noise floor (the
+// numbers of a CalculiX ramp with friction 0.3), while one that removes half of it (the best
+// candidate on the same ramp without friction) stays rejected.
+TEST(DecisionRule, ACandidateThatRemovesMostOfTheExcessPassesGateC) {
+  const DecisionOptions options;
+  CandidateTest friction = Passing(Extension::kFriction);
+  friction.cost_before = 2.218e-5;
+  friction.cost_after = 1.891e-6;
+  friction.floor_cost = 0.5 * 0.588e-3 * 0.588e-3;
+  friction.still_flagged = {"patch 0 (-y top)", "impact"};
+  ApplyDecisionRule(options, GetCandidate(Extension::kFriction), &friction);
+  EXPECT_NEAR(friction.excess_explained, 0.922, 1e-3);
+  EXPECT_FALSE(friction.returned_to_noise);
+  EXPECT_TRUE(friction.misfit_passed);
+  EXPECT_TRUE(friction.accepted) << friction.Reason();
+
+  CandidateTest split = Passing(Extension::kHeterogeneousStiffness);
+  split.cost_before = 4.843e-7;
+  split.cost_after = 3.416e-7;
+  split.floor_cost = 0.5 * 0.6056e-3 * 0.6056e-3;
+  split.still_flagged = {"patch 3 (+x top)"};
+  ApplyDecisionRule(options, GetCandidate(Extension::kHeterogeneousStiffness), &split);
+  EXPECT_NEAR(split.excess_explained, 0.475, 1e-3);
+  EXPECT_FALSE(split.accepted);
+  EXPECT_NE(split.Reason().find("47.4"), std::string::npos) << split.Reason();
+
+  // At min_excess_explained 1 only a fit down to the noise floor passes with cells still flagged.
+  DecisionOptions strict;
+  strict.min_excess_explained = 1.0;
+  ApplyDecisionRule(strict, GetCandidate(Extension::kFriction), &friction);
+  EXPECT_FALSE(friction.accepted);
+  // A base already at the floor has no excess to explain.
+  CandidateTest at_floor = Passing(Extension::kFriction);
+  at_floor.floor_cost = at_floor.cost_before;
+  at_floor.still_flagged = {"sliding"};
+  ApplyDecisionRule(options, GetCandidate(Extension::kFriction), &at_floor);
+  EXPECT_EQ(at_floor.excess_explained, 0.0);
+  EXPECT_FALSE(at_floor.accepted);
+}
+
 // The stiffness split axis is chosen among 3 on the same data: its level is alpha / 3.
 TEST(DecisionRule, BonferroniForChosenVariants) {
   CandidateTest t = Passing(Extension::kHeterogeneousStiffness);
@@ -202,10 +243,13 @@ TEST(DecisionRule, NuisanceThatExplainsEverythingIsNeverPhysics) {
   EXPECT_EQ(Decide(true, {s.spin, weak_alone, nothing}, &winner), "none");
 }
 
-// Neither model explains everything alone (each leaves the other's signature), the joint model
-// does: the physics is found given the nuisance.
+// Neither model explains everything alone (each leaves the other's signature, and removes under
+// min_excess_explained of the base's cost above the floor: 70 % and 75 %), the joint model does:
+// the physics is found given the nuisance.
 TEST(DecisionRule, JointModelExplainsWhatNeitherDoesAlone) {
   SpinAndStiffness s;
+  s.spin.cost_after = 6.0e-6;
+  s.stiffness.cost_after = 5.0e-6;
   s.spin.still_flagged = {"flight"};
   s.stiffness.still_flagged = {"rebound"};
   for (CandidateTest* t : {&s.spin, &s.stiffness}) {
@@ -227,6 +271,11 @@ TEST(DecisionOptions, ValidateNamesTheField) {
   options = DecisionOptions();
   options.alpha = 0.7;
   EXPECT_NE(options.Validate().message().find("decision.alpha"), std::string::npos);
+  options = DecisionOptions();
+  options.min_excess_explained = 0.0;
+  EXPECT_NE(options.Validate().message().find("decision.min_excess_explained = 0"),
+            std::string::npos)
+      << options.Validate().message();
 }
 
 }  // namespace
