@@ -238,6 +238,9 @@ struct DiagnosisRun {
     if (options.on_stage) options.on_stage(message);
   }
   bool Cancelled() const { return options.fit.cancel != nullptr && options.fit.cancel->load(); }
+  double ElapsedSeconds() const {
+    return std::chrono::duration<double>(Clock::now() - begin).count();
+  }
   double DefaultK(const fem::PhysicalParameters& p) const {
     return fem::DefaultContactStiffness(p.youngs_modulus, context.rest_bounds.sizes().maxCoeff());
   }
@@ -799,10 +802,13 @@ struct DiagnosisRun {
         Stage(why.str());
         DiagnoseOptions next = options;
         next.max_base_restarts = options.max_base_restarts - 1;
+        // The budget counts from the first run's start.
+        if (options.max_seconds > 0.0)
+          next.max_seconds = std::max(1e-3, options.max_seconds - ElapsedSeconds());
         SOFTID_ASSIGN_OR_RETURN(
             DiagnosisReport restarted,
             DiagnoseAt(capture, job, config, compared_coarser, next, &*better, nullptr));
-        report.seconds = std::chrono::duration<double>(Clock::now() - begin).count();
+        report.seconds = ElapsedSeconds();
         nlohmann::json restart = {{"reason", "base fit in a local minimum"},
                                   {"via", via},
                                   {"cost_before", r0.cost},
@@ -886,9 +892,17 @@ struct DiagnosisRun {
                                            {"reused", "the job's fit"}};
       return;
     }
-    const inverse::JobConfig final_config =
+    inverse::JobConfig final_config =
         RefitConfig(job, winner != nullptr ? winner->fitted : base.fitted,
                     winner != nullptr ? winner->parameters : p0);
+    // On the grid and time step the job's own fit chose, when given: its values compare with the
+    // job's, and its "auto" checks are not run again.
+    if (job_fit != nullptr) final_config = inverse::WithFitDiscretisation(final_config, *job_fit);
+    double& limit = final_config.solver.max_seconds;
+    if (options.max_seconds > 0.0) {
+      const double left = std::max(1e-3, options.max_seconds - ElapsedSeconds());
+      limit = limit > 0.0 ? std::min(limit, left) : left;
+    }
     Stage("final model refitted at the job's discretisation (compared at " +
           std::to_string(config.solver.cells) + " cells, " +
           std::to_string(config.solver.substeps) + " substeps per frame)");
@@ -904,8 +918,14 @@ struct DiagnosisRun {
       report.final_values =
           ExtensionValues(winner->test.extension, fit->Best().final, DefaultK(fit->Best().final));
     }
-    report.compared_at["final_refit"] = {
-        {"cells", fit->cells}, {"substeps", fit->substeps}, {"seconds", seconds}};
+    const inverse::StartResult& best = fit->Best();
+    report.compared_at["final_refit"] = {{"cells", fit->cells},
+                                         {"substeps", fit->substeps},
+                                         {"seconds", seconds},
+                                         {"iterations", best.iterations},
+                                         {"converged", best.converged}};
+    if (limit > 0.0 && !best.converged && fit->total_seconds >= limit)
+      report.compared_at["final_refit"]["stopped_at_time_limit_s"] = limit;
   }
 
   // The PNG plots, when a folder is given.
@@ -970,6 +990,8 @@ Status DiagnoseOptions::Validate() const {
     return json::Invalid("comparison_cells", comparison_cells, "must be 0 (the job's) or >= 2");
   if (comparison_substeps < 0)
     return json::Invalid("comparison_substeps", comparison_substeps, "must be >= 0");
+  if (!(max_seconds >= 0.0 && std::isfinite(max_seconds)))
+    return json::Invalid("max_seconds", max_seconds, "must be a finite number >= 0");
   return Status::Ok();
 }
 

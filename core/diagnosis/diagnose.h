@@ -10,8 +10,9 @@
 // Cost: the base fit, one adjoint and ~20 forward runs of screening, max_refits fits, and the
 // identifiability analysis (2 adjoint runs per fitted variable) of the final model, all on the
 // comparison discretisation (DiagnoseOptions::comparison_cells), then one fit of the final model on
-// the job's when that is finer. A capture whose base fit is at the noise floor stops after the
-// base fit and its identifiability (and that refit).
+// the job's when that is finer, within what is left of DiagnoseOptions::max_seconds. A capture
+// whose base fit is at the noise floor stops after the base fit and its identifiability (and that
+// refit).
 #pragma once
 
 #include <atomic>
@@ -62,6 +63,13 @@ struct DiagnoseOptions {
   // compared optimum, and that fit is the report's final_fit.
   int comparison_cells = 10;
   int comparison_substeps = 4;
+  // The diagnosis' wall-time budget [s], >= 0; 0 = none. Only the final refit at the job's
+  // discretisation gives way to it: its optimisation stops at its first iteration that ends past
+  // the budget (SolverOptions::max_seconds) and keeps its best point, and the report says so.
+  // The comparison is not cut short (the decision needs every stage). 600: a one-second,
+  // one-camera capture diagnosed on 2 cores within about 10 minutes; past it, the final values
+  // lie between the compared optimum and the job's, and a fit of the found model gives the rest.
+  double max_seconds = 600.0;
   // Folder for the PNG plots; empty = no plots.
   std::filesystem::path plot_directory;
   // Stage messages ("base fit", "screening", ...), and the fits' progress and cancellation.

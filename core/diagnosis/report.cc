@@ -228,7 +228,13 @@ void WriteComparedAtText(const nlohmann::json& compared_at, std::ostream& out) {
     } else {
       out << "; final model refitted on " << refit.value("cells", 0) << " cells, "
           << refit.value("substeps", 0) << " substeps (" << Fixed(refit.value("seconds", 0.0))
-          << " s)";
+          << " s";
+      if (refit.contains("stopped_at_time_limit_s")) {
+        out << "; stopped after " << refit.value("iterations", 0)
+            << " iteration(s) at the diagnosis' time budget: its values lie between the compared "
+               "optimum and the job's";
+      }
+      out << ")";
     }
   }
   out << "\n";

@@ -276,8 +276,19 @@ struct StartRun {
   double scale;  // phi_max^2 [m^2]: cost / scale is what the optimiser minimises
   std::vector<double> x;
   const std::vector<ObservedFrame>& frames;
+  Clock::time_point fit_begin;  // of the whole fit, for SolverOptions::max_seconds
 
   bool Cancelled() const { return options.cancel != nullptr && options.cancel->load(); }
+  // Seconds the start may still optimise (Ceres' default without a limit), at least a
+  // millisecond: Ceres then stops after its first evaluation, at the stage's starting point.
+  double SecondsLeft() const {
+    if (config.solver.max_seconds <= 0.0)
+      return ceres::GradientProblemSolver::Options().max_solver_time_in_seconds;
+    return std::max(1e-3, config.solver.max_seconds - SecondsSince(fit_begin));
+  }
+  bool OutOfTime() const {
+    return config.solver.max_seconds > 0.0 && SecondsSince(fit_begin) >= config.solver.max_seconds;
+  }
 };
 
 // The stages, from the frame costs at the start (a start that cannot be simulated gets one
@@ -332,6 +343,7 @@ int SolveStage(StartRun& run, const std::vector<int>& stages, size_t stage, int 
                              run.options.cancel, info, result);
   ceres::GradientProblemSolver::Options solver =
       StageSolverOptions(run.config, last, used_iterations, stage_budget);
+  solver.max_solver_time_in_seconds = run.SecondsLeft();
   solver.callbacks.push_back(&reporter);
   ceres::Solve(solver, problem, run.x.data(), summary);
   const int iterations = std::max(0, static_cast<int>(summary->iterations.size()) - 1);
@@ -464,7 +476,7 @@ void RecordHeldoutCosts(StartRun& run) {
 void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjective& objective,
               const ParameterSpace& space, const fem::PhysicalParameters& base,
               const JobConfig& config, const FitOptions& options, ProgressBoard& board,
-              StartResult* result) {
+              Clock::time_point fit_begin, StartResult* result) {
   const auto begin = Clock::now();
   result->index = index;
   result->initial = start;
@@ -481,7 +493,8 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
                .result = result,
                .scale = scale,
                .x = space.ToVariables(start),
-               .frames = objective.frames()};
+               .frames = objective.frames(),
+               .fit_begin = fit_begin};
   result->initial = space.ToParameters(run.x.data(), base);
 
   std::optional<double> full_initial_cost;
@@ -490,7 +503,7 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
   const int used_iterations = SolveStages(run, stages, &summary);
   RecordLbfgsOutcome(summary, used_iterations, result);
   const bool cancelled = run.Cancelled();
-  if (config.solver.refine_iterations > 0 && !result->failed && !cancelled) {
+  if (config.solver.refine_iterations > 0 && !result->failed && !cancelled && !run.OutOfTime()) {
     RefineStart(run, static_cast<int>(stages.size()), used_iterations, &summary);
   }
   RecordFinalState(run, summary, stages.size(), full_initial_cost);
@@ -762,7 +775,7 @@ FitCheckpoint ResumedCheckpoint(const FitOptions& options, int num_starts, FitRe
 Status RunStarts(const capture::Capture& capture, const JobConfig& config,
                  const FitOptions& options, const FitSetup& setup,
                  const cost::SurfaceCostOptions& cost_options, const std::vector<int>& to_run,
-                 FitCheckpoint* checkpoint, FitResult* result) {
+                 Clock::time_point fit_begin, FitCheckpoint* checkpoint, FitResult* result) {
   const std::vector<fem::PhysicalParameters>& starts = setup.starts;
   std::mutex checkpoint_mutex;
   auto finished = [&](const StartResult& start) {
@@ -793,7 +806,7 @@ Status RunStarts(const capture::Capture& capture, const JobConfig& config,
       const int s = to_run[next];
       board.StartBegins();
       RunStart(s, starts[s], *objective, *setup.space, result->base, config, options, board,
-               &result->starts[s]);
+               fit_begin, &result->starts[s]);
       // A start stopped by a cancel did not finish: a resumed fit runs it again.
       if (options.cancel == nullptr || !options.cancel->load()) finished(result->starts[s]);
     }
@@ -845,8 +858,8 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   SOFTID_ASSIGN_OR_RETURN(std::vector<int> to_run, StartsToRun(options, num_starts));
   FitCheckpoint checkpoint = ResumedCheckpoint(options, num_starts, &result);
   if (options.on_checkpoint) options.on_checkpoint(checkpoint);
-  SOFTID_RETURN_IF_ERROR(
-      RunStarts(capture, config, options, setup, cost_options, to_run, &checkpoint, &result));
+  SOFTID_RETURN_IF_ERROR(RunStarts(capture, config, options, setup, cost_options, to_run, begin,
+                                   &checkpoint, &result));
   result.cancelled = options.cancel != nullptr && options.cancel->load();
   ChooseBestStart(&result);
   result.total_seconds = SecondsSince(begin);

@@ -26,6 +26,7 @@
 //     "starts": 4, "threads": 0, "seed": 1,
 //     "max_iterations": 50, "function_tolerance": 1e-6, "gradient_tolerance": 1e-10,
 //     "parameter_tolerance": 1e-8,
+//     "max_seconds": 0,          // wall time of the fit [s]; 0 = no limit
 //     "gradient": "adjoint",     // or "finite_difference"
 //     "finite_difference_step": 1e-4,
 //     "continuation": true,      // fit a growing prefix of the frames first (fit.h)

@@ -156,6 +156,12 @@ Status ParseOptimiser(const Json& j, SolverOptions* options) {
       SOFTID_ASSIGN_OR_RETURN(*target, json::ToPositiveNumber(j[key], key));
     }
   }
+  if (j.contains("max_seconds")) {
+    SOFTID_ASSIGN_OR_RETURN(options->max_seconds,
+                            json::ToFiniteNumber(j["max_seconds"], "max_seconds"));
+    if (options->max_seconds < 0.0)
+      return json::Invalid("max_seconds", j["max_seconds"], "must be a finite number >= 0");
+  }
   if (j.contains("refine_iterations")) {
     SOFTID_ASSIGN_OR_RETURN(options->refine_iterations,
                             json::ToIntegerAtLeast(j["refine_iterations"], "refine_iterations", 0));
@@ -215,6 +221,8 @@ Status SolverOptions::Validate() const {
                             std::pair{"finite_difference_step", finite_difference_step}}) {
     if (!IsPositiveFinite(value)) return json::Invalid(key, value, kPositiveRequirement);
   }
+  if (!(max_seconds >= 0.0 && std::isfinite(max_seconds)))
+    return json::Invalid("max_seconds", max_seconds, "must be a finite number >= 0");
   if (refine_iterations < 0)
     return json::Invalid("refine_iterations", refine_iterations, AtLeast(0));
   if (gradient != GradientMethod::kAdjoint && gradient != GradientMethod::kFiniteDifference) {
@@ -248,6 +256,7 @@ void WriteJson(const SolverOptions& options, Json* job_config) {
   j["function_tolerance"] = options.function_tolerance;
   j["gradient_tolerance"] = options.gradient_tolerance;
   j["parameter_tolerance"] = options.parameter_tolerance;
+  j["max_seconds"] = options.max_seconds;
   j["gradient"] = ToString(options.gradient);
   j["finite_difference_step"] = options.finite_difference_step;
   j["continuation"] = options.continuation;

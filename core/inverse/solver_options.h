@@ -91,6 +91,13 @@ struct SolverOptions {
   double function_tolerance = 1e-6;   // |cost change| / cost [-], > 0, finite
   double gradient_tolerance = 1e-10;  // max-norm of the projected gradient [-], > 0, finite
   double parameter_tolerance = 1e-8;  // |step| / (|x| + tolerance) [-], > 0, finite
+  // Wall time of the fit [s], >= 0, finite; 0 = no limit. Counted from the call of Fit (the grid
+  // and time-step choice included; on each worker from its own call when starts run on several),
+  // each start stops at its first iteration that ends later (Ceres' max_solver_time_in_seconds;
+  // the iteration under way is finished) and keeps its best point; a start begun past it stops
+  // after its first evaluation, and the refinement is skipped. A limit makes the result depend on
+  // the machine's speed: for a time budget, not for reproducible fits.
+  double max_seconds = 0.0;
   GradientMethod gradient = GradientMethod::kAdjoint;
   // Step of finite differences, relative, in the optimiser's (log) parameters: 1e-4 changes a
   // positive parameter by 0.01 %, above simulation noise yet small against its curvature.
@@ -132,6 +139,7 @@ inline constexpr auto kSolverOptionKeys = std::to_array<std::string_view>({
     "function_tolerance",
     "gradient_tolerance",
     "parameter_tolerance",
+    "max_seconds",
     "gradient",
     "finite_difference_step",
     "continuation",

@@ -23,6 +23,7 @@ struct DiagnoseFlags {
   std::string out = "diagnosis.json";
   std::string plots;  // default: <out dir>/diagnosis_plots
   int max_refits = 2;
+  double max_seconds = diagnosis::DiagnoseOptions().max_seconds;
   bool no_identifiability = false;
 };
 
@@ -33,6 +34,7 @@ int RunDiagnose(const DiagnoseFlags& flags) {
   const inverse::JobConfig& config = inputs.config;
   diagnosis::DiagnoseOptions options = DiagnoseOptionsForLab(config);
   options.decision.max_refits = flags.max_refits;
+  options.max_seconds = flags.max_seconds;
   options.identifiability = !flags.no_identifiability;
   const std::filesystem::path out(flags.out);
   options.plot_directory =
@@ -69,6 +71,11 @@ Command RegisterDiagnose(CLI::App* app) {
   app->add_option("--max-refits", flags->max_refits, "candidates refitted after screening")
       ->capture_default_str()
       ->check(CLI::Range(1, 10));
+  app->add_option("--max-seconds", flags->max_seconds,
+                  "time budget [s]: the final refit on the job's grid and time step stops at its "
+                  "first iteration past it (0 = none)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
   app->add_flag("--no-identifiability", flags->no_identifiability,
                 "skip the identifiability analysis of the final model");
   return [flags] { return RunDiagnose(*flags); };

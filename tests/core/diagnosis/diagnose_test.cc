@@ -280,6 +280,22 @@ TEST(Diagnose, ControlWithoutEffectGivesNone) {
       << ToText(*report);
   EXPECT_EQ(json["final_fit"], inverse::ToJson(*job_fit));
 
+  // The same without the job's fit and with a time budget already spent when the final refit
+  // begins: the refit stops at its starting point (the compared optimum), and the report says so.
+  options.max_seconds = 1e-3;
+  report = Diagnose(ramp.capture, job, options);
+  ASSERT_TRUE(report.ok()) << report.status().ToString();
+  EXPECT_EQ(report->decision, "none") << ToText(*report);
+  const nlohmann::json limited = ToJson(*report);
+  const nlohmann::json& refit = limited["compared_at"]["final_refit"];
+  EXPECT_EQ(refit["cells"], 10);
+  EXPECT_EQ(refit["iterations"], 0);
+  EXPECT_EQ(refit["stopped_at_time_limit_s"], 1e-3);
+  EXPECT_NE(ToText(*report).find("stopped after 0 iteration(s) at the diagnosis' time budget"),
+            std::string::npos)
+      << ToText(*report);
+  options.max_seconds = DiagnoseOptions().max_seconds;
+
   // Compared on the job's own discretisation (comparison 0 / 0) with its time step "auto": the
   // resolved step is the job's, so nothing is refitted after the comparison.
   job = ramp.BaseConfig();

@@ -153,6 +153,35 @@ TEST(Fit, RefinementFinishesWhatLbfgsLeftAndIsReported) {
   EXPECT_LT(start.final_cost, plain->Best().final_cost);
 }
 
+// max_seconds: a start stops at its first iteration past the limit and keeps its best point (here
+// its starting point: the limit has passed before the first iteration ends); the refinement is
+// skipped. Without the limit the same start iterates.
+TEST(Fit, ATimeLimitStopsEachStartAtItsBestPointSoFar) {
+  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.35);
+  ASSERT_TRUE(small.ok) << small.error;
+  JobConfig config = OneStartConfig(small.truth, 1.3);
+  config.solver.continuation = false;
+  config.solver.max_iterations = 5;
+  config.solver.refine_iterations = 5;
+  config.solver.max_seconds = 1e-3;
+  Result<FitResult> limited = Fit(small.capture, config);
+  ASSERT_TRUE(limited.ok()) << limited.status().ToString();
+  const StartResult& start = limited->Best();
+  EXPECT_EQ(start.iterations, 0);
+  EXPECT_FALSE(start.converged);
+  EXPECT_FALSE(start.refinement.has_value());
+  EXPECT_NE(start.termination.find("time"), std::string::npos) << start.termination;
+  EXPECT_EQ(start.final.youngs_modulus, start.initial.youngs_modulus);
+  EXPECT_EQ(start.final_cost, start.initial_cost);
+
+  config.solver.max_seconds = 0.0;
+  config.solver.refine_iterations = 0;
+  Result<FitResult> free = Fit(small.capture, config);
+  ASSERT_TRUE(free.ok()) << free.status().ToString();
+  EXPECT_GE(free->Best().iterations, 1);
+  EXPECT_LT(free->Best().final_cost, start.final_cost);
+}
+
 TEST(Fit, RejectsConfigsThatDoNotFitTheCapture) {
   testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.1);
   ASSERT_TRUE(small.ok) << small.error;

@@ -86,6 +86,7 @@ json FullConfig() {
     "finite_difference_step": 1e-3,
     "continuation": false,
     "refine_iterations": 12,
+    "max_seconds": 90.5,
     "cost": {"band_cells": 4, "truncation_cells": 1.5, "rest_sdf": "sampled"},
     "diagnose": true
   })");
@@ -200,6 +201,7 @@ TEST(JobConfig, FullConfigRoundTrips) {
   EXPECT_EQ(config->solver.finite_difference_step, 1e-3);
   EXPECT_FALSE(config->solver.continuation);
   EXPECT_EQ(config->solver.refine_iterations, 12);
+  EXPECT_EQ(config->solver.max_seconds, 90.5);
   EXPECT_EQ(config->solver.cost, (CostSettings{4, 1.5, cost::RestSdf::kSampled}));
   EXPECT_TRUE(config->diagnose);
   EXPECT_TRUE(config->Validate().ok()) << config->Validate().ToString();
@@ -411,6 +413,9 @@ TEST(JobConfigRejects, NumericalSettings) {
                 "refine_iterations = -1: ", "must be an integer >= 0");
   ExpectInvalid(json::parse(R"({"refine_iterations": 2.5})"),
                 "refine_iterations = 2.5: ", "must be an integer >= 0");
+  ExpectInvalid(json::parse(R"({"max_seconds": -1})"),
+                "max_seconds = -1: ", "must be a finite number >= 0");
+  ExpectInvalid(json::parse(R"({"max_seconds": "1h"})"), "max_seconds = \"1h\": ", "");
 }
 
 TEST(JobConfigRejects, Frames) {

@@ -48,6 +48,7 @@ TEST(SolverOptions, ValidateNamesEveryFieldOutOfRange) {
       {[](SolverOptions& o) { o.function_tolerance = 0; }, "function_tolerance = 0.0: ", "> 0"},
       {[](SolverOptions& o) { o.gradient_tolerance = kNaN; }, "gradient_tolerance = ", "> 0"},
       {[](SolverOptions& o) { o.parameter_tolerance = -1; }, "parameter_tolerance = -1.0: ", "> 0"},
+      {[](SolverOptions& o) { o.max_seconds = kInf; }, "max_seconds = ", "finite number >= 0"},
       {[](SolverOptions& o) { o.finite_difference_step = kInf; },
        "finite_difference_step = ", "finite number > 0"},
       {[](SolverOptions& o) { o.refine_iterations = -1; }, "refine_iterations = -1: ", ">= 0"},
@@ -84,6 +85,7 @@ TEST(SolverOptions, JsonRoundTripKeepsEveryField) {
   options.function_tolerance = 1e-7;
   options.gradient_tolerance = 1e-9;
   options.parameter_tolerance = 1e-6;
+  options.max_seconds = 120.0;
   options.gradient = GradientMethod::kFiniteDifference;
   options.finite_difference_step = 1e-3;
   options.continuation = false;
