@@ -230,9 +230,10 @@ void WriteComparedAtText(const nlohmann::json& compared_at, std::ostream& out) {
           << refit.value("substeps", 0) << " substeps (" << Fixed(refit.value("seconds", 0.0))
           << " s";
       if (refit.contains("stopped_at_time_limit_s")) {
-        out << "; stopped after " << refit.value("iterations", 0)
-            << " iteration(s) at the diagnosis' time budget: its values lie between the compared "
-               "optimum and the job's";
+        const int iterations = refit.value("iterations", 0);
+        out << "; stopped after " << iterations << " iteration(s) at the diagnosis' time budget: "
+            << (iterations == 0 ? "its values are the compared optimum's"
+                                : "its values lie between the compared optimum and the job's");
       }
       out << ")";
     }
