@@ -221,8 +221,18 @@ def print_diagnosis_table(diagnosed):
         found = "; ".join(json.dumps(f) for f in d["findings"] if f) or "-"
         print(f"| `{r['case']}` | {d['decision']} | {d['expected']} | {found} "
               f"| {d['seconds']:.0f} ({d['screening_seconds']:.0f}) |")
-    right = sum(r["diagnosis"]["decision"] == r["diagnosis"]["expected"] for r in diagnosed)
-    print(f"\ndiagnosis right: {right} of {len(diagnosed)}")
+    right = sum(diagnosis_right(r["diagnosis"]) for r in diagnosed)
+    print(f"\ndiagnosis right: {right} of {len(diagnosed)} (a control is right when it names no "
+          "physics: `none`, or `unexplained` where the codes' own difference stays above the noise)")
+
+
+def diagnosis_right(d):
+    """The concealed effect named; on a control, no physics named. A control's base fit misses
+    physics another code wrote by more than the depth noise (the two codes differ), so
+    `unexplained` -- a mismatch not attributed to physics -- is as right as `none`."""
+    if d["expected"] == "none":
+        return d["decision"] in ("none", "unexplained")
+    return d["decision"] == d["expected"]
 
 
 def main(argv=None):
