@@ -166,9 +166,12 @@ inverse::IdentifiabilityOptions IdentifiabilityOptionsFor(const inverse::JobConf
   return options;
 }
 
-// The job's config with its grid and time step capped at the options' comparison discretisation.
+// The job's config with its grid and time step capped at the options' comparison discretisation,
+// and without the job's time limit: a refit cut short would compare the models unequally (only the
+// final refit gives way to a budget, DiagnoseOptions::max_seconds).
 inverse::JobConfig ComparisonConfig(inverse::JobConfig config, const DiagnoseOptions& options) {
   inverse::SolverOptions& solver = config.solver;
+  solver.max_seconds = 0.0;
   if (options.comparison_cells > 0 && solver.cell_size_m == 0.0 &&
       (solver.cells == inverse::kAutoCells || solver.cells > options.comparison_cells)) {
     solver.cells = options.comparison_cells;
