@@ -927,7 +927,7 @@ struct DiagnosisRun {
                                          {"seconds", seconds},
                                          {"iterations", best.iterations},
                                          {"converged", best.converged}};
-    if (limit > 0.0 && !best.converged && fit->total_seconds >= limit)
+    if (best.stopped_at_time_limit)
       report.compared_at["final_refit"]["stopped_at_time_limit_s"] = limit;
   }
 

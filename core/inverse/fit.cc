@@ -12,6 +12,7 @@
 #include "core/capture/capture.h"
 #include "core/common/json_fields.h"
 #include "core/inverse/fit_checkpoint.h"
+#include "core/inverse/flight_stage.h"
 #include "core/inverse/horizon_continuation.h"
 #include "core/inverse/least_squares_refinement.h"
 #include "core/inverse/objective_settings.h"
@@ -162,7 +163,8 @@ class IterationReporter : public ceres::IterationCallback {
  public:
   IterationReporter(int start, const double* x, const ParameterSpace* space,
                     const fem::PhysicalParameters* base, double scale, ProgressBoard* board,
-                    const std::atomic<bool>* cancel, StageInfo stage, StartResult* stats)
+                    const std::atomic<bool>* cancel, StageInfo stage, StartResult* stats,
+                    std::function<bool(double)> out_of_budget)
       : start_(start),
         x_(x),
         space_(space),
@@ -171,7 +173,8 @@ class IterationReporter : public ceres::IterationCallback {
         board_(board),
         cancel_(cancel),
         stage_(stage),
-        stats_(stats) {}
+        stats_(stats),
+        out_of_budget_(std::move(out_of_budget)) {}
 
   ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
     const double cost = summary.cost * scale_;
@@ -187,6 +190,8 @@ class IterationReporter : public ceres::IterationCallback {
                      stats_->unconverged_steps);
     }
     if (cancel_ != nullptr && cancel_->load()) return ceres::SOLVER_ABORT;
+    if (out_of_budget_(summary.iteration_time_in_seconds))
+      return ceres::SOLVER_TERMINATE_SUCCESSFULLY;
     return ceres::SOLVER_CONTINUE;
   }
 
@@ -200,6 +205,7 @@ class IterationReporter : public ceres::IterationCallback {
   const std::atomic<bool>* cancel_;
   StageInfo stage_;
   StartResult* stats_;
+  std::function<bool(double)> out_of_budget_;  // after an iteration of the given seconds
 };
 
 // Whether the optimiser works with log(value): ranges of such parameters are sampled on a log
@@ -278,16 +284,36 @@ struct StartRun {
   const std::vector<ObservedFrame>& frames;
   Clock::time_point fit_begin;  // of the whole fit, for SolverOptions::max_seconds
 
+  double longest_iteration_s = 0.0;  // of this start so far
+  bool stopped_for_time = false;     // an iteration would have ended past max_seconds
+
   bool Cancelled() const { return options.cancel != nullptr && options.cancel->load(); }
   // Seconds the start may still optimise (Ceres' default without a limit), at least a
   // millisecond: Ceres then stops after its first evaluation, at the stage's starting point.
   double SecondsLeft() const {
     if (config.solver.max_seconds <= 0.0)
       return ceres::GradientProblemSolver::Options().max_solver_time_in_seconds;
+    if (stopped_for_time) return 1e-3;
     return std::max(1e-3, config.solver.max_seconds - SecondsSince(fit_begin));
   }
   bool OutOfTime() const {
-    return config.solver.max_seconds > 0.0 && SecondsSince(fit_begin) >= config.solver.max_seconds;
+    return stopped_for_time || (config.solver.max_seconds > 0.0 &&
+                                SecondsSince(fit_begin) >= config.solver.max_seconds);
+  }
+  // After an iteration of `seconds`: whether one as long as the longest so far, and the held-out
+  // evaluation after the start (two forward runs), would end past max_seconds. Ceres' own limit
+  // lets the iteration under way finish, and one line search at 16 cells with friction took 3
+  // minutes of a 10-minute diagnosis budget.
+  bool NextIterationWouldOverrun(double seconds) {
+    longest_iteration_s = std::max(longest_iteration_s, seconds);
+    if (config.solver.max_seconds <= 0.0) return false;
+    const bool any_heldout =
+        std::any_of(frames.begin(), frames.end(), [](const ObservedFrame& f) { return f.heldout; });
+    const double forward_run_s =
+        result->evaluations > 0 ? result->forward_seconds / result->evaluations : 0.0;
+    const double reserve = longest_iteration_s + (any_heldout ? 2.0 * forward_run_s : 0.0);
+    stopped_for_time = SecondsSince(fit_begin) + reserve > config.solver.max_seconds;
+    return stopped_for_time;
   }
 };
 
@@ -298,7 +324,8 @@ std::vector<int> PlanHorizonStages(StartRun& run, std::optional<double>* full_in
   std::vector<int> stages = {all_frames};
   if (run.config.solver.continuation) {
     run.objective.SetActiveFrames(all_frames);
-    Result<ObjectiveEvaluation> at_start = run.objective.Evaluate(run.result->initial, false);
+    Result<ObjectiveEvaluation> at_start =
+        run.objective.Evaluate(run.space.ToParameters(run.x.data(), run.base), false);
     if (at_start.ok() && !at_start->diverged) {
       *full_initial_cost = at_start->cost;
       // Frames matching to 1 % of the truncation distance are matching, however noise-free.
@@ -339,8 +366,9 @@ int SolveStage(StartRun& run, const std::vector<int>& stages, size_t stage, int 
   ceres::GradientProblem problem(function);  // takes ownership
   StageInfo info{static_cast<int>(stage), static_cast<int>(stages.size()),
                  run.frames[stages[stage] - 1].frame, used_iterations, result->stages.empty()};
-  IterationReporter reporter(run.index, run.x.data(), &run.space, &run.base, run.scale, &run.board,
-                             run.options.cancel, info, result);
+  IterationReporter reporter(
+      run.index, run.x.data(), &run.space, &run.base, run.scale, &run.board, run.options.cancel,
+      info, result, [&run](double seconds) { return run.NextIterationWouldOverrun(seconds); });
   ceres::GradientProblemSolver::Options solver =
       StageSolverOptions(run.config, last, used_iterations, stage_budget);
   solver.max_solver_time_in_seconds = run.SecondsLeft();
@@ -473,35 +501,84 @@ void RecordHeldoutCosts(StartRun& run) {
   }
 }
 
+// What a start optimises after its flight stage: every fitted parameter, or all but the launch
+// measured in flight, about the start with that launch.
+struct StartSpace {
+  std::optional<ParameterSpace> held;  // set when the launch is held
+  fem::PhysicalParameters base;
+};
+
+// The flight stage of a start (flight_stage.h) when the config asks for it; *result->flight
+// records it. A failure other than a cancel skips it.
+StartSpace MeasureLaunch(TrajectoryObjective& objective, const ParameterSpace& space,
+                         const fem::PhysicalParameters& base, const JobConfig& config,
+                         const FitOptions& options, double scale, StartResult* result) {
+  StartSpace out{std::nullopt, base};
+  if (!config.solver.launch_from_flight || LaunchParameters(space.names()).empty()) return out;
+  Result<FlightStageResult> flight =
+      MeasureLaunchInFlight(objective, space.names(), result->initial, scale, options.cancel);
+  if (!flight.ok()) {
+    FlightStageResult skipped;
+    skipped.skipped = flight.status().message();
+    flight = std::move(skipped);
+  }
+  result->flight = *flight;
+  if (flight->held.empty()) return out;
+  std::vector<std::string> rest;
+  for (const std::string& name : space.names()) {
+    if (std::find(flight->held.begin(), flight->held.end(), name) == flight->held.end())
+      rest.push_back(name);
+  }
+  Result<ParameterSpace> held =
+      ParameterSpace::Create(rest, flight->parameters, objective.characteristic_length());
+  if (!held.ok()) {
+    result->flight->skipped = held.status().message();
+    result->flight->held.clear();
+    return out;
+  }
+  out.held = std::move(*held);
+  out.base = flight->parameters;
+  return out;
+}
+
 void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjective& objective,
               const ParameterSpace& space, const fem::PhysicalParameters& base,
               const JobConfig& config, const FitOptions& options, ProgressBoard& board,
               Clock::time_point fit_begin, StartResult* result) {
   const auto begin = Clock::now();
   result->index = index;
-  result->initial = start;
+  result->initial = space.ToParameters(space.ToVariables(start).data(), base);
   const double h = objective.simulator().hex_mesh().CellSize();
   const double phi_max = config.solver.cost.truncation_cells * h;
   const double scale = phi_max * phi_max;
+  const StartSpace start_space =
+      MeasureLaunch(objective, space, base, config, options, scale, result);
+  const ParameterSpace& run_space = start_space.held ? *start_space.held : space;
   StartRun run{.index = index,
                .objective = objective,
-               .space = space,
-               .base = base,
+               .space = run_space,
+               .base = start_space.base,
                .config = config,
                .options = options,
                .board = board,
                .result = result,
                .scale = scale,
-               .x = space.ToVariables(start),
+               .x = run_space.ToVariables(start_space.held ? start_space.base : start),
                .frames = objective.frames(),
                .fit_begin = fit_begin};
-  result->initial = space.ToParameters(run.x.data(), base);
 
   std::optional<double> full_initial_cost;
   const std::vector<int> stages = PlanHorizonStages(run, &full_initial_cost);
   ceres::GradientProblemSolver::Summary summary;
   const int used_iterations = SolveStages(run, stages, &summary);
   RecordLbfgsOutcome(summary, used_iterations, result);
+  result->stopped_at_time_limit = run.OutOfTime();
+  if (run.stopped_for_time) {
+    result->termination =
+        "stopped at the time limit: an iteration as long as the longest so far (" +
+        std::to_string(run.longest_iteration_s) +
+        " s) would end past max_seconds = " + std::to_string(config.solver.max_seconds) + " s";
+  }
   const bool cancelled = run.Cancelled();
   if (config.solver.refine_iterations > 0 && !result->failed && !cancelled && !run.OutOfTime()) {
     RefineStart(run, static_cast<int>(stages.size()), used_iterations, &summary);
@@ -927,6 +1004,7 @@ nlohmann::json StartJson(const FitResult& result, const StartResult& start) {
                         {"iterations", start.iterations},
                         {"converged", start.converged},
                         {"failed", start.failed},
+                        {"stopped_at_time_limit", start.stopped_at_time_limit},
                         {"termination", start.termination},
                         {"evaluations", start.evaluations},
                         {"failed_evaluations", start.failed_evaluations},
@@ -934,7 +1012,8 @@ nlohmann::json StartJson(const FitResult& result, const StartResult& start) {
                         {"unconverged_steps", start.unconverged_steps},
                         {"seconds", start.seconds},
                         {"stages", StagesJson(start)},
-                        {"refinement", RefinementJson(start)}};
+                        {"refinement", RefinementJson(start)},
+                        {"flight", start.flight ? ToJson(*start.flight) : nlohmann::json(nullptr)}};
 }
 
 // The parameters the fit held: the base without the fitted ones.

@@ -35,6 +35,7 @@
 #include "core/common/status.h"
 #include "core/fem/physical_parameters.h"
 #include "core/geometry/triangle_mesh.h"
+#include "core/inverse/flight_stage.h"
 #include "core/inverse/grid_selection.h"
 #include "core/inverse/job_config.h"
 #include "core/inverse/observed_frames.h"
@@ -112,6 +113,9 @@ struct StartResult {
   bool converged = false;
   std::string termination;  // Ceres' message, or why the start failed
   bool failed = false;      // the start could not be evaluated at all (e.g. diverged at the start)
+  // SolverOptions::max_seconds ended the start's iterations: Ceres' limit, or the next iteration
+  // (as long as its longest so far) would have ended past it.
+  bool stopped_at_time_limit = false;
   // The cost after each iteration of this start, in order: every continuation stage's, then the
   // refinement's; one entry per ITERATION progress report after the start's iteration 0, so its
   // size is iterations + refinement->iterations [m^2]. An entry is over the capture frames up to
@@ -124,6 +128,9 @@ struct StartResult {
   std::vector<double> CostHistoryOverEveryFrame() const;
   std::vector<HorizonStageResult> stages;      // the last one fits every frame
   std::optional<RefinementResult> refinement;  // when SolverOptions::refine_iterations > 0
+  // The launch measured on the flight frames and then held (SolverOptions::launch_from_flight),
+  // or why not; absent when the option is off or no launch parameter is fitted.
+  std::optional<FlightStageResult> flight;
   int evaluations = 0, failed_evaluations = 0;
   double seconds = 0.0, forward_seconds = 0.0, backward_seconds = 0.0;
   long long steps = 0;  // simulation steps run, over all evaluations

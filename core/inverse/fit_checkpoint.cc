@@ -70,10 +70,12 @@ Json StartJson(const StartResult& s) {
           {"converged", s.converged},
           {"termination", s.termination},
           {"failed", s.failed},
+          {"stopped_at_time_limit", s.stopped_at_time_limit},
           {"cost_history", history},
           {"cost_history_last_frame", s.cost_history_last_frame},
           {"stages", stages},
           {"refinement", s.refinement ? RefinementJson(*s.refinement) : Json(nullptr)},
+          {"flight", s.flight ? ToJson(*s.flight) : Json(nullptr)},
           {"evaluations", s.evaluations},
           {"failed_evaluations", s.failed_evaluations},
           {"seconds", s.seconds},
@@ -96,6 +98,7 @@ Result<StartResult> ReadStart(const Json& j) {
   s.converged = j.at("converged").get<bool>();
   s.termination = j.at("termination").get<std::string>();
   s.failed = j.at("failed").get<bool>();
+  s.stopped_at_time_limit = j.value("stopped_at_time_limit", false);
   for (const Json& cost : j.at("cost_history")) s.cost_history.push_back(ReadNumber(cost));
   s.cost_history_last_frame = j.at("cost_history_last_frame").get<std::vector<int>>();
   if (s.cost_history_last_frame.size() != s.cost_history.size()) {
@@ -105,6 +108,10 @@ Result<StartResult> ReadStart(const Json& j) {
   }
   for (const Json& stage : j.at("stages")) s.stages.push_back(ReadStage(stage));
   if (!j.at("refinement").is_null()) s.refinement = ReadRefinement(j.at("refinement"));
+  // Absent from checkpoints written before the flight stage existed.
+  if (j.contains("flight") && !j.at("flight").is_null()) {
+    SOFTID_ASSIGN_OR_RETURN(s.flight, FlightStageResultFromJson(j.at("flight")));
+  }
   s.evaluations = j.at("evaluations").get<int>();
   s.failed_evaluations = j.at("failed_evaluations").get<int>();
   s.seconds = j.at("seconds").get<double>();

@@ -30,6 +30,7 @@
 //     "gradient": "adjoint",     // or "finite_difference"
 //     "finite_difference_step": 1e-4,
 //     "continuation": true,      // fit a growing prefix of the frames first (fit.h)
+//     "launch_from_flight": true,  // fit the launch on the frames before landing, then hold it
 //     "refine_iterations": 0,    // Levenberg-Marquardt iterations after L-BFGS; 0 = none
 //     "cost": {"band_cells": 3, "truncation_cells": 2.0,
 //              "rest_sdf": "surface_fitted"},  // or "exact", "sampled"

@@ -172,6 +172,10 @@ Status ParseOptimiser(const Json& j, SolverOptions* options) {
   if (j.contains("continuation")) {
     SOFTID_ASSIGN_OR_RETURN(options->continuation, ParseBool(j["continuation"], "continuation"));
   }
+  if (j.contains("launch_from_flight")) {
+    SOFTID_ASSIGN_OR_RETURN(options->launch_from_flight,
+                            ParseBool(j["launch_from_flight"], "launch_from_flight"));
+  }
   return Status::Ok();
 }
 
@@ -260,6 +264,7 @@ void WriteJson(const SolverOptions& options, Json* job_config) {
   j["gradient"] = ToString(options.gradient);
   j["finite_difference_step"] = options.finite_difference_step;
   j["continuation"] = options.continuation;
+  j["launch_from_flight"] = options.launch_from_flight;
   j["refine_iterations"] = options.refine_iterations;
   j["cost"] = {{"band_cells", options.cost.band_cells},
                {"truncation_cells", options.cost.truncation_cells},

@@ -171,6 +171,8 @@ TEST(Fit, ATimeLimitStopsEachStartAtItsBestPointSoFar) {
   EXPECT_FALSE(start.converged);
   EXPECT_FALSE(start.refinement.has_value());
   EXPECT_NE(start.termination.find("time"), std::string::npos) << start.termination;
+  EXPECT_TRUE(start.stopped_at_time_limit);
+  EXPECT_TRUE(ToJson(*limited)["starts"][0]["stopped_at_time_limit"].get<bool>());
   EXPECT_EQ(start.final.youngs_modulus, start.initial.youngs_modulus);
   EXPECT_EQ(start.final_cost, start.initial_cost);
 
@@ -179,6 +181,7 @@ TEST(Fit, ATimeLimitStopsEachStartAtItsBestPointSoFar) {
   Result<FitResult> free = Fit(small.capture, config);
   ASSERT_TRUE(free.ok()) << free.status().ToString();
   EXPECT_GE(free->Best().iterations, 1);
+  EXPECT_FALSE(free->Best().stopped_at_time_limit);
   EXPECT_LT(free->Best().final_cost, start.final_cost);
 }
 
