@@ -509,7 +509,7 @@ struct StartSpace {
 };
 
 // The flight stage of a start (flight_stage.h) when the config asks for it; *result->flight
-// records it. A failure other than a cancel skips it.
+// records it. A failure skips it (after a cancel the stages stop at their first evaluation).
 StartSpace MeasureLaunch(TrajectoryObjective& objective, const ParameterSpace& space,
                          const fem::PhysicalParameters& base, const JobConfig& config,
                          const FitOptions& options, double scale, StartResult* result) {
