@@ -151,12 +151,14 @@ SubstepSelection ReadSubstepSelection(const Json& j) {
   selection.within_tolerance = j.at("within_tolerance").get<bool>();
   // Checkpoints written before these keys existed still resume.
   selection.converging = j.value("converging", true);
+  selection.max_substeps = j.value("max_substeps", 16);  // the largest candidate before it was kept
   for (const Json& t : j.at("trials")) {
     SubstepTrial trial;
     trial.substeps = t.at("substeps").get<int>();
     trial.difference_m = t.at("difference_m").get<double>();
     trial.worst_frame = t.at("worst_frame").get<int>();
     trial.frames_within_tolerance = t.value("frames_within_tolerance", 0);
+    trial.frames_converging = t.value("frames_converging", trial.frames_within_tolerance);
     trial.diverged = t.at("diverged").get<bool>();
     selection.trials.push_back(trial);
   }

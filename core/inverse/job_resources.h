@@ -29,8 +29,8 @@ struct JobResourceEstimate {
   int64_t steps_per_run = 0;  // simulation steps of one forward run over the fitted frames
   int concurrent_starts = 0;  // starts that run at once
   double memory_bytes = 0.0;  // peak estimate over the concurrent starts [B]
-  // Wall time if every start ran all max_iterations (an upper estimate: fits usually converge
-  // sooner, and "auto" substeps usually choose fewer steps) [s].
+  // Wall time if every start ran all max_iterations (fits usually converge sooner), "auto"
+  // substeps counted at 16 per frame (an impact may take up to 4x as many) [s].
   double wall_seconds = 0.0;
 };
 
@@ -51,7 +51,7 @@ struct JobResourceLimits {
 //   cells = 300: the job would need about 41 GiB of memory (grid 301 x 301 x 108 nodes, 960
 //   steps per run); at most 4 GiB is accepted: use fewer cells, substeps or frames
 //   max_iterations = 5000: the job could run for about 31 h (...); at most 24 h is accepted
-// "auto" substeps count as their largest candidate (SubstepSelectionOptions::max_substeps), "auto"
+// "auto" substeps count as their largest candidate on that grid (LargestSubstepCandidate), "auto"
 // cells as the finest grid candidate within GridSelectionOptions::max_grid_nodes.
 Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
                                                  const CaptureExtent& extent,

@@ -22,6 +22,10 @@ Status CheckSubstepSelectionInputs(const SubstepSelectionOptions& options, doubl
     return Status::InvalidArgument("min_substeps = " + std::to_string(options.min_substeps) +
                                    ": must be at least 1");
   }
+  if (!(options.max_node_steps_per_frame > 0.0)) {
+    return Status::InvalidArgument(fmt::format("max_node_steps_per_frame = {}: must be positive",
+                                               options.max_node_steps_per_frame));
+  }
   if (options.max_substeps < options.min_substeps) {
     return Status::InvalidArgument("max_substeps = " + std::to_string(options.max_substeps) +
                                    ": must be at least min_substeps");
@@ -38,18 +42,41 @@ Status CheckSubstepSelectionInputs(const SubstepSelectionOptions& options, doubl
   return Status::Ok();
 }
 
-// The comparison of the surface trajectories at `substeps` (coarse) and twice as many (fine).
+// Leading frames whose difference is within tolerance_m or at most 3/4 of `previous`'s there (a
+// step error at least halves with the step; a chaotic motion's difference does not shrink).
+int LeadingFramesConverging(const std::vector<double>& current, const std::vector<double>& previous,
+                            double tolerance_m) {
+  const size_t frames = std::min(current.size(), previous.size());
+  size_t count = 0;
+  while (count < frames &&
+         (current[count] <= tolerance_m || current[count] <= 0.75 * previous[count])) {
+    ++count;
+  }
+  return static_cast<int>(count);
+}
+
+// The comparison of the surface trajectories at `substeps` (coarse) and twice as many (fine);
+// `previous_per_frame_m` holds the previous trial's per-frame differences (empty for the first)
+// and receives this one's.
 SubstepTrial CompareSubsteps(int substeps, const SurfaceTrajectory& coarse,
-                             const SurfaceTrajectory& fine, double tolerance_m) {
+                             const SurfaceTrajectory& fine, double tolerance_m,
+                             std::vector<double>* previous_per_frame_m) {
   SubstepTrial trial;
   trial.substeps = substeps;
   trial.diverged = coarse.empty() || fine.empty();
-  if (!trial.diverged) {
-    const TrajectoryDifference difference = CompareTrajectories(coarse, fine);
-    trial.difference_m = difference.difference_m;
-    trial.worst_frame = difference.worst_frame;
-    trial.frames_within_tolerance = difference.LeadingFramesWithin(tolerance_m);
+  if (trial.diverged) {
+    previous_per_frame_m->clear();
+    return trial;
   }
+  TrajectoryDifference difference = CompareTrajectories(coarse, fine);
+  trial.difference_m = difference.difference_m;
+  trial.worst_frame = difference.worst_frame;
+  trial.frames_within_tolerance = difference.LeadingFramesWithin(tolerance_m);
+  trial.frames_converging =
+      previous_per_frame_m->empty()
+          ? trial.frames_within_tolerance
+          : LeadingFramesConverging(difference.per_frame_m, *previous_per_frame_m, tolerance_m);
+  *previous_per_frame_m = std::move(difference.per_frame_m);
   return trial;
 }
 
@@ -75,17 +102,24 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
                                     int last_frame, const SubstepSelectionOptions& options,
                                     SubstepSelection* selection) {
   int substeps = options.min_substeps;
-  SurfaceTrajectory coarse =
-      SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps, last_frame,
-                                substeps, options.cancel)
-          .frames;
+  SurfaceRun first = SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps,
+                                               last_frame, substeps, options.cancel);
   if (Cancelled(options.cancel)) return Status::Cancelled("the time-step choice was cancelled");
+  SurfaceTrajectory coarse = std::move(first.frames);
+  selection->max_substeps = LargestSubstepCandidate(first.grid_nodes, options);
+  if (selection->max_substeps < options.max_substeps) {
+    spdlog::info(
+        "time step: at most {} substeps per frame on this grid ({} nodes; {:.0f} node-steps per "
+        "frame bound the fit's memory)",
+        selection->max_substeps, first.grid_nodes, options.max_node_steps_per_frame);
+  }
+  std::vector<double> previous_per_frame_m;
   while (true) {
-    if (substeps >= options.max_substeps) {
-      selection->substeps = options.max_substeps;
+    if (substeps >= selection->max_substeps) {
+      selection->substeps = selection->max_substeps;
       break;
     }
-    const int finer = std::min(2 * substeps, options.max_substeps);
+    const int finer = std::min(2 * substeps, selection->max_substeps);
     SurfaceTrajectory fine =
         SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps, last_frame,
                                   finer, options.cancel)
@@ -93,13 +127,14 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
     if (Cancelled(options.cancel)) {
       return Status::Cancelled("the time-step choice was cancelled");
     }
-    const SubstepTrial trial = CompareSubsteps(substeps, coarse, fine, selection->tolerance_m);
+    const SubstepTrial trial =
+        CompareSubsteps(substeps, coarse, fine, selection->tolerance_m, &previous_per_frame_m);
     selection->trials.push_back(trial);
     spdlog::info(
         "time step: {} vs {} substeps per frame: surface differs by {:.3g} mm at frame {}, within "
-        "tolerance on the first {} frames{}",
+        "tolerance on the first {} frames, converging on the first {}{}",
         substeps, finer, 1e3 * trial.difference_m, trial.worst_frame, trial.frames_within_tolerance,
-        trial.diverged ? " (a run diverged)" : "");
+        trial.frames_converging, trial.diverged ? " (a run diverged)" : "");
     if (!trial.diverged && trial.difference_m <= selection->tolerance_m) {
       selection->substeps = substeps;
       selection->within_tolerance = true;
@@ -112,6 +147,12 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
 }
 
 }  // namespace
+
+int LargestSubstepCandidate(double grid_nodes, const SubstepSelectionOptions& options) {
+  const double affordable = options.max_node_steps_per_frame / std::max(1.0, grid_nodes);
+  return std::max(options.min_substeps,
+                  static_cast<int>(std::min<double>(options.max_substeps, std::floor(affordable))));
+}
 
 Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
                                         const std::optional<Eigen::AlignedBox3d>& fixed_region,
@@ -158,13 +199,12 @@ nlohmann::json ToJson(const SubstepSelection& selection) {
                       {"difference_m", t.difference_m},
                       {"worst_frame", t.worst_frame},
                       {"frames_within_tolerance", t.frames_within_tolerance},
+                      {"frames_converging", t.frames_converging},
                       {"diverged", t.diverged}});
   }
-  return {{"substeps", selection.substeps},
-          {"tolerance_m", selection.tolerance_m},
-          {"within_tolerance", selection.within_tolerance},
-          {"converging", selection.converging},
-          {"trials", trials}};
+  return {{"substeps", selection.substeps},       {"max_substeps", selection.max_substeps},
+          {"tolerance_m", selection.tolerance_m}, {"within_tolerance", selection.within_tolerance},
+          {"converging", selection.converging},   {"trials", trials}};
 }
 
 }  // namespace softid::inverse

@@ -23,8 +23,18 @@
 namespace softid::inverse {
 
 struct SubstepSelectionOptions {
-  int min_substeps = 2;   // first candidate [-], >= 1
-  int max_substeps = 16;  // the candidates double up to this [-], >= min_substeps
+  int min_substeps = 2;  // first candidate [-], >= 1
+  // The candidates double up to this [-], >= min_substeps. A penalty contact's onset converges
+  // at first order only, slowly: on CalculiX's block dropped onto a floor (fine reference, E
+  // and the launch fitted over the landing and first rebound, frames 0-20, 16 cells) Young's
+  // modulus came out -7.5 % at 16 substeps, +1.0 % at 32 and +0.2 % at 64, the fit's time
+  // barely higher (64 s, 162 s, 77 s: Newton converges faster at the shorter step).
+  int max_substeps = 64;
+  // ... and while grid nodes x substeps stays within this [-], > 0: a fit keeps every step's
+  // state for its adjoint, so this bounds its memory per frame (192,000 node-steps of 72 bytes:
+  // 14 MB per frame). It is twice the 6,000-node grid limit at 16 substeps; the block above at 16
+  // cells (1,620 nodes) may take 64 substeps, a 6,000-node grid 32.
+  double max_node_steps_per_frame = 192000.0;
   // Accepted step-doubling difference: RMS over surface vertices of the distance between the
   // positions at s and 2 s substeps, maximised over the frames, as a fraction of the object's
   // longest side [-], > 0. Measured on torus-drop (28 cm, 60 fps, capture made at 16 substeps,
@@ -43,11 +53,17 @@ struct SubstepTrial {
   int worst_frame = 0;        // where that maximum is
   // Leading frames whose difference is within the tolerance (every frame: the trial passed).
   int frames_within_tolerance = 0;
+  // Leading frames in which this halving of the step shrank the difference of the previous one
+  // to at most 3/4 or met the tolerance: where the motion converges with the step. Beyond them
+  // it is sensitive to the smallest change (chaotic). The first trial: frames_within_tolerance.
+  int frames_converging = 0;
   bool diverged = false;  // either run failed
 };
 
 struct SubstepSelection {
   int substeps = 0;  // the choice
+  // The largest candidate: max_substeps, or fewer on a large grid (max_node_steps_per_frame).
+  int max_substeps = 0;
   double tolerance_m = 0.0;
   bool within_tolerance = false;  // false: max_substeps taken without meeting the tolerance
   // False when the last halving of the step shrank the difference by less than a quarter, where
@@ -67,6 +83,10 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
                                         const fem::SimulationOptions& simulation, double fps,
                                         int last_frame,
                                         const SubstepSelectionOptions& options = {});
+
+// The largest candidate on a grid of `grid_nodes` nodes: options.max_substeps, or fewer so that
+// grid_nodes x substeps stays within options.max_node_steps_per_frame; never below min_substeps.
+int LargestSubstepCandidate(double grid_nodes, const SubstepSelectionOptions& options);
 
 nlohmann::json ToJson(const SubstepSelection& selection);
 

@@ -5,6 +5,7 @@
 #include <string>
 
 #include "core/inverse/grid_selection.h"
+#include "core/inverse/time_step_selection.h"
 
 namespace softid::inverse {
 namespace {
@@ -36,9 +37,12 @@ TEST(JobResources, DefaultConfigFitsWithRoom) {
   ASSERT_EQ(GridSelectionOptions{}.max_grid_nodes, 6000);
   EXPECT_DOUBLE_EQ(estimate->cell_size_m, 0.28 / 16);
   EXPECT_EQ(estimate->grid_nodes, 17 * 17 * 7);
-  EXPECT_EQ(estimate->steps_per_run, 60 * 16);  // "auto": its largest candidate
+  // "auto" substeps: the largest candidate on that grid, 64 (2023 nodes x 64 is within the
+  // node-step budget).
+  EXPECT_EQ(LargestSubstepCandidate(17 * 17 * 7, SubstepSelectionOptions{}), 64);
+  EXPECT_EQ(estimate->steps_per_run, 60 * 64);
   EXPECT_EQ(estimate->concurrent_starts, 2);
-  EXPECT_LT(estimate->memory_bytes, 0.25 * limits.max_memory_bytes);
+  EXPECT_LT(estimate->memory_bytes, 0.5 * limits.max_memory_bytes);
 }
 
 // The configs an attacker or an unlucky user sent: each refused, naming the key.
@@ -78,14 +82,20 @@ TEST(JobResources, WallTimeIsEstimatedAndBounded) {
 
   JobConfig longer;
   longer.solver.max_iterations = 2 * JobConfig{}.solver.max_iterations;
+  ASSERT_TRUE(EstimateJobResources(longer, TorusSized(), limits).ok())
+      << EstimateJobResources(longer, TorusSized(), limits).status().ToString();
   EXPECT_GT(EstimateJobResources(longer, TorusSized(), limits)->wall_seconds,
             1.9 * plain->wall_seconds);
   JobConfig diagnosed;
   diagnosed.diagnose = true;
+  ASSERT_TRUE(EstimateJobResources(diagnosed, TorusSized(), limits).ok())
+      << EstimateJobResources(diagnosed, TorusSized(), limits).status().ToString();
   EXPECT_GT(EstimateJobResources(diagnosed, TorusSized(), limits)->wall_seconds,
             4.0 * plain->wall_seconds);
   // More cores for the same starts: never slower.
   limits.cores = 8;
+  ASSERT_TRUE(EstimateJobResources({}, TorusSized(), limits).ok())
+      << EstimateJobResources({}, TorusSized(), limits).status().ToString();
   EXPECT_LE(EstimateJobResources({}, TorusSized(), limits)->wall_seconds, plain->wall_seconds);
   limits.max_wall_seconds = 0;
   EXPECT_FALSE(EstimateJobResources({}, TorusSized(), limits).ok());

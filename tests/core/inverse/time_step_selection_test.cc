@@ -85,6 +85,39 @@ TEST(SelectSubsteps, ChaoticRockingIsToldFromAStepError) {
   // Before the first impact (it falls 4 cm: about 5 frames) the runs agree.
   EXPECT_GT(selection->trials.back().frames_within_tolerance, 3);
   EXPECT_LT(selection->trials.back().frames_within_tolerance, 48);
+  // The impact itself still converges with the step (first order), the rocking after it not.
+  EXPECT_EQ(selection->trials[0].frames_converging, selection->trials[0].frames_within_tolerance);
+  EXPECT_GT(selection->trials.back().frames_converging,
+            selection->trials.back().frames_within_tolerance);
+  EXPECT_LT(selection->trials.back().frames_converging, 48);
+}
+
+// The fit keeps every step's state for its adjoint: on a large grid the candidates stop short of
+// max_substeps so that nodes x substeps stays within the budget.
+TEST(SelectSubsteps, LargeGridsTakeFewerCandidates) {
+  SubstepSelectionOptions options;
+  options.max_substeps = 64;
+  options.max_node_steps_per_frame = 192000.0;
+  EXPECT_EQ(LargestSubstepCandidate(1000, options), 64);
+  EXPECT_EQ(LargestSubstepCandidate(6000, options), 32);
+  EXPECT_EQ(LargestSubstepCandidate(1e7, options), options.min_substeps);
+
+  const Result<scenes::Scene> scene = scenes::MakeBuiltinScene("ball-bounce");
+  ASSERT_TRUE(scene.ok());
+  options.min_substeps = 1;
+  options.tolerance_fraction = 1e-9;  // unreachable: every candidate up to the largest is tried
+  options.max_node_steps_per_frame = 0.0;
+  EXPECT_FALSE(SelectSubsteps(scene->mesh, scene->fixed_region, scene->parameters, CoarseGrid(),
+                              60.0, 10, options)
+                   .ok());
+  options.max_node_steps_per_frame = 1.0;  // any grid: the smallest candidate only
+  const Result<SubstepSelection> selection = SelectSubsteps(
+      scene->mesh, scene->fixed_region, scene->parameters, CoarseGrid(), 60.0, 10, options);
+  ASSERT_TRUE(selection.ok()) << selection.status().ToString();
+  EXPECT_EQ(selection->max_substeps, 1);
+  EXPECT_EQ(selection->substeps, 1);
+  EXPECT_TRUE(selection->trials.empty());
+  EXPECT_EQ(ToJson(*selection).at("max_substeps").get<int>(), 1);
 }
 
 // Newmark integrates a constant acceleration exactly: in free fall the first candidate passes.
