@@ -1,6 +1,7 @@
 #include "core/inverse/fit.h"
 
 #include <ceres/ceres.h>
+#include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <chrono>
@@ -834,6 +835,31 @@ Status DiscretiseFit(const capture::Capture& capture, const JobConfig& config,
                               &setup->simulation, result);
 }
 
+// Leaves out the frames after the motion turns chaotic (SolverOptions::predictable_frames_only)
+// when the time-step choice found where: setup->frames keeps those up to the last predictable
+// one, if at least two of them are fitted.
+void KeepPredictableFrames(const JobConfig& config, double fps, FitSetup* setup,
+                           FitResult* result) {
+  if (!config.solver.predictable_frames_only || !result->substep_selection) return;
+  const int last_frame = LastNominalFrame(*setup->frames, fps);
+  const int last = PredictableLastFrame(*result->substep_selection, last_frame);
+  if (last < 0) return;
+  std::vector<ObservedFrame> kept;
+  for (const ObservedFrame& frame : *setup->frames) {
+    if (frame.time * fps <= last + 1e-9) kept.push_back(frame);
+  }
+  const auto fitted =
+      std::count_if(kept.begin(), kept.end(), [](const ObservedFrame& f) { return !f.heldout; });
+  if (fitted < 2) return;
+  spdlog::warn(
+      "fit: frames {}-{} left out: halving the time step no longer converges there (the motion is "
+      "chaotic: no step predicts it), so the fit compares frames up to {} only "
+      "(\"predictable_frames_only\": false fits them all)",
+      last + 1, last_frame, last);
+  setup->frames = std::make_shared<const std::vector<ObservedFrame>>(std::move(kept));
+  result->predictable_last_frame = last;
+}
+
 // The fit's checkpoint with the starts a resumed checkpoint finished, which also go into
 // result->starts.
 FitCheckpoint ResumedCheckpoint(const FitOptions& options, int num_starts, FitResult* result) {
@@ -932,6 +958,7 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   result.starts.resize(setup.starts.size());
   const cost::SurfaceCostOptions cost_options = CostOptionsFor(config.solver);
   SOFTID_RETURN_IF_ERROR(DiscretiseFit(capture, config, options, &setup, &result));
+  KeepPredictableFrames(config, capture.fps, &setup, &result);
   SOFTID_ASSIGN_OR_RETURN(std::vector<int> to_run, StartsToRun(options, num_starts));
   FitCheckpoint checkpoint = ResumedCheckpoint(options, num_starts, &result);
   if (options.on_checkpoint) options.on_checkpoint(checkpoint);
@@ -946,6 +973,12 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
     return Status::FailedPrecondition("every start failed (first start: " + why + ")");
   }
   return result;
+}
+
+JobConfig AsFitted(const JobConfig& config, const FitResult& fit) {
+  JobConfig fitted = config;
+  if (fit.predictable_last_frame >= 0) fitted.frames.last = fit.predictable_last_frame;
+  return fitted;
 }
 
 nlohmann::json ParameterValueJson(const fem::PhysicalParameters& p, const std::string& name) {
@@ -1070,6 +1103,9 @@ nlohmann::json ToJson(const FitResult& result) {
   if (result.grid_selection) out["grid"]["selection"] = ToJson(*result.grid_selection);
   out["time_step"] = {{"substeps", result.substeps}};
   if (result.substep_selection) out["time_step"]["selection"] = ToJson(*result.substep_selection);
+  if (result.predictable_last_frame >= 0) {
+    out["time_step"]["predictable_last_frame"] = result.predictable_last_frame;
+  }
   out["timing"] = TimingJson(result);
   return out;
 }

@@ -148,6 +148,9 @@ struct FitResult {
   double total_seconds = 0.0;
   int substeps = 0;  // simulation steps per frame used (config's, or chosen when "auto")
   std::optional<SubstepSelection> substep_selection;  // when chosen
+  // The last frame fitted when the frames after it were left out as unpredictable
+  // (SolverOptions::predictable_frames_only); -1 when every configured frame was fitted.
+  int predictable_last_frame = -1;
   // The grid used: cells along the longest side (config's, or chosen when "auto"; 0 when the
   // config gave cell_size) and the cell size h [m].
   int cells = 0;
@@ -173,6 +176,10 @@ Result<fem::PhysicalParameters> BaseParameters(const capture::Capture& capture,
 // fails (FailedPrecondition).
 Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
                       const FitOptions& options = {});
+
+// `config` with frames.last at fit.predictable_last_frame where the fit left the later frames out:
+// what the analyses after the fit (uncertainty, discretisation error) must compare.
+JobConfig AsFitted(const JobConfig& config, const FitResult& fit);
 
 // `config` with the grid and the time step `fit` used in place of "auto": analyses after a fit
 // (uncertainty, the diagnosis' refits) must see the fit's own cost function, not choose again.

@@ -31,6 +31,7 @@
 //     "finite_difference_step": 1e-4,
 //     "continuation": true,      // fit a growing prefix of the frames first (fit.h)
 //     "launch_from_flight": true,  // fit the launch on the frames before landing, then hold it
+//     "predictable_frames_only": true,  // leave out frames after the motion turns chaotic
 //     "refine_iterations": 0,    // Levenberg-Marquardt iterations after L-BFGS; 0 = none
 //     "cost": {"band_cells": 3, "truncation_cells": 2.0,
 //              "rest_sdf": "surface_fitted"},  // or "exact", "sampled"

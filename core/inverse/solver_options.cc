@@ -176,6 +176,10 @@ Status ParseOptimiser(const Json& j, SolverOptions* options) {
     SOFTID_ASSIGN_OR_RETURN(options->launch_from_flight,
                             ParseBool(j["launch_from_flight"], "launch_from_flight"));
   }
+  if (j.contains("predictable_frames_only")) {
+    SOFTID_ASSIGN_OR_RETURN(options->predictable_frames_only,
+                            ParseBool(j["predictable_frames_only"], "predictable_frames_only"));
+  }
   return Status::Ok();
 }
 
@@ -265,6 +269,7 @@ void WriteJson(const SolverOptions& options, Json* job_config) {
   j["finite_difference_step"] = options.finite_difference_step;
   j["continuation"] = options.continuation;
   j["launch_from_flight"] = options.launch_from_flight;
+  j["predictable_frames_only"] = options.predictable_frames_only;
   j["refine_iterations"] = options.refine_iterations;
   j["cost"] = {{"band_cells", options.cost.band_cells},
                {"truncation_cells", options.cost.truncation_cells},

@@ -148,6 +148,17 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
 
 }  // namespace
 
+int PredictableLastFrame(const SubstepSelection& selection, int last_frame,
+                         int min_converging_contact_frames) {
+  if (selection.converging || selection.within_tolerance || selection.trials.size() < 2) return -1;
+  const SubstepTrial& last = selection.trials.back();
+  if (last.diverged || last.frames_converging > last_frame) return -1;
+  if (last.frames_converging < last.frames_within_tolerance + min_converging_contact_frames) {
+    return -1;
+  }
+  return last.frames_converging - 1;
+}
+
 int LargestSubstepCandidate(double grid_nodes, const SubstepSelectionOptions& options) {
   const double affordable = options.max_node_steps_per_frame / std::max(1.0, grid_nodes);
   return std::max(options.min_substeps,
@@ -180,7 +191,7 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
         "substeps taken",
         1e3 * previous.difference_m, previous.substeps, 2 * previous.substeps,
         1e3 * last.difference_m, last.substeps, 2 * last.substeps, 1e3 * selection.tolerance_m,
-        last.frames_within_tolerance, selection.substeps);
+        last.frames_converging, selection.substeps);
   } else if (!selection.within_tolerance) {
     spdlog::warn(
         "time step: even {} substeps per frame leave the surface {:.3g} mm from a run at half the "

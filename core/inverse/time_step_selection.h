@@ -70,7 +70,7 @@ struct SubstepSelection {
   // a step error halves at least (first order, in contact): the motion itself is then sensitive
   // to the smallest change (an undamped block rocking on a floor is chaotic: 7.4, 22 and 14 mm
   // between 8/16, 16/32 and 32/64 substeps, docs/benchmarks.md), and no step makes its frames from
-  // trials.back().frames_within_tolerance on predictable.
+  // trials.back().frames_converging on predictable.
   bool converging = true;
   std::vector<SubstepTrial> trials;
 };
@@ -83,6 +83,15 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
                                         const fem::SimulationOptions& simulation, double fps,
                                         int last_frame,
                                         const SubstepSelectionOptions& options = {});
+
+// The last frame a fit should compare when `selection` found the motion chaotic: the last of the
+// leading frames in which the last halving of the step still shrank the difference
+// (trials.back().frames_converging), or -1 (every frame) when the motion converges, fewer than
+// two trials ran, every frame converges, or fewer than `min_converging_contact_frames` converge
+// after those already within the tolerance (then not even the first impact converges, and the
+// frames before it would not tell the fit anything).
+int PredictableLastFrame(const SubstepSelection& selection, int last_frame,
+                         int min_converging_contact_frames = 3);
 
 // The largest candidate on a grid of `grid_nodes` nodes: options.max_substeps, or fewer so that
 // grid_nodes x substeps stays within options.max_node_steps_per_frame; never below min_substeps.

@@ -150,6 +150,8 @@ def run_case(case, args):
            "grid_cells": result["grid"]["cells"], "substeps": result["time_step"]["substeps"],
            "grid_agrees_frames": agreeing_frames(result["grid"]),
            "step_agrees_frames": agreeing_frames(result["time_step"]),
+           # The frames compared: all, or those before the motion turned chaotic.
+           "fitted_last_frame": result["time_step"].get("predictable_last_frame"),
            "seconds": round(seconds, 1), "config": config}
     if "friction_coefficient" in result["parameters"]:
         row["fitted_friction"] = result["parameters"]["friction_coefficient"]["value"]
@@ -189,11 +191,17 @@ def dash(x):
     return "-" if x is None else str(x)
 
 
+def fitted_frames(row):
+    last = row.get("fitted_last_frame")
+    return "all" if last is None else f"0-{last}"
+
+
 def print_table(rows):
     print("| case | E fitted [kPa] | vs reference mesh | vs nominal | sigma | discretisation "
           "| truth in band | corrected vs reference | grid / substeps "
-          "| frames agreeing (grid / step) | launch velocity error [m/s] | friction | time [s] |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+          "| frames agreeing (grid / step) | frames fitted | launch velocity error [m/s] | friction "
+          "| time [s] |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for r in rows:
         e = r["fitted_youngs_modulus"]
         friction = (f"{r['fitted_friction']:.3f} (truth {r['friction']})" if "friction" in r else "-")
@@ -203,6 +211,7 @@ def print_table(rows):
               f"| {percent(r['corrected_error_vs_reference'])} "
               f"| {r['grid_cells']} / {r['substeps']} "
               f"| {dash(r['grid_agrees_frames'])} / {dash(r['step_agrees_frames'])} "
+              f"| {fitted_frames(r)} "
               f"| {r['velocity_error_m_s']:.3f} | {friction} "
               f"| {r['seconds']:.0f} |")
     judged = [r for r in rows if len(r["reference_youngs_modulus_per_material"]) <= 1]

@@ -146,6 +146,7 @@ TEST(JobConfig, DefaultsFromEmptyObject) {
   EXPECT_EQ(config->solver.finite_difference_step, 1e-4);
   EXPECT_TRUE(config->solver.continuation);
   EXPECT_TRUE(config->solver.launch_from_flight);
+  EXPECT_TRUE(config->solver.predictable_frames_only);
   EXPECT_EQ(config->solver.refine_iterations, 0);
   EXPECT_EQ(config->solver.cost.band_cells, 3);
   EXPECT_EQ(config->solver.cost.truncation_cells, 2.0);
@@ -412,6 +413,8 @@ TEST(JobConfigRejects, NumericalSettings) {
                 "continuation = 1: ", "must be true or false");
   ExpectInvalid(json::parse(R"({"launch_from_flight": "no"})"),
                 "launch_from_flight = \"no\": ", "must be true or false");
+  ExpectInvalid(json::parse(R"({"predictable_frames_only": 1})"),
+                "predictable_frames_only = 1: ", "must be true or false");
   ExpectInvalid(json::parse(R"({"refine_iterations": -1})"),
                 "refine_iterations = -1: ", "must be an integer >= 0");
   ExpectInvalid(json::parse(R"({"refine_iterations": 2.5})"),

@@ -90,6 +90,7 @@ TEST(SolverOptions, JsonRoundTripKeepsEveryField) {
   options.finite_difference_step = 1e-3;
   options.continuation = false;
   options.launch_from_flight = false;
+  options.predictable_frames_only = false;
   options.refine_iterations = 4;
   options.cost = {5, 1.5, cost::RestSdf::kExact};
   ASSERT_TRUE(options.Validate().ok()) << options.Validate().ToString();
