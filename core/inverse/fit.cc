@@ -741,6 +741,7 @@ JobConfig WithFitDiscretisation(JobConfig config, const FitResult& fit) {
   if (config.solver.cells == kAutoCells && fit.cells > 0) config.solver.cells = fit.cells;
   if (config.solver.substeps == kAutoSubsteps && fit.substeps > 0)
     config.solver.substeps = fit.substeps;
+  if (fit.predictable_last_frame >= 0) config.frames.last = fit.predictable_last_frame;
   return config;
 }
 
@@ -973,12 +974,6 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
     return Status::FailedPrecondition("every start failed (first start: " + why + ")");
   }
   return result;
-}
-
-JobConfig AsFitted(const JobConfig& config, const FitResult& fit) {
-  JobConfig fitted = config;
-  if (fit.predictable_last_frame >= 0) fitted.frames.last = fit.predictable_last_frame;
-  return fitted;
 }
 
 nlohmann::json ParameterValueJson(const fem::PhysicalParameters& p, const std::string& name) {

@@ -177,12 +177,10 @@ Result<fem::PhysicalParameters> BaseParameters(const capture::Capture& capture,
 Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
                       const FitOptions& options = {});
 
-// `config` with frames.last at fit.predictable_last_frame where the fit left the later frames out:
-// what the analyses after the fit (uncertainty, discretisation error) must compare.
-JobConfig AsFitted(const JobConfig& config, const FitResult& fit);
-
-// `config` with the grid and the time step `fit` used in place of "auto": analyses after a fit
-// (uncertainty, the diagnosis' refits) must see the fit's own cost function, not choose again.
+// `config` with the grid and the time step `fit` used in place of "auto", and frames.last at the
+// last frame it compared where it left the unpredictable ones out (predictable_last_frame):
+// analyses after a fit (uncertainty, the diagnosis' refits) must see the fit's own cost
+// function, not choose again.
 JobConfig WithFitDiscretisation(JobConfig config, const FitResult& fit);
 
 // Public JSON of a parameter value: number, array, {"normal", "offset"} or the stiffness field.

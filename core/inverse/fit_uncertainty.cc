@@ -80,9 +80,7 @@ void AddDiscretisationErrors(const DiscretisationError& error, nlohmann::json* j
 }  // namespace
 
 Result<FitUncertainty> EstimateFitUncertainty(const capture::Capture& capture,
-                                              const JobConfig& job_config, const FitResult& fit) {
-  // The frames the fit compared (it may have left out the unpredictable ones).
-  const JobConfig config = AsFitted(job_config, fit);
+                                              const JobConfig& config, const FitResult& fit) {
   IdentifiabilityOptions options;
   // Forward runs only: the analysis comes with every result, so its cost counts (a third of
   // it by central differences of the adjoint gradient; docs/benchmarks.md).

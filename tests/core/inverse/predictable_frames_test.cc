@@ -91,8 +91,9 @@ TEST_F(PredictableFramesTest, TheFitLeavesOutTheFramesNoStepPredicts) {
   }
   EXPECT_EQ(ToJson(*fit).at("time_step").at("predictable_last_frame").get<int>(),
             fit->predictable_last_frame);
-  // The analyses after the fit compare the same frames.
-  EXPECT_EQ(AsFitted(config, *fit).frames.last, fit->predictable_last_frame);
+  // The analyses after the fit compare the same frames, at the same step.
+  EXPECT_EQ(WithFitDiscretisation(config, *fit).frames.last, fit->predictable_last_frame);
+  EXPECT_EQ(WithFitDiscretisation(config, *fit).solver.substeps, fit->substeps);
 
   JobConfig every_frame = config;
   every_frame.solver.predictable_frames_only = false;
@@ -101,7 +102,7 @@ TEST_F(PredictableFramesTest, TheFitLeavesOutTheFramesNoStepPredicts) {
   EXPECT_EQ(all->predictable_last_frame, -1);
   EXPECT_FALSE(ToJson(*all).at("time_step").contains("predictable_last_frame"));
   EXPECT_EQ(all->Best().stages.back().last_frame, kLastFrame);
-  EXPECT_EQ(AsFitted(every_frame, *all).frames.last, every_frame.frames.last);
+  EXPECT_EQ(WithFitDiscretisation(every_frame, *all).frames.last, every_frame.frames.last);
 }
 
 // Where the motion converges, or not even the first impact does, every frame is kept.
