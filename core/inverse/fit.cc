@@ -948,6 +948,22 @@ Result<FitCheckpoint> PrepareFit(const capture::Capture& capture, const JobConfi
   return CheckpointOf(chosen, static_cast<int>(setup.starts.size()));
 }
 
+Result<TimeStepCheck> CheckTimeStep(const capture::Capture& capture, const JobConfig& config,
+                                    const std::atomic<bool>* cancel) {
+  SOFTID_ASSIGN_OR_RETURN(FitSetup setup, SetUpFit(capture, config));
+  JobConfig automatic = config;
+  automatic.solver.substeps = kAutoSubsteps;
+  FitResult chosen;
+  chosen.base = setup.base;
+  SOFTID_RETURN_IF_ERROR(ChooseDiscretisation(capture, setup.mesh, automatic, *setup.frames, cancel,
+                                              &setup.simulation, &chosen));
+  TimeStepCheck out;
+  out.selection = std::move(*chosen.substep_selection);
+  out.predictable_last_frame =
+      PredictableLastFrame(out.selection, LastNominalFrame(*setup.frames, capture.fps));
+  return out;
+}
+
 Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
                       const FitOptions& options) {
   const auto begin = Clock::now();

@@ -177,6 +177,17 @@ Result<fem::PhysicalParameters> BaseParameters(const capture::Capture& capture,
 Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
                       const FitOptions& options = {});
 
+// The time-step check a fit of `config` runs with "substeps": "auto" (at the config's grid, the
+// central start), alone: its trials, and the last frame the fit would compare under
+// predictable_frames_only (-1: every frame). The diagnosis compares its models on a fixed coarse
+// step, and leaves out what no step predicts with it.
+struct TimeStepCheck {
+  SubstepSelection selection;
+  int predictable_last_frame = -1;
+};
+Result<TimeStepCheck> CheckTimeStep(const capture::Capture& capture, const JobConfig& config,
+                                    const std::atomic<bool>* cancel = nullptr);
+
 // `config` with the grid and the time step `fit` used in place of "auto", and frames.last at the
 // last frame it compared where it left the unpredictable ones out (predictable_last_frame):
 // analyses after a fit (uncertainty, the diagnosis' refits) must see the fit's own cost

@@ -86,10 +86,10 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
 
 // The last frame a fit should compare when `selection` found the motion chaotic: the last of the
 // leading frames in which the last halving of the step still shrank the difference
-// (trials.back().frames_converging), or -1 (every frame) when the motion converges, fewer than
-// two trials ran, every frame converges, or fewer than `min_converging_contact_frames` converge
-// after those already within the tolerance (then not even the first impact converges, and the
-// frames before it would not tell the fit anything).
+// (trials.back().frames_converging), or -1 (every frame) when the last trial met the tolerance,
+// fewer than two trials ran, every frame converges, or fewer than `min_converging_contact_frames`
+// converge after those already within the tolerance (then not even the first impact converges, and
+// the frames before it would not tell the fit anything).
 int PredictableLastFrame(const SubstepSelection& selection, int last_frame,
                          int min_converging_contact_frames = 3);
 

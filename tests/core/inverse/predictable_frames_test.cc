@@ -94,6 +94,13 @@ TEST_F(PredictableFramesTest, TheFitLeavesOutTheFramesNoStepPredicts) {
   // The analyses after the fit compare the same frames, at the same step.
   EXPECT_EQ(WithFitDiscretisation(config, *fit).frames.last, fit->predictable_last_frame);
   EXPECT_EQ(WithFitDiscretisation(config, *fit).solver.substeps, fit->substeps);
+  // The check alone (what the diagnosis runs before comparing at a fixed step) finds the same.
+  JobConfig fixed_step = config;
+  fixed_step.solver.substeps = 4;
+  const Result<TimeStepCheck> check = CheckTimeStep(capture_, fixed_step);
+  ASSERT_TRUE(check.ok()) << check.status().ToString();
+  EXPECT_EQ(check->predictable_last_frame, fit->predictable_last_frame);
+  EXPECT_EQ(check->selection.substeps, fit->substeps);
 
   JobConfig every_frame = config;
   every_frame.solver.predictable_frames_only = false;
@@ -105,7 +112,8 @@ TEST_F(PredictableFramesTest, TheFitLeavesOutTheFramesNoStepPredicts) {
   EXPECT_EQ(WithFitDiscretisation(every_frame, *all).frames.last, every_frame.frames.last);
 }
 
-// Where the motion converges, or not even the first impact does, every frame is kept.
+// Where every frame converges or meets the tolerance, or not even the first impact converges,
+// every frame is kept.
 TEST(PredictableLastFrame, OnlyWhereTheImpactConvergesAndTheRestDoesNot) {
   SubstepSelection selection;
   selection.converging = false;
@@ -118,9 +126,12 @@ TEST(PredictableLastFrame, OnlyWhereTheImpactConvergesAndTheRestDoesNot) {
   selection.trials.back().frames_converging = 49;  // every frame converges
   EXPECT_EQ(PredictableLastFrame(selection, 48), -1);
   selection.trials.back().frames_converging = 18;
+  // The largest difference shrank, but by chance in the frames that do not converge.
   selection.converging = true;
+  EXPECT_EQ(PredictableLastFrame(selection, 48), 17);
+  selection.within_tolerance = true;
   EXPECT_EQ(PredictableLastFrame(selection, 48), -1);
-  selection.converging = false;
+  selection.within_tolerance = false;
   selection.trials.resize(1);
   EXPECT_EQ(PredictableLastFrame(selection, 48), -1);
 }
