@@ -52,7 +52,12 @@ const std::vector<Candidate>& CandidateLibrary() {
     c[3].num_boundary = 1;
     c[3].needs_ground = true;
     c[3].phases = {Phase::kImpact, Phase::kRest};
-    c[3].description = "contact compliance and restitution: wrong rebound, hovering or sinking";
+    // A nuisance: the floor's compliance and restitution belong to the rig (a mat, a table, the
+    // penalty of another code), not to the object, and a real floor is never softid's default.
+    c[3].nuisance = true;
+    c[3].description =
+        "contact compliance and restitution (a nuisance of the floor, not the object's physics): "
+        "wrong rebound, hovering or sinking";
     c[4].extension = Extension::kInitialSpin;
     c[4].nuisance = true;
     c[4].parameters = {"initial_angular_velocity"};

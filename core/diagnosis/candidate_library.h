@@ -7,10 +7,12 @@
 //   heterogeneous_stiffness  stiffness_field: E ratio of two halves        1        0
 //                            along the axis the screening picks (null 1)
 //   air_drag                 drag_quadratic (>= 0, null 0)                 1        1
-//   contact                  contact_stiffness (null 100 E / L),           2        1
+//   contact (nuisance)       contact_stiffness (null 100 E / L),           2        1
 //                            contact_damping (>= 0, null 0)
 //   initial_spin (nuisance)  initial_angular_velocity (null 0)             3        0
 //
+// The contact law is the floor's, not the object's: fitted as a nuisance, it is measured where
+// the residual concentrates in contact, and never named as the physics the object left out.
 // Camera pose and time offset are nuisances the fit cannot model; noise_floor.h flags their
 // signature (a frame 0 worse than the moving frames).
 #pragma once

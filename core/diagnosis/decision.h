@@ -16,14 +16,14 @@
 //      from the candidate's refit with the extension at its null, and a-d are applied again when
 //      that is lower (an extension that only led the optimiser out of a poor base optimum is
 //      then rejected).
-//   2. A physics candidate and a nuisance (initial spin) are not nested: their likelihood ratios
-//      against the base answer different questions, and a small nuisance can soak up part of a
-//      physical signal. When a nuisance N and a physics candidate P both improve the fit (LRs
-//      passed, N plausible), P is refitted jointly with N (every base parameter free) and tested
-//      GIVEN N: the rule of step 1 with the N model as the null (LR of (base+N+P) vs (base+N),
-//      held-out against the N model, flagged cells back to noise, plausible, determined). The same
-//      joint fit tells whether N still adds anything once P is in (its LR against the P model at
-//      N's critical value, and the held-out gate against the P model). P stands on
+//   2. A physics candidate and a nuisance (initial spin, the contact law) are not nested: their
+//      likelihood ratios against the base answer different questions, and a small nuisance can
+//      soak up part of a physical signal. When a nuisance N and a physics candidate P both improve
+//      the fit (LRs passed, N plausible), P is refitted jointly with N (every base parameter free)
+//      and tested GIVEN N: the rule of step 1 with the N model as the null (LR of (base+N+P) vs
+//      (base+N), held-out against the N model, flagged cells back to noise, plausible, determined).
+//      The same joint fit tells whether N still adds anything once P is in (its LR against the P
+//      model at N's critical value, and the held-out gate against the P model). P stands on
 //        - the joint model when P given N is accepted (N is then reported as a nuisance alongside
 //          the physics, and whether it is still needed given P);
 //        - P alone when P alone is accepted, P given N passes its LR but not every gate (e.g. the

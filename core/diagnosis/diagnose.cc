@@ -1,5 +1,7 @@
 #include "core/diagnosis/diagnose.h"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -40,16 +42,21 @@ struct ModelResiduals {
   ResidualMap map;
 };
 
-Result<ModelResiduals> ResidualsAt(Context& context, const fem::PhysicalParameters& p) {
-  SOFTID_ASSIGN_OR_RETURN(inverse::ObjectiveEvaluation evaluation,
-                          context.objective->Evaluate(p, false));
+// The residuals of `objective` (one over the context's observations) at p.
+Result<ModelResiduals> ResidualsOf(inverse::TrajectoryObjective& objective, const Context& context,
+                                   const fem::PhysicalParameters& p) {
+  SOFTID_ASSIGN_OR_RETURN(inverse::ObjectiveEvaluation evaluation, objective.Evaluate(p, false));
   if (evaluation.diverged) return Status::FailedPrecondition("the simulation diverged");
-  SOFTID_ASSIGN_OR_RETURN(auto matches, context.objective->MatchPoints(p));
+  SOFTID_ASSIGN_OR_RETURN(auto matches, objective.MatchPoints(p));
   ModelResiduals out;
   out.cost = evaluation.cost;
   out.heldout = evaluation.heldout_cost;
   out.map = BuildResidualMap(context.observations, matches, context.patches, context.truncation);
   return out;
+}
+
+Result<ModelResiduals> ResidualsAt(Context& context, const fem::PhysicalParameters& p) {
+  return ResidualsOf(*context.objective, context, p);
 }
 
 // The refit of a model extension: the base config with `freed` parameters fitted as well and
@@ -332,8 +339,11 @@ struct DiagnosisRun {
     sigma = report.noise_floor.sigma;
     SOFTID_ASSIGN_OR_RETURN(report.motion, SplitMotionPhases(context.objective->simulator(), p0,
                                                              context.frame_times, options.phases));
-    report.before = Locate(r0.map, report.motion, sigma, rule.misfit_threshold,
-                           rule.min_phase_frames, rule.min_patch_points);
+    SOFTID_RETURN_IF_ERROR(EstimateComparedStepError());
+    std::vector<double> share;
+    report.before = Locate(LessStepError(r0.map, &share), report.motion, sigma,
+                           rule.misfit_threshold, rule.min_phase_frames, rule.min_patch_points);
+    if (report.time_step_error) report.time_step_error->frame_share = share;
     report.after = report.before;
     ess0 = ComputeEffectiveSampleSize(FittedResiduals(r0.map));
     report.n_eff = ess0.n_eff;
@@ -347,6 +357,64 @@ struct DiagnosisRun {
            {"modelled", false}});
     }
     return Status::Ok();
+  }
+
+  // 2b. The compared time step's own share of the misfit (time_step_error.h): the base model once
+  // more at half the step, and once per base variable for its sensitivities.
+  Status EstimateComparedStepError() {
+    const int substeps = config.solver.substeps;
+    if (!options.remove_time_step_error || substeps <= 0) return Status::Ok();
+    Stage("the compared time step's error: the base model at " + std::to_string(2 * substeps) +
+          " substeps per frame");
+    auto frames =
+        std::make_shared<const std::vector<inverse::ObservedFrame>>(context.observations.frames);
+    std::unique_ptr<inverse::TrajectoryObjective> finer;
+    try {
+      finer = std::make_unique<inverse::TrajectoryObjective>(
+          context.mesh, capture.fixed_region, p0, inverse::SimulationOptionsFor(config.solver),
+          inverse::CostOptionsFor(config.solver), frames, capture.fps, 2 * substeps);
+    } catch (const std::invalid_argument& e) {
+      return Status::InvalidArgument(e.what());
+    }
+    finer->SetCancelFlag(options.fit.cancel);
+    Result<ModelResiduals> at_half_step = ResidualsOf(*finer, context, p0);
+    if (!at_half_step.ok()) {
+      spdlog::warn("diagnosis: the base model at half the step: {} (its error stays in the misfit)",
+                   at_half_step.status().message());
+      return Status::Ok();
+    }
+    const std::optional<Sensitivities> sensitivities = BaseSensitivities();
+    report.time_step_error =
+        EstimateTimeStepError(r0.map, at_half_step->map, sensitivities ? &*sensitivities : nullptr,
+                              substeps, 2 * substeps);
+    return Status::Ok();
+  }
+  // The residual maps with each base variable moved by 0.01 (optimiser units: 1 % of a modulus,
+  // a hundredth of the body's length per second of a launch), one run each; nullopt when a run
+  // fails (nothing is then absorbed).
+  std::optional<Sensitivities> BaseSensitivities() {
+    Result<inverse::ParameterSpace> space = inverse::ParameterSpace::Create(
+        base.fitted, base.base, context.rest_bounds.sizes().maxCoeff());
+    if (!space.ok()) return std::nullopt;
+    const std::vector<double> x0 = space->ToVariables(p0);
+    Sensitivities out;
+    out.step = 0.01;
+    Result<ModelResiduals> at = ResidualsAt(context, space->ToParameters(x0.data(), p0));
+    if (!at.ok()) return std::nullopt;
+    out.at = std::move(at->map);
+    for (size_t v = 0; v < x0.size(); ++v) {
+      std::vector<double> x = x0;
+      x[v] += out.step;
+      Result<ModelResiduals> moved = ResidualsAt(context, space->ToParameters(x.data(), p0));
+      if (!moved.ok()) return std::nullopt;
+      out.moved.push_back(std::move(moved->map));
+    }
+    return out;
+  }
+  // `map` less the compared time step's component (time_step_error.h), when estimated.
+  ResidualMap LessStepError(const ResidualMap& map, std::vector<double>* share = nullptr) const {
+    if (!report.time_step_error) return map;
+    return WithoutTimeStepComponent(map, *report.time_step_error, share);
   }
 
   // 3. Screen every candidate around the base fit (its parameters profiled out).
@@ -501,7 +569,7 @@ struct DiagnosisRun {
     tested->test.tau_pixels = ess.tau_pixels;
     tested->test.tau_frames = ess.tau_frames;
     tested->test.lr = LikelihoodRatioStatistic(tested->test.cost_before, r1->cost, ess.n_eff);
-    tested->after = Locate(r1->map, report.motion, sigma, rule.misfit_threshold,
+    tested->after = Locate(LessStepError(r1->map), report.motion, sigma, rule.misfit_threshold,
                            rule.min_phase_frames, rule.min_patch_points);
     // The phases and patches flagged at the base fit must be back at the noise level.
     for (size_t i = 0; i < report.before.phases.size(); ++i) {
@@ -714,7 +782,7 @@ struct DiagnosisRun {
   };
 
   // The joint refits step 2 runs: each nuisance that improves the fit with a plausible value with
-  // each physics candidate that improves it, from the better start (forward cost).
+  // each physics candidate that improves it, from the best start (forward cost).
   std::vector<JointRefit> PlanJointRefits() const {
     std::vector<JointRefit> joints;
     const size_t num_single = report.tested.size();
@@ -731,13 +799,21 @@ struct DiagnosisRun {
         const TestedCandidate& physics = report.tested[i];
         const Candidate& candidate = GetCandidate(physics.test.extension);
         const Candidate& nuisance_candidate = GetCandidate(nuisance.test.extension);
-        fem::PhysicalParameters start =
-            CopyExtension(candidate.extension, physics.parameters, nuisance.parameters);
-        const fem::PhysicalParameters other =
-            CopyExtension(nuisance_candidate.extension, nuisance.parameters, physics.parameters);
-        Result<inverse::ObjectiveEvaluation> a = context.objective->Evaluate(start, false);
-        Result<inverse::ObjectiveEvaluation> b = context.objective->Evaluate(other, false);
-        if (b.ok() && !b->diverged && (!a.ok() || a->diverged || b->cost < a->cost)) start = other;
+        // Each refit with the other's found values, and each refit as it is (the other at its
+        // null): the joint model nests both, so its refit must end at least as low as either.
+        const fem::PhysicalParameters starts[] = {
+            CopyExtension(candidate.extension, physics.parameters, nuisance.parameters),
+            CopyExtension(nuisance_candidate.extension, nuisance.parameters, physics.parameters),
+            nuisance.parameters, physics.parameters};
+        fem::PhysicalParameters start = starts[0];
+        double lowest = std::numeric_limits<double>::infinity();
+        for (const fem::PhysicalParameters& p : starts) {
+          Result<inverse::ObjectiveEvaluation> e = context.objective->Evaluate(p, false);
+          if (e.ok() && !e->diverged && e->cost < lowest) {
+            lowest = e->cost;
+            start = p;
+          }
+        }
         JointRefit joint;
         joint.nuisance = n;
         joint.physics = i;
@@ -884,6 +960,8 @@ struct DiagnosisRun {
   // grid's and time step's. A failed refit leaves the compared final fit, with the error.
   void RefitAtTheJobsDiscretisation() {
     report.compared_at = {{"cells", config.solver.cells}, {"substeps", config.solver.substeps}};
+    if (config.frames.last != job.frames.last)
+      report.compared_at["predictable_last_frame"] = config.frames.last;
     if (!compared_coarser || Cancelled()) return;
     const TestedCandidate* winner = report.winner >= 0 ? &report.tested[report.winner] : nullptr;
     if (winner == nullptr && job_fit != nullptr) {
@@ -938,10 +1016,13 @@ struct DiagnosisRun {
     const std::filesystem::path dir = options.plot_directory;
     const bool changed = report.winner >= 0;
     const std::string misfit_png = (dir / "residual_per_frame.png").string();
+    std::vector<double> as_compared;  // with the time step's component
+    if (report.time_step_error)
+      for (const FrameResiduals& f : r0.map.frames) as_compared.push_back(f.misfit / sigma);
     SOFTID_RETURN_IF_ERROR(
         WriteFrameMisfitPlot(misfit_png, report.frames, report.before.frame_normalised,
                              changed ? report.after.frame_normalised : std::vector<double>{},
-                             report.motion, rule.misfit_threshold));
+                             report.motion, rule.misfit_threshold, "before", as_compared));
     report.plots.push_back(misfit_png);
     int worst = 0;
     for (size_t k = 0; k < report.frames.size(); ++k)
@@ -1000,6 +1081,37 @@ Status DiagnoseOptions::Validate() const {
 
 namespace {
 
+// When the job lets "auto" choose its step and leaves the unpredictable frames out
+// (predictable_frames_only), but the models are compared on a fixed coarser step, that step's
+// check (inverse::CheckTimeStep, at the compared grid) finds where the motion turns chaotic, and
+// the comparison stops there too: no model predicts those frames, and their misfit would be
+// flagged as unexplained. Returns whether frames were cut.
+Result<bool> KeepPredictableComparedFrames(const capture::Capture& capture,
+                                           const inverse::JobConfig& job,
+                                           const DiagnoseOptions& options,
+                                           inverse::JobConfig* compared) {
+  if (job.solver.substeps != inverse::kAutoSubsteps || !job.solver.predictable_frames_only ||
+      compared->solver.substeps == inverse::kAutoSubsteps)
+    return false;
+  if (options.on_stage) options.on_stage("the time-step check at the compared grid");
+  Result<inverse::TimeStepCheck> check =
+      inverse::CheckTimeStep(capture, *compared, options.fit.cancel);
+  if (!check.ok()) {
+    if (check.status().code() == StatusCode::kInvalidArgument) return check.status();
+    spdlog::warn("diagnosis: the time-step check: {} (every frame compared)",
+                 check.status().message());
+    return false;
+  }
+  const int last = check->predictable_last_frame;
+  if (last < 0 || (compared->frames.last >= 0 && last >= compared->frames.last)) return false;
+  spdlog::warn(
+      "diagnosis: the frames after frame {} are not compared: halving the step no longer "
+      "converges there (the motion is chaotic), and the job's fit leaves them out too",
+      last);
+  compared->frames.last = last;
+  return true;
+}
+
 Result<DiagnosisReport> DiagnoseAt(const capture::Capture& capture, const inverse::JobConfig& job,
                                    inverse::JobConfig compared, bool compared_coarser,
                                    const DiagnoseOptions& options,
@@ -1024,10 +1136,12 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
   SOFTID_RETURN_IF_ERROR(config.Validate());
   inverse::JobConfig compared = ComparisonConfig(config, options);
   const bool compared_coarser = !SameDiscretisation(config.solver, compared.solver);
+  SOFTID_ASSIGN_OR_RETURN(const bool frames_cut,
+                          KeepPredictableComparedFrames(capture, config, options, &compared));
   // A given fit serves only when it held out the frames the diagnosis holds out, on the grid and
   // time step the models are compared on.
-  const bool usable =
-      base_fit != nullptr && config_in.heldout_every > 0 && RanAt(*base_fit, compared.solver);
+  const bool usable = base_fit != nullptr && config_in.heldout_every > 0 && !frames_cut &&
+                      RanAt(*base_fit, compared.solver);
   const inverse::FitResult* job_fit =
       base_fit != nullptr && RanAt(*base_fit, config.solver) ? base_fit : nullptr;
   return DiagnoseAt(capture, config, std::move(compared), compared_coarser, options,

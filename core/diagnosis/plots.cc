@@ -54,10 +54,12 @@ void DrawLine(cv::Mat& image, const Axes& axes, const std::vector<double>& x,
 Status WriteFrameMisfitPlot(const std::filesystem::path& path, const std::vector<int>& frames,
                             const std::vector<double>& before, const std::vector<double>& after,
                             const std::vector<FrameMotion>& motion, double threshold,
-                            const std::string& before_label) {
+                            const std::string& before_label,
+                            const std::vector<double>& as_compared) {
   cv::Mat image(440, 760, CV_8UC3, kWhite);
   if (frames.empty()) return Save(path, image);
   double top = threshold * 1.2;
+  for (double v : as_compared) top = std::max(top, v);
   for (double v : before) top = std::max(top, v);
   for (double v : after) top = std::max(top, v);
   Axes axes{cv::Rect(70, 40, 660, 320), double(frames.front()),
@@ -84,6 +86,10 @@ Status WriteFrameMisfitPlot(const std::filesystem::path& path, const std::vector
              kGrey, 1);
   }
   std::vector<double> x(frames.begin(), frames.end());
+  if (!as_compared.empty()) {
+    DrawLine(image, axes, x, as_compared, kGrey);
+    Text(image, "with the compared time step's error", {250, 428}, 0.45, kGrey);
+  }
   DrawLine(image, axes, x, before, kColours[0]);
   Text(image, before_label, {80, 428}, 0.45, kColours[0]);
   if (!after.empty()) {

@@ -25,10 +25,13 @@ struct Series {
 // @param frames capture frame indices (x axis); before/after misfit / sigma per frame (after may
 //   be empty); motion colours the background by phase; threshold is drawn as a dashed line;
 //   before_label names the first curve in the legend.
+// `as_compared`: when given, the base misfit with the compared time step's own error still in it
+// (time_step_error.h), drawn in grey; `before` is then the misfit without it.
 Status WriteFrameMisfitPlot(const std::filesystem::path& path, const std::vector<int>& frames,
                             const std::vector<double>& before, const std::vector<double>& after,
                             const std::vector<FrameMotion>& motion, double threshold,
-                            const std::string& before_label = "before");
+                            const std::string& before_label = "before",
+                            const std::vector<double>& as_compared = {});
 
 // Cost per iteration of each series on a log scale [m^2].
 Status WriteCostHistoryPlot(const std::filesystem::path& path, const std::vector<Series>& series);

@@ -217,6 +217,10 @@ void WriteComparedAtText(const nlohmann::json& compared_at, std::ostream& out) {
   if (!compared_at.is_object()) return;
   out << "models compared on " << compared_at.value("cells", 0) << " cells, "
       << compared_at.value("substeps", 0) << " substeps per frame";
+  if (compared_at.contains("predictable_last_frame")) {
+    out << ", up to frame " << compared_at["predictable_last_frame"].get<int>()
+        << " (after it the motion is chaotic: halving the step no longer converges)";
+  }
   if (compared_at.contains("final_refit")) {
     const nlohmann::json& refit = compared_at["final_refit"];
     if (refit.contains("error")) {
@@ -269,6 +273,7 @@ nlohmann::json ToJson(const DiagnosisReport& r) {
   out["base_fit"] = r.base_fit;
   out["final_fit"] = r.final_fit;
   out["compared_at"] = r.compared_at;
+  out["time_step_error"] = r.time_step_error ? ToJson(*r.time_step_error) : nlohmann::json();
   out["identifiability"] = r.identifiability;
   out["plots"] = r.plots;
   out["seconds"] = r.seconds;
@@ -302,6 +307,13 @@ std::string ToText(const DiagnosisReport& r) {
         << b.value("first_decision", std::string()) << ")\n";
   }
   WriteComparedAtText(r.compared_at, out);
+  if (r.time_step_error) {
+    out << "compared time step: " << r.time_step_error->finer_substeps
+        << " substeps per frame move the residuals by " << Fixed(r.time_step_error->change_m * 1e3)
+        << " mm RMS, " << Fixed(r.time_step_error->unabsorbed_m * 1e3)
+        << " mm beyond what the base parameters absorb; that component is left out of each "
+           "frame's misfit before the phases and patches are judged\n";
+  }
   if (!r.plots.empty()) out << "plots: " << Join(r.plots) << "\n";
   return out.str();
 }

@@ -25,6 +25,8 @@ struct DiagnoseFlags {
   int max_refits = 2;
   double max_seconds = diagnosis::DiagnoseOptions().max_seconds;
   bool no_identifiability = false;
+  int compare_cells = diagnosis::DiagnoseOptions().comparison_cells;
+  int compare_substeps = diagnosis::DiagnoseOptions().comparison_substeps;
 };
 
 int RunDiagnose(const DiagnoseFlags& flags) {
@@ -36,6 +38,8 @@ int RunDiagnose(const DiagnoseFlags& flags) {
   options.decision.max_refits = flags.max_refits;
   options.max_seconds = flags.max_seconds;
   options.identifiability = !flags.no_identifiability;
+  options.comparison_cells = flags.compare_cells;
+  options.comparison_substeps = flags.compare_substeps;
   const std::filesystem::path out(flags.out);
   options.plot_directory =
       flags.plots.empty() ? (out.has_parent_path() ? out.parent_path() : ".") / "diagnosis_plots"
@@ -74,6 +78,16 @@ Command RegisterDiagnose(CLI::App* app) {
   app->add_option("--max-seconds", flags->max_seconds,
                   "time budget [s]: the final refit on the job's grid and time step stops at its "
                   "first iteration past it (0 = none)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  app->add_option("--compare-cells", flags->compare_cells,
+                  "grid the models are compared on, at most (cells along the longest side; 0 = "
+                  "the job's own)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
+  app->add_option("--compare-substeps", flags->compare_substeps,
+                  "time step the models are compared on, at most (substeps per frame; 0 = the "
+                  "job's own)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
   app->add_flag("--no-identifiability", flags->no_identifiability,
