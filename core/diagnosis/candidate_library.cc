@@ -199,4 +199,13 @@ nlohmann::json ExtensionValues(Extension extension, const fem::PhysicalParameter
   return nlohmann::json::object();
 }
 
+fem::PhysicalParameters WithExtensionAtNull(Extension extension,
+                                            const fem::PhysicalParameters& refit,
+                                            fem::PhysicalParameters to,
+                                            const Eigen::AlignedBox3d& rest_bounds) {
+  if (extension == Extension::kHeterogeneousStiffness)
+    to.stiffness_field = HalvesField(rest_bounds, HalvesAxis(refit), 1.0);
+  return to;
+}
+
 }  // namespace softid::diagnosis

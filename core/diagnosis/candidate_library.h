@@ -65,6 +65,14 @@ fem::StiffnessField HalvesField(const Eigen::AlignedBox3d& rest_bounds, int axis
 fem::PhysicalParameters CopyExtension(Extension extension, const fem::PhysicalParameters& from,
                                       fem::PhysicalParameters to);
 
+// `to` (a model without the extension) with the extension present at its null, in the form
+// `refit` gives it: a stiffness split becomes ratio 1 along the refit's axis, so that a fit can
+// free it from there; any other extension's null is a value `to` already has.
+fem::PhysicalParameters WithExtensionAtNull(Extension extension,
+                                            const fem::PhysicalParameters& refit,
+                                            fem::PhysicalParameters to,
+                                            const Eigen::AlignedBox3d& rest_bounds);
+
 // The start of the null model refitted from an extension's refit: `refit` with the extension
 // back at its null (taken from `null`). A stiffness split keeps its stiffness: E becomes the
 // volume-weighted geometric mean E_upper r^f (f = the share of `rest_bounds` inside the scaled

@@ -804,7 +804,9 @@ struct DiagnosisRun {
         const fem::PhysicalParameters starts[] = {
             CopyExtension(candidate.extension, physics.parameters, nuisance.parameters),
             CopyExtension(nuisance_candidate.extension, nuisance.parameters, physics.parameters),
-            nuisance.parameters, physics.parameters};
+            WithExtensionAtNull(candidate.extension, physics.parameters, nuisance.parameters,
+                                context.rest_bounds),
+            physics.parameters};
         fem::PhysicalParameters start = starts[0];
         double lowest = std::numeric_limits<double>::infinity();
         for (const fem::PhysicalParameters& p : starts) {

@@ -57,6 +57,26 @@ TEST(NullModelStart, OtherExtensionsKeepTheRefitsBaseParameters) {
   EXPECT_EQ(contact.youngs_modulus, 5000.0);
 }
 
+// A model without the stiffness split gets the split at ratio 1 along the refit's axis (a field a
+// joint refit can free); other extensions' nulls are the model's own values.
+TEST(WithExtensionAtNull, AStiffnessSplitAtRatioOneAlongTheRefitsAxis) {
+  const Eigen::AlignedBox3d body(Eigen::Vector3d::Zero(), Eigen::Vector3d(0.1, 0.2, 0.3));
+  fem::PhysicalParameters refit = NullParameters();
+  refit.stiffness_field = HalvesField(body, 2, 4.0);
+  fem::PhysicalParameters model = NullParameters();
+  model.contact_stiffness = 2e6;
+  const fem::PhysicalParameters out =
+      WithExtensionAtNull(Extension::kHeterogeneousStiffness, refit, model, body);
+  ASSERT_EQ(out.stiffness_field.regions.size(), 1u);
+  EXPECT_EQ(out.stiffness_field.regions[0].scale, 1.0);
+  EXPECT_EQ(out.stiffness_field.regions[0].box.min(), refit.stiffness_field.regions[0].box.min());
+  EXPECT_EQ(out.stiffness_field.regions[0].box.max(), refit.stiffness_field.regions[0].box.max());
+  EXPECT_EQ(out.contact_stiffness, 2e6);
+  refit.friction_coefficient = 0.4;
+  EXPECT_EQ(WithExtensionAtNull(Extension::kFriction, refit, model, body).friction_coefficient,
+            model.friction_coefficient);
+}
+
 // The library names the parameters it frees under their registry names, and an extension's copy
 // takes exactly those from the refit.
 TEST(CandidateLibrary, FreesRegistryParameters) {
