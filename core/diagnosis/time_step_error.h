@@ -18,7 +18,6 @@
 // (a stiffness contrast tilting the body, friction holding it back) keeps its misfit.
 #pragma once
 
-#include <Eigen/Core>
 #include <nlohmann/json.hpp>
 #include <vector>
 
@@ -35,8 +34,8 @@ struct TimeStepError {
   std::vector<double> patch_m;  // per patch, over every frame [m]
   // e per frame and point, aligned with the map (0 where a run did not match the point) [m].
   std::vector<std::vector<float>> point_m;
-  // Per observed frame: the share of its misfit^2 (matched points) along e [-], in [0, 1]; filled
-  // by WithoutTimeStepComponent of the base fit's map.
+  // Per observed frame: the share of the base fit's misfit^2 (matched points) along e [-], in
+  // [0, 1]; the diagnosis fills it from WithoutTimeStepComponent's `share`.
   std::vector<double> frame_share;
 };
 
