@@ -7,6 +7,7 @@
 #include <cmath>
 #include <iomanip>
 #include <limits>
+#include <memory>
 #include <optional>
 #include <sstream>
 
@@ -29,6 +30,8 @@ using Clock = std::chrono::steady_clock;
 struct Context {
   geometry::TriangleMesh mesh;
   Observations observations;
+  // observations.frames, shared by every objective built on them (one copy per diagnosis).
+  std::shared_ptr<const std::vector<inverse::ObservedFrame>> frames;
   std::unique_ptr<inverse::TrajectoryObjective> objective;
   inverse::ObjectiveFactory make_objective;  // another objective like `objective`
   Eigen::AlignedBox3d rest_bounds;
@@ -300,14 +303,15 @@ struct DiagnosisRun {
     SOFTID_ASSIGN_OR_RETURN(
         context.observations,
         LoadObservations(capture, config.frames.first, config.frames.last, config.heldout_every));
-    auto frames =
+    context.frames =
         std::make_shared<const std::vector<inverse::ObservedFrame>>(context.observations.frames);
     // Each objective simulates on one thread (SimulationOptions' default): parallel work runs
     // whole evaluations side by side (the screening's tries), which scales better.
-    context.make_objective = [this, frames] {
+    context.make_objective = [this] {
       auto objective = std::make_unique<inverse::TrajectoryObjective>(
           context.mesh, capture.fixed_region, p0, inverse::SimulationOptionsFor(config.solver),
-          inverse::CostOptionsFor(config.solver), frames, capture.fps, config.solver.substeps);
+          inverse::CostOptionsFor(config.solver), context.frames, capture.fps,
+          config.solver.substeps);
       objective->SetCancelFlag(options.fit.cancel);
       return objective;
     };
@@ -366,13 +370,11 @@ struct DiagnosisRun {
     if (!options.remove_time_step_error || substeps <= 0) return Status::Ok();
     Stage("the compared time step's error: the base model at " + std::to_string(2 * substeps) +
           " substeps per frame");
-    auto frames =
-        std::make_shared<const std::vector<inverse::ObservedFrame>>(context.observations.frames);
     std::unique_ptr<inverse::TrajectoryObjective> finer;
     try {
       finer = std::make_unique<inverse::TrajectoryObjective>(
           context.mesh, capture.fixed_region, p0, inverse::SimulationOptionsFor(config.solver),
-          inverse::CostOptionsFor(config.solver), frames, capture.fps, 2 * substeps);
+          inverse::CostOptionsFor(config.solver), context.frames, capture.fps, 2 * substeps);
     } catch (const std::invalid_argument& e) {
       return Status::InvalidArgument(e.what());
     }
@@ -1152,13 +1154,16 @@ Result<DiagnosisReport> Diagnose(const capture::Capture& capture,
   if (config.heldout_every == 0) config.heldout_every = options.default_heldout_every;
   SOFTID_RETURN_IF_ERROR(config.Validate());
   inverse::JobConfig compared = ComparisonConfig(config, options);
+  // The likelihood ratios are those of least squares (Gaussian noise): the models are fitted and
+  // compared by it whatever frame loss the job's own fit used.
+  compared.solver.cost.frame_loss = inverse::FrameLossKind::kSquared;
   const bool compared_coarser = !SameDiscretisation(config.solver, compared.solver);
   SOFTID_ASSIGN_OR_RETURN(const bool frames_cut,
                           KeepPredictableComparedFrames(capture, config, options, &compared));
-  // A given fit serves only when it held out the frames the diagnosis holds out, on the grid and
-  // time step the models are compared on.
+  // A given fit serves only when it held out the frames the diagnosis holds out, by least squares,
+  // on the grid and time step the models are compared on.
   const bool usable = base_fit != nullptr && config_in.heldout_every > 0 && !frames_cut &&
-                      RanAt(*base_fit, compared.solver);
+                      RanAt(*base_fit, compared.solver) && base_fit->frame_loss.IsSquared();
   const inverse::FitResult* job_fit =
       base_fit != nullptr && RanAt(*base_fit, config.solver) ? base_fit : nullptr;
   return DiagnoseAt(capture, config, std::move(compared), compared_coarser, options,

@@ -28,6 +28,7 @@ constexpr double kOrder = 1.0;
 struct FitSetting {
   geometry::TriangleMesh mesh;
   std::shared_ptr<const std::vector<ObservedFrame>> frames;
+  FrameLoss frame_loss;  // the fit's
 };
 
 Result<FitSetting> LoadFitSetting(const capture::Capture& capture, const JobConfig& config) {
@@ -51,6 +52,7 @@ Result<Eigen::VectorXd> GradientAt(const FitSetting& setting, const capture::Cap
   } catch (const std::invalid_argument& e) {
     return Status::InvalidArgument(e.what());
   }
+  objective->SetFrameLoss(setting.frame_loss);
   SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation, objective->Evaluate(optimum, true));
   if (evaluation.diverged) return Status::FailedPrecondition("the simulation diverged");
   Eigen::VectorXd gradient(space.NumVariables());
@@ -186,6 +188,7 @@ Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& 
     return Status::FailedPrecondition("discretisation error: the fit has no usable start");
   const JobConfig config = WithFitDiscretisation(config_in, fit);
   SOFTID_ASSIGN_OR_RETURN(FitSetting setting, LoadFitSetting(capture, config));
+  setting.frame_loss = fit.frame_loss;
   SOFTID_ASSIGN_OR_RETURN(
       const ParameterSpace space,
       ParameterSpace::Create(fit.fitted, fit.base, setting.mesh.Bounds().sizes().maxCoeff()));

@@ -516,8 +516,15 @@ StartSpace MeasureLaunch(TrajectoryObjective& objective, const ParameterSpace& s
                          const FitOptions& options, double scale, StartResult* result) {
   StartSpace out{std::nullopt, base};
   if (!config.solver.launch_from_flight || LaunchParameters(space.names()).empty()) return out;
+  // By least squares whatever the job's frame loss: the flight is rigid motion the model
+  // reproduces to the noise, and a launch measured from rest needs least squares' wide basin (the
+  // Cauchy loss is flat where every frame misfits: a launched block's launch came out at half its
+  // speed, and its modulus at 10x).
+  const FrameLoss loss = objective.frame_loss();
+  objective.SetFrameLoss(FrameLoss{});
   Result<FlightStageResult> flight =
       MeasureLaunchInFlight(objective, space.names(), result->initial, scale, options.cancel);
+  objective.SetFrameLoss(loss);
   if (!flight.ok()) {
     FlightStageResult skipped;
     skipped.skipped = flight.status().message();
@@ -836,6 +843,18 @@ Status DiscretiseFit(const capture::Capture& capture, const JobConfig& config,
                               &setup->simulation, result);
 }
 
+// The frame loss of the config (frame_loss.h), scaled by the depth noise of frame 0 (the depth
+// quantum without points there).
+void ChooseFrameLoss(const capture::Capture& capture, const geometry::TriangleMesh& mesh,
+                     const JobConfig& config, FitResult* result) {
+  const CostSettings& cost = config.solver.cost;
+  if (cost.frame_loss == FrameLossKind::kSquared) return;
+  Result<RestFrameNoise> noise = EstimateRestFrameNoise(capture, mesh);
+  result->depth_noise_m = noise.ok() ? noise->sigma_m : DepthQuantisationSigma(capture);
+  result->frame_loss =
+      MakeFrameLoss(cost.frame_loss, cost.frame_loss_noise_multiple, result->depth_noise_m);
+}
+
 // Leaves out the frames after the motion turns chaotic (SolverOptions::predictable_frames_only)
 // when the time-step choice found where: setup->frames keeps those up to the last predictable
 // one, if at least two of them are fitted.
@@ -905,6 +924,7 @@ Status RunStarts(const capture::Capture& capture, const JobConfig& config,
       return;
     }
     objective->SetCancelFlag(options.cancel);
+    objective->SetFrameLoss(result->frame_loss);
     for (int next = next_start++; next < static_cast<int>(to_run.size()); next = next_start++) {
       if (options.cancel != nullptr && options.cancel->load()) break;
       const int s = to_run[next];
@@ -975,6 +995,7 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   result.starts.resize(setup.starts.size());
   const cost::SurfaceCostOptions cost_options = CostOptionsFor(config.solver);
   SOFTID_RETURN_IF_ERROR(DiscretiseFit(capture, config, options, &setup, &result));
+  ChooseFrameLoss(capture, setup.mesh, config, &result);
   KeepPredictableFrames(config, capture.fps, &setup, &result);
   SOFTID_ASSIGN_OR_RETURN(std::vector<int> to_run, StartsToRun(options, num_starts));
   FitCheckpoint checkpoint = ResumedCheckpoint(options, num_starts, &result);
@@ -1112,6 +1133,11 @@ nlohmann::json ToJson(const FitResult& result) {
                  {"cell_size_m", result.cell_size_m},
                  {"element", fem::ToString(result.element)}};
   if (result.grid_selection) out["grid"]["selection"] = ToJson(*result.grid_selection);
+  if (!result.frame_loss.IsSquared()) {
+    out["frame_loss"] = {{"kind", ToString(FrameLossKind::kCauchy)},
+                         {"scale_m2", result.frame_loss.scale_m2},
+                         {"depth_noise_m", result.depth_noise_m}};
+  }
   out["time_step"] = {{"substeps", result.substeps}};
   if (result.substep_selection) out["time_step"]["selection"] = ToJson(*result.substep_selection);
   if (result.predictable_last_frame >= 0) {

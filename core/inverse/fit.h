@@ -36,6 +36,7 @@
 #include "core/fem/physical_parameters.h"
 #include "core/geometry/triangle_mesh.h"
 #include "core/inverse/flight_stage.h"
+#include "core/inverse/frame_loss.h"
 #include "core/inverse/grid_selection.h"
 #include "core/inverse/job_config.h"
 #include "core/inverse/observed_frames.h"
@@ -157,6 +158,10 @@ struct FitResult {
   double cell_size_m = 0.0;
   std::optional<GridSelection> grid_selection;                                    // when chosen
   fem::ElementFormulation element = fem::ElementFormulation::kIncompatibleModes;  // the config's
+  // How the frames' costs added up (SolverOptions::cost.frame_loss, its scale from the depth
+  // noise of frame 0, depth_noise_m [m]; 0 when least squares did not need it).
+  FrameLoss frame_loss;
+  double depth_noise_m = 0.0;
 
   const StartResult& Best() const { return starts.at(best); }
 };

@@ -259,7 +259,7 @@ namespace {
 
 // The cost's curvature at the optimum in the optimiser's variables, and what came with it.
 struct Curvature {
-  double cost = 0.0;         // C(x*) [m^2]
+  double cost = 0.0;         // C(x*) [m^2]; with a frame loss, its reweighted least-squares cost
   Eigen::VectorXd gradient;  // dC/dx at x* [m^2]
   Eigen::MatrixXd hessian;   // symmetric [m^2]
   double asymmetry = 0.0;    // |H - H^T| / |H| before symmetrising [-]
@@ -354,7 +354,7 @@ Result<Curvature> CurvatureByGradientDifferences(const ObjectiveFactory& make_ob
                                 objective.Evaluate(at, /*with_gradient=*/true));
         if (evaluation.diverged) return stencil.Diverged(variable, task % 2 == 1 ? " - " : " + ");
         Evaluation& result = results[task];
-        result.cost = evaluation.cost;
+        result.cost = evaluation.reweighted_cost;
         result.gradient.resize(p);
         stencil.space.ChainGradient(evaluation.gradient, x.data(), result.gradient.data());
         if (task == 0) out.num_points = PointsInFittedFrames(objective);
@@ -392,7 +392,7 @@ Result<Curvature> CurvatureByGaussNewton(const ObjectiveFactory& make_objective,
                                 objective.EvaluateResiduals(at, &residuals[task]));
         if (evaluation.diverged) return stencil.Diverged(task - 1, " + ");
         if (task == 0) {
-          out.cost = evaluation.cost;
+          out.cost = evaluation.reweighted_cost;
           out.num_points = PointsInFittedFrames(objective);
           frame_sizes = ResidualsPerFrame(objective);
         }
@@ -608,9 +608,11 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const capture::Capture& cap
   if (resolved.threads == 0) resolved.threads = config.solver.threads;
   return AnalyzeIdentifiability(
       [&]() {
-        return std::make_unique<TrajectoryObjective>(mesh, capture.fixed_region, optimum,
-                                                     simulation, cost_options, frames, capture.fps,
-                                                     substeps);
+        auto objective =
+            std::make_unique<TrajectoryObjective>(mesh, capture.fixed_region, optimum, simulation,
+                                                  cost_options, frames, capture.fps, substeps);
+        objective->SetFrameLoss(fit.frame_loss);
+        return objective;
       },
       space, optimum, resolved);
 }

@@ -12,6 +12,9 @@
 //     and the Laplace approximation of the posterior covariance is
 //       Cov(x) = (sigma^2 / (2 N_eff)) (H / 2)^-1 = sigma^2 / N_eff * H^-1
 //              = 2 C_min / (N_eff - p) * H^-1.
+//     With the Cauchy frame loss (frame_loss.h) C_min is the reweighted least-squares cost (each
+//     frame's cost times its weight) and H the loss's curvature: the covariance of least squares
+//     weighted by the frames' weights, whatever their common scale.
 //     N_eff defaults to the number of observed points in the fitted frames. Depth pixels are not
 //     independent where the model itself is off (discretisation, left-out physics: neighbouring
 //     residuals share the error), so these uncertainties are lower bounds (2b widens them); the
@@ -167,7 +170,9 @@ HessianCovariance CovarianceFromHessian(const Eigen::MatrixXd& h, double varianc
 
 struct IdentifiabilityReport {
   std::vector<VariableIdentifiability> variables;
-  double cost = 0.0;                   // C_min [m^2] at the analysed parameters
+  // C_min [m^2] at the analysed parameters (with a frame loss other than least squares, the
+  // reweighted least-squares cost, TrajectoryObjective::reweighted_cost, which scales the noise)
+  double cost = 0.0;
   Eigen::VectorXd gradient;            // dC/dx at x* [m^2] (should be ~0 at an optimum)
   double num_effective_samples = 0.0;  // N_eff used [-]
   double residual_sigma = 0.0;         // sigma [m]

@@ -34,7 +34,9 @@
 //     "predictable_frames_only": true,  // leave out frames after the motion turns chaotic
 //     "refine_iterations": 0,    // Levenberg-Marquardt iterations after L-BFGS; 0 = none
 //     "cost": {"band_cells": 3, "truncation_cells": 2.0,
-//              "rest_sdf": "surface_fitted"},  // or "exact", "sampled"
+//              "rest_sdf": "surface_fitted",  // or "exact", "sampled"
+//              "frame_loss": "squared",       // or "cauchy" (frame_loss.h)
+//              "frame_loss_noise_multiple": 2.0},
 //     "diagnose": false, "uncertainty": true
 //   }
 // Malformed input is rejected with InvalidArgument "<field path> = <value>: <reason>", e.g.

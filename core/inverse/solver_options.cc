@@ -21,8 +21,9 @@ constexpr const char* kPositiveRequirement = "must be a finite number > 0";
 constexpr const char* kGradientRequirement = "must be \"adjoint\" or \"finite_difference\"";
 constexpr const char* kElementRequirement = "must be \"trilinear\" or \"incompatible_modes\"";
 constexpr const char* kRestSdfRequirement = "must be \"surface_fitted\", \"exact\" or \"sampled\"";
-constexpr auto kCostKeys =
-    std::to_array<std::string_view>({"band_cells", "truncation_cells", "rest_sdf"});
+constexpr const char* kFrameLossRequirement = "must be \"squared\" or \"cauchy\"";
+constexpr auto kCostKeys = std::to_array<std::string_view>(
+    {"band_cells", "truncation_cells", "rest_sdf", "frame_loss", "frame_loss_noise_multiple"});
 
 std::string AtLeast(int min) {
   return "must be an integer >= " + std::to_string(min);
@@ -64,6 +65,22 @@ Result<CostSettings> ParseCost(const Json& value) {
       }
     }
     if (!known) return json::Invalid("cost.rest_sdf", rest_sdf, kRestSdfRequirement);
+  }
+  if (value.contains("frame_loss")) {
+    const Json& loss = value["frame_loss"];
+    bool known = false;
+    for (FrameLossKind kind : {FrameLossKind::kSquared, FrameLossKind::kCauchy}) {
+      if (loss.is_string() && loss.get<std::string>() == ToString(kind)) {
+        settings.frame_loss = kind;
+        known = true;
+      }
+    }
+    if (!known) return json::Invalid("cost.frame_loss", loss, kFrameLossRequirement);
+  }
+  if (value.contains("frame_loss_noise_multiple")) {
+    SOFTID_ASSIGN_OR_RETURN(settings.frame_loss_noise_multiple,
+                            json::ToPositiveNumber(value["frame_loss_noise_multiple"],
+                                                   "cost.frame_loss_noise_multiple"));
   }
   return settings;
 }
@@ -188,6 +205,14 @@ Status ValidateCost(const CostSettings& cost) {
   if (!IsPositiveFinite(cost.truncation_cells)) {
     return json::Invalid("cost.truncation_cells", cost.truncation_cells, kPositiveRequirement);
   }
+  if (!IsPositiveFinite(cost.frame_loss_noise_multiple)) {
+    return json::Invalid("cost.frame_loss_noise_multiple", cost.frame_loss_noise_multiple,
+                         kPositiveRequirement);
+  }
+  if (cost.frame_loss != FrameLossKind::kSquared && cost.frame_loss != FrameLossKind::kCauchy) {
+    return json::Invalid("cost.frame_loss", static_cast<int>(cost.frame_loss),
+                         kFrameLossRequirement);
+  }
   for (cost::RestSdf mode :
        {cost::RestSdf::kSurfaceFitted, cost::RestSdf::kExact, cost::RestSdf::kSampled}) {
     if (cost.rest_sdf == mode) return Status::Ok();
@@ -233,6 +258,12 @@ Status SolverOptions::Validate() const {
     return json::Invalid("max_seconds", max_seconds, "must be a finite number >= 0");
   if (refine_iterations < 0)
     return json::Invalid("refine_iterations", refine_iterations, AtLeast(0));
+  // The refinement keeps its point by comparing its least-squares cost with L-BFGS's.
+  if (refine_iterations > 0 && cost.frame_loss != FrameLossKind::kSquared) {
+    return json::Invalid("refine_iterations", refine_iterations,
+                         "must be 0 with cost.frame_loss \"cauchy\" (the refinement is least "
+                         "squares)");
+  }
   if (gradient != GradientMethod::kAdjoint && gradient != GradientMethod::kFiniteDifference) {
     return json::Invalid("gradient", static_cast<int>(gradient), kGradientRequirement);
   }
@@ -273,7 +304,9 @@ void WriteJson(const SolverOptions& options, Json* job_config) {
   j["refine_iterations"] = options.refine_iterations;
   j["cost"] = {{"band_cells", options.cost.band_cells},
                {"truncation_cells", options.cost.truncation_cells},
-               {"rest_sdf", cost::ToString(options.cost.rest_sdf)}};
+               {"rest_sdf", cost::ToString(options.cost.rest_sdf)},
+               {"frame_loss", ToString(options.cost.frame_loss)},
+               {"frame_loss_noise_multiple", options.cost.frame_loss_noise_multiple}};
   // 0 means "absent" (use cells); written only when set so the round trip keeps it absent.
   if (options.cell_size_m != 0.0) j["cell_size"] = options.cell_size_m;
   if (options.rho_infinity != SolverOptions::kNewmark) j["rho_infinity"] = options.rho_infinity;

@@ -14,6 +14,7 @@
 #include "core/common/status.h"
 #include "core/cost/sparse_surface_cost.h"
 #include "core/fem/hex_element.h"
+#include "core/inverse/frame_loss.h"
 
 namespace softid::inverse {
 
@@ -46,6 +47,13 @@ struct CostSettings {
   // queries the distance to the rest surface itself (no floor, one closest-point query per
   // point); "sampled" interpolates the nodal distances (the paper's).
   cost::RestSdf rest_sdf = cost::RestSdf::kSurfaceFitted;
+  // How the frames' costs add up (frame_loss.h): "squared" (least squares) or "cauchy" (each
+  // frame counted by b log(1 + C_k / b), so that frames the model cannot reproduce count by their
+  // relative change), with b = (frame_loss_noise_multiple x the capture's depth noise)^2 / 2.
+  // Used by the fit and the analyses of its result (uncertainty, discretisation error); the
+  // diagnosis compares models by least squares whatever this says.
+  FrameLossKind frame_loss = FrameLossKind::kSquared;
+  double frame_loss_noise_multiple = 2.0;  // > 0, finite [-]
   friend bool operator==(const CostSettings&, const CostSettings&) = default;
 };
 

@@ -17,14 +17,18 @@ double SecondsSince(std::chrono::steady_clock::time_point start) {
 // 1e-12 steps of k * substeps, and an interpolation weight of 1e-9 changes nothing measurable.
 constexpr double kOnStepTolerance = 1e-9;
 
-// Sums the frame costs in frame order (the same bits whichever pass computed them).
+// Sums the frame costs through the loss in frame order (the same bits whichever pass computed
+// them).
 void SumFrameCosts(std::span<const ObservedFrame> frames, int fitted, int heldout,
-                   ObjectiveEvaluation* out) {
+                   const FrameLoss& loss, ObjectiveEvaluation* out) {
   for (size_t k = 0; k < frames.size(); ++k) {
-    if (frames[k].heldout)
-      out->heldout_cost += out->frame_costs[k] / heldout;
-    else
-      out->cost += out->frame_costs[k] / fitted;
+    const double c = out->frame_costs[k];
+    if (frames[k].heldout) {
+      out->heldout_cost += loss.Value(c) / heldout;
+    } else {
+      out->cost += loss.Value(c) / fitted;
+      out->reweighted_cost += loss.Weight(c) * c / fitted;
+    }
   }
 }
 
@@ -93,7 +97,7 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
       out.frame_costs[k] =
           cost_->Evaluate(ObservedDisplacement(static_cast<int>(k)), frames[k].points, nullptr);
     }
-    SumFrameCosts(frames, fitted, heldout, &out);
+    SumFrameCosts(frames, fitted, heldout, frame_loss_, &out);
     out.forward_seconds = SecondsSince(forward_start);
     return out;
   }
@@ -104,7 +108,7 @@ Result<ObjectiveEvaluation> TrajectoryObjective::Evaluate(const fem::PhysicalPar
   // the forward time).
   const auto backward_start = std::chrono::steady_clock::now();
   SOFTID_RETURN_IF_ERROR(Backpropagate(fitted, &out));
-  SumFrameCosts(frames, fitted, heldout, &out);
+  SumFrameCosts(frames, fitted, heldout, frame_loss_, &out);
   out.backward_seconds = SecondsSince(backward_start);
   return out;
 }
@@ -159,7 +163,7 @@ Status TrajectoryObjective::Backpropagate(int fitted, ObjectiveEvaluation* out) 
         continue;
       }
       out->frame_costs[next_frame] = cost_->Evaluate(u, frame.points, &frame_gradient_);
-      frame_gradient_ /= fitted;
+      frame_gradient_ *= frame_loss_.Weight(out->frame_costs[next_frame]) / fitted;
       const Eigen::VectorXd& gradient = RestGradient(next_frame, &out->gradient);
       const double weight = observation_steps_[next_frame].weight;
       adjoint.u += weight * gradient;
@@ -200,7 +204,8 @@ Result<ObjectiveEvaluation> TrajectoryObjective::EvaluateResiduals(
     const ObservedFrame& frame = (*frames_)[k];
     if (frame.heldout || frame.points.empty()) continue;
     cost_->Evaluate(ObservedDisplacement(k), frame.points, nullptr, &matches_);
-    const double weight = 2.0 / (static_cast<double>(fitted) * frame.points.size());
+    const double weight = 2.0 * frame_loss_.Weight(evaluation.frame_costs[k]) /
+                          (static_cast<double>(fitted) * frame.points.size());
     for (const cost::PointMatch& match : matches_) {
       const double magnitude = std::sqrt(weight * match.cost);
       (*residuals)[next++] = match.matched && match.phi < 0.0 ? -magnitude : magnitude;

@@ -2,14 +2,15 @@
 // fitted frame with what the cameras saw through the sparse-surface-constraint cost, and get the
 // gradient with respect to every parameter by one adjoint pass backwards through the states.
 //
-//   cost = (1 / F) sum over the F fitted frames k of C_k(u(t_k))   [m^2]
+//   cost = (1 / F) sum over the F fitted frames k of L(C_k(u(t_k)))   [m^2]
 //
-// C_k is the per-frame SSC cost (mean truncated squared distance of the frame's points); frame k
-// is compared with the state at its time t_k (k / fps, or the capture's frame_times): the state
-// after t_k / dt steps when t_k falls on a step, else the linear interpolation of the two steps
-// around it (jittered or dropped frames). Held-out frames are evaluated (for
-// validation) but do not enter the cost or the gradient. Only the active frames (a prefix, by
-// default all) are simulated and compared.
+// L is the frame loss (frame_loss.h; least squares, L(c) = c, unless SetFrameLoss says
+// otherwise). C_k is the per-frame SSC cost (mean truncated squared distance of the frame's
+// points); frame k is compared with the state at its time t_k (k / fps, or the capture's
+// frame_times): the state after t_k / dt steps when t_k falls on a step, else the linear
+// interpolation of the two steps around it (jittered or dropped frames). Held-out frames are
+// evaluated (for validation) but do not enter the cost or the gradient. Only the active frames (a
+// prefix, by default all) are simulated and compared.
 //
 // Memory: the states (u, v, a) of every step, nothing else; matrices are re-assembled backwards.
 // Thread-compatibility: one instance per thread (it owns a Simulator and a cost).
@@ -28,15 +29,19 @@
 #include "core/fem/simulation_options.h"
 #include "core/fem/simulator.h"
 #include "core/geometry/triangle_mesh.h"
+#include "core/inverse/frame_loss.h"
 #include "core/inverse/observed_frames.h"
 
 namespace softid::inverse {
 
 struct ObjectiveEvaluation {
-  bool diverged = false;            // the forward run failed: no cost, the parameters are unusable
-  double cost = 0.0;                // mean over fitted frames [m^2]
-  double heldout_cost = 0.0;        // mean over held-out frames [m^2] (0 without any)
-  std::vector<double> frame_costs;  // per active observed frame (fitted and held out) [m^2]
+  bool diverged = false;      // the forward run failed: no cost, the parameters are unusable
+  double cost = 0.0;          // mean of L(C_k) over fitted frames [m^2]
+  double heldout_cost = 0.0;  // mean of L(C_k) over held-out frames [m^2] (0 without any)
+  // mean of L'(C_k) C_k over fitted frames [m^2]: the cost of the reweighted least-squares
+  // problem at these parameters (1/2 |r|^2 of EvaluateResiduals); = cost with least squares.
+  double reweighted_cost = 0.0;
+  std::vector<double> frame_costs;  // C_k per active observed frame (fitted and held out) [m^2]
   fem::ParameterGradient gradient;  // d cost / d parameters (when requested)
   int steps = 0;
   // Steps whose Newton iteration stopped at max_newton_iterations short of its tolerance: the
@@ -65,7 +70,9 @@ class TrajectoryObjective {
 
   // The cost as a sum of squares, for Gauss-Newton methods: one residual per observed point of
   // every fitted active frame k (N_k points, F fitted frames), in frame order,
-  //   r = sign(phi) sqrt(2 rho(phi) / (F N_k))   [m],   so that cost = 1/2 |r|^2.
+  //   r = sign(phi) sqrt(2 w_k rho(phi) / (F N_k))   [m],   so that cost = 1/2 |r|^2
+  // with least squares (w_k = 1); with another frame loss, w_k = loss.Weight(C_k) and 1/2 |r|^2
+  // is its reweighted least-squares form at these parameters (equal gradient, not equal value).
   // sign(phi) keeps r smooth through phi = 0 (rho ~ phi^2 / 2 there); a point matching nothing
   // (constant rho) counts as outside. Forward only; `residuals` is resized to NumResiduals().
   // The evaluation's cost and frame costs are filled as by Evaluate(parameters, false).
@@ -88,6 +95,10 @@ class TrajectoryObjective {
   // set, they return StatusCode::kCancelled within one step (a cancel takes effect within
   // seconds even inside a long run). Null (default): never cancelled.
   void SetCancelFlag(const std::atomic<bool>* cancel) { cancel_ = cancel; }
+  // How frame costs add up (default least squares). EvaluateResiduals then weights frame k's
+  // residuals by sqrt(loss.Weight(C_k)) (the Gauss-Newton form of the reweighted problem).
+  void SetFrameLoss(const FrameLoss& loss) { frame_loss_ = loss; }
+  const FrameLoss& frame_loss() const { return frame_loss_; }
 
   fem::Simulator& simulator() { return *simulator_; }
   const std::vector<ObservedFrame>& frames() const { return *frames_; }
@@ -128,6 +139,7 @@ class TrajectoryObjective {
   Eigen::VectorXd rest_gradient_;                   // the same in the rest frame
   std::vector<cost::PointMatch> matches_;           // scratch of EvaluateResiduals
   const std::atomic<bool>* cancel_ = nullptr;
+  FrameLoss frame_loss_;
 };
 
 }  // namespace softid::inverse

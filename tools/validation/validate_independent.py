@@ -3,6 +3,7 @@
 
     tools/validation/validate_independent.py --lab build/core/lab/softid-lab --out DIR
         [--cases a,b] [--resolution coarse|fine] [--starts N] [--max-iterations N]
+        [--frame-loss squared|cauchy]
 
 For each case: generates the capture unless DIR/<case>-<resolution>/ exists (make_validation_set.py),
 fits it with the settings a user with a known rig would use (gravity, floor, Poisson ratio and no
@@ -45,6 +46,8 @@ def parse_args(argv):
     parser.add_argument("--cells", default="auto", help='"auto" (default) or a number')
     parser.add_argument("--element", choices=["trilinear", "incompatible_modes"],
                         default="trilinear", help="the job config's \"element\"")
+    parser.add_argument("--frame-loss", choices=["squared", "cauchy"], default="squared",
+                        help="the job config's \"cost\": {\"frame_loss\"} (docs/job-config.md)")
     parser.add_argument("--diagnose", action="store_true",
                         help="leave friction out of the fit and diagnose after it (\"diagnose\": "
                              "true): the diagnosis should name friction and two materials, "
@@ -80,7 +83,8 @@ def job_config(truth, args):
     cells = args.cells if args.cells == "auto" else int(args.cells)
     return {"fit": fit, "fixed": fixed, "initial": initial, "starts": args.starts,
             "max_iterations": args.max_iterations, "cells": cells, "uncertainty": True,
-            "element": args.element, "diagnose": args.diagnose}
+            "element": args.element, "diagnose": args.diagnose,
+            "cost": {"frame_loss": args.frame_loss}}
 
 
 def ensure_capture(case, resolution, out):

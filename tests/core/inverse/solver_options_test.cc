@@ -58,6 +58,15 @@ TEST(SolverOptions, ValidateNamesEveryFieldOutOfRange) {
       {[](SolverOptions& o) { o.cost.truncation_cells = kNaN; }, "cost.truncation_cells = ", "> 0"},
       {[](SolverOptions& o) { o.cost.rest_sdf = static_cast<cost::RestSdf>(9); },
        "cost.rest_sdf = 9: ", "\"surface_fitted\", \"exact\" or \"sampled\""},
+      {[](SolverOptions& o) { o.cost.frame_loss = static_cast<FrameLossKind>(7); },
+       "cost.frame_loss = 7: ", "\"squared\" or \"cauchy\""},
+      {[](SolverOptions& o) { o.cost.frame_loss_noise_multiple = 0.0; },
+       "cost.frame_loss_noise_multiple = 0.0: ", "> 0"},
+      {[](SolverOptions& o) {
+         o.cost.frame_loss = FrameLossKind::kCauchy;
+         o.refine_iterations = 2;
+       },
+       "refine_iterations = 2: ", "cost.frame_loss \"cauchy\""},
   };
   for (const BadField& bad : cases) {
     SolverOptions options;
@@ -106,6 +115,24 @@ TEST(SolverOptions, JsonRoundTripKeepsEveryField) {
   EXPECT_EQ(defaults.at("substeps"), "auto");
   EXPECT_FALSE(defaults.contains("cell_size"));     // 0 = absent
   EXPECT_FALSE(defaults.contains("rho_infinity"));  // Newmark
+  EXPECT_EQ(defaults.at("cost").at("frame_loss"), "squared");
+
+  SolverOptions robust;
+  robust.cost.frame_loss = FrameLossKind::kCauchy;
+  robust.cost.frame_loss_noise_multiple = 3.0;
+  json robust_json = json::object();
+  WriteJson(robust, &robust_json);
+  const Result<SolverOptions> robust_read = SolverOptionsFromJson(robust_json);
+  ASSERT_TRUE(robust_read.ok()) << robust_read.status().ToString();
+  EXPECT_EQ(*robust_read, robust);
+}
+
+TEST(SolverOptions, AnUnknownFrameLossIsRejectedByName) {
+  const Result<SolverOptions> read =
+      SolverOptionsFromJson(json{{"cost", {{"frame_loss", "huber"}}}});
+  ASSERT_FALSE(read.ok());
+  EXPECT_EQ(read.status().message().rfind("cost.frame_loss = \"huber\": ", 0), 0u)
+      << read.status().message();
 }
 
 // The solver reads only its own keys of a job config: the specification's are the caller's.

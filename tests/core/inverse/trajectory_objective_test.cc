@@ -4,8 +4,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -20,10 +22,20 @@
 namespace softid::inverse {
 namespace {
 
+// The simulation of the small captures' objectives: an 8-cell grid, other settings default.
+fem::SimulationOptions EightCells() {
+  fem::SimulationOptions options;
+  options.cells_along_longest_side = 8;
+  return options;
+}
+
 // Checks the adjoint gradient of a torus drop's objective over `frames` against central finite
 // differences, parameter by parameter.
-void ExpectAdjointMatchesFiniteDifferences(
-    const testing::SmallCapture& small, std::shared_ptr<const std::vector<ObservedFrame>> frames) {
+// With `robust`, the frames add up through a Cauchy frame loss whose scale is the median frame
+// cost there, so that the frames' weights differ.
+void ExpectAdjointMatchesFiniteDifferences(const testing::SmallCapture& small,
+                                           std::shared_ptr<const std::vector<ObservedFrame>> frames,
+                                           bool robust = false) {
   fem::SimulationOptions options;
   options.cells_along_longest_side = 8;
   options.newton_tolerance = 1e-11;
@@ -42,6 +54,14 @@ void ExpectAdjointMatchesFiniteDifferences(
   p.initial_angular_velocity = Eigen::Vector3d(0.4, -0.6, 0.3);
   TrajectoryObjective objective(small.mesh, std::nullopt, p, options, {}, frames, small.capture.fps,
                                 2);
+  if (robust) {
+    Result<ObjectiveEvaluation> plain = objective.Evaluate(p, false);
+    ASSERT_TRUE(plain.ok() && !plain->diverged);
+    std::vector<double> costs = plain->frame_costs;
+    std::nth_element(costs.begin(), costs.begin() + costs.size() / 2, costs.end());
+    ASSERT_GT(costs[costs.size() / 2], 0.0);
+    objective.SetFrameLoss(FrameLoss{costs[costs.size() / 2]});
+  }
   Result<ObjectiveEvaluation> base = objective.Evaluate(p, true);
   ASSERT_TRUE(base.ok()) << base.status().ToString();
   ASSERT_FALSE(base->diverged);
@@ -96,6 +116,49 @@ TEST(TrajectoryObjective, AdjointGradientMatchesFiniteDifferences) {
   testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.3);
   ASSERT_TRUE(small.ok) << small.error;
   ExpectAdjointMatchesFiniteDifferences(small, small.frames);
+}
+
+// The Cauchy frame loss (frame_loss.h) weights each frame's gradient by its own cost.
+TEST(TrajectoryObjective, AdjointGradientMatchesFiniteDifferencesWithACauchyFrameLoss) {
+  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.3);
+  ASSERT_TRUE(small.ok) << small.error;
+  ExpectAdjointMatchesFiniteDifferences(small, small.frames, /*robust=*/true);
+}
+
+// The Cauchy frame loss's cost is the mean of b log(1 + C_k / b) over the fitted frames; its
+// residuals are the frames' least-squares residuals weighted by 1 / (1 + C_k / b).
+TEST(TrajectoryObjective, ACauchyFrameLossCountsEachFrameByItsRelativeMisfit) {
+  testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.3);
+  ASSERT_TRUE(small.ok) << small.error;
+  fem::PhysicalParameters p = small.truth;
+  p.youngs_modulus *= 1.6;
+  TrajectoryObjective objective(small.mesh, std::nullopt, p, EightCells(), {}, small.frames,
+                                small.capture.fps, 2);
+  Result<ObjectiveEvaluation> plain = objective.Evaluate(p, false);
+  ASSERT_TRUE(plain.ok() && !plain->diverged);
+  std::vector<double> sorted = plain->frame_costs;
+  std::sort(sorted.begin(), sorted.end());
+  const double b = sorted[sorted.size() / 2];  // [m^2]: frames below and far above it
+  objective.SetFrameLoss(FrameLoss{b});
+  Eigen::VectorXd residuals;
+  Result<ObjectiveEvaluation> robust = objective.EvaluateResiduals(p, &residuals);
+  ASSERT_TRUE(robust.ok() && !robust->diverged);
+  EXPECT_EQ(robust->frame_costs, plain->frame_costs);
+  double expected = 0.0, reweighted = 0.0, largest = 0.0, smallest = 1e300;
+  const double frames = static_cast<double>(plain->frame_costs.size());
+  for (double c : plain->frame_costs) {
+    expected += b * std::log1p(c / b) / frames;
+    reweighted += c / (1.0 + c / b) / frames;
+    largest = std::max(largest, c);
+    smallest = std::min(smallest, c);
+  }
+  ASSERT_GT(largest, 5.0 * b);  // the premise: some frames far above the scale
+  ASSERT_LT(smallest, b);       // and some below it
+  EXPECT_NEAR(robust->cost, expected, 1e-12 * expected);
+  EXPECT_LT(robust->cost, plain->cost);
+  EXPECT_NEAR(0.5 * residuals.squaredNorm(), reweighted, 1e-9 * reweighted);
+  EXPECT_NEAR(robust->reweighted_cost, reweighted, 1e-12 * reweighted);
+  EXPECT_EQ(plain->reweighted_cost, plain->cost);  // least squares
 }
 
 // Frames between simulation steps (device-clock jitter), a dropped frame and two frames within
@@ -211,8 +274,7 @@ TEST(TrajectoryObjective, ResidualsAreTheCostAsASumOfSquares) {
 TEST(TrajectoryObjective, EvaluationIsBitwiseRepeatable) {
   testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.3);
   ASSERT_TRUE(small.ok) << small.error;
-  fem::SimulationOptions options;
-  options.cells_along_longest_side = 8;
+  const fem::SimulationOptions options = EightCells();
   fem::PhysicalParameters p = small.truth;
   p.youngs_modulus *= 0.8;
   p.friction_coefficient = 0.3;
