@@ -586,16 +586,17 @@ Result<IdentifiabilityReport> AnalyzeIdentifiability(const capture::Capture& cap
   SOFTID_RETURN_IF_ERROR(options.Validate());
   if (fit.best < 0 || fit.best >= static_cast<int>(fit.starts.size()))
     return Status::FailedPrecondition("identifiability: the fit has no usable start");
+  // The fit's grid, time step and frames (config may say "auto"; the fit resolved them, and it may
+  // have left out the unpredictable frames).
+  const JobConfig resolved_config = WithFitDiscretisation(config, fit);
   SOFTID_ASSIGN_OR_RETURN(geometry::TriangleMesh mesh, capture::LoadCaptureMesh(capture));
-  SOFTID_ASSIGN_OR_RETURN(auto frames, LoadFittedFrames(capture, config));
+  SOFTID_ASSIGN_OR_RETURN(auto frames, LoadFittedFrames(capture, resolved_config));
   const double length = mesh.Bounds().sizes().maxCoeff();
   // The fit's own variables: the same reference (the base parameters) fixes the ground plane's
   // tangent basis.
   SOFTID_ASSIGN_OR_RETURN(ParameterSpace space,
                           ParameterSpace::Create(fit.fitted, fit.base, length));
   const fem::PhysicalParameters& optimum = fit.Best().final;
-  // The fit's grid and time step (config may say "auto"; the fit resolved them).
-  const JobConfig resolved_config = WithFitDiscretisation(config, fit);
   const fem::SimulationOptions simulation = SimulationOptionsFor(resolved_config.solver);
   const cost::SurfaceCostOptions cost_options = CostOptionsFor(resolved_config.solver);
   const int substeps = resolved_config.solver.substeps;

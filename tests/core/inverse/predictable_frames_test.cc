@@ -9,6 +9,7 @@
 
 #include "core/capture/capture.h"
 #include "core/inverse/fit.h"
+#include "core/inverse/fit_uncertainty.h"
 #include "core/inverse/time_step_selection.h"
 #include "core/scenes/scene.h"
 #include "core/scenes/synthesize.h"
@@ -71,6 +72,16 @@ class PredictableFramesTest : public ::testing::Test {
   fem::PhysicalParameters truth_;
 };
 
+// Observed points in frames 0..last.
+double PointsUpTo(const capture::Capture& capture, int last) {
+  const Result<std::vector<ObservedFrame>> frames = LoadObservedFrames(capture, 0, last);
+  double points = 0.0;
+  if (frames.ok()) {
+    for (const ObservedFrame& frame : *frames) points += static_cast<double>(frame.points.size());
+  }
+  return points;
+}
+
 TEST_F(PredictableFramesTest, TheFitLeavesOutTheFramesNoStepPredicts) {
   const JobConfig config = Config();
   const Result<FitResult> fit = Fit(capture_, config);
@@ -94,6 +105,11 @@ TEST_F(PredictableFramesTest, TheFitLeavesOutTheFramesNoStepPredicts) {
   // The analyses after the fit compare the same frames, at the same step.
   EXPECT_EQ(WithFitDiscretisation(config, *fit).frames.last, fit->predictable_last_frame);
   EXPECT_EQ(WithFitDiscretisation(config, *fit).solver.substeps, fit->substeps);
+  const Result<FitUncertainty> uncertainty = EstimateFitUncertainty(capture_, config, *fit);
+  ASSERT_TRUE(uncertainty.ok()) << uncertainty.status().ToString();
+  EXPECT_EQ(uncertainty->report.num_effective_samples,
+            PointsUpTo(capture_, fit->predictable_last_frame));
+  EXPECT_LT(uncertainty->report.num_effective_samples, PointsUpTo(capture_, kLastFrame));
   // The check alone (what the diagnosis runs before comparing at a fixed step) finds the same.
   JobConfig fixed_step = config;
   fixed_step.solver.substeps = 4;
