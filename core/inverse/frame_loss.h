@@ -34,6 +34,12 @@ struct FrameLoss {
   double Value(double c) const { return IsSquared() ? c : scale_m2 * std::log1p(c / scale_m2); }
   // d Value / d c [-], in (0, 1].
   double Weight(double c) const { return IsSquared() ? 1.0 : 1.0 / (1.0 + c / scale_m2); }
+  // Value(c) / c [-], in (0, 1]: its limit 1 at c = 0 (below 1e-8 b, where log1p(x) / x = 1 to
+  // 1e-8; avoids 0 / 0).
+  double ValueOverCost(double c) const {
+    if (IsSquared() || c < 1e-8 * scale_m2) return 1.0;
+    return scale_m2 * std::log1p(c / scale_m2) / c;
+  }
 };
 
 // The loss of `kind` for a capture of depth noise `depth_noise_m` [m]: b = (noise_multiple x

@@ -87,7 +87,8 @@ class ResidualFunction : public ceres::CostFunction {
       Count(nullptr);
       return false;
     }
-    Result<ObjectiveEvaluation> evaluation = objective.EvaluateResiduals(p, out);
+    Result<ObjectiveEvaluation> evaluation =
+        objective.EvaluateResiduals(p, out, TrajectoryObjective::ResidualWeighting::kLossValue);
     const bool ok = evaluation.ok() && !evaluation->diverged && out->allFinite();
     Count(evaluation.ok() ? &*evaluation : nullptr, ok);
     if (ok) *out *= inverse_root_scale_;

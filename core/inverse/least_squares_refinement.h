@@ -5,7 +5,9 @@
 // modulus, mass and stiffness damping trade off so that E twice the truth costs 1.4 % more than
 // the truth), where L-BFGS, which only sees gradients, creeps (47 iterations moved E from 6.7 to
 // 6.3 kPa of a true 3.45 kPa). The cost is a sum of squared point residuals
-// (TrajectoryObjective::EvaluateResiduals), so J^T J of their Jacobian J is a curvature that is
+// (TrajectoryObjective::EvaluateResiduals; with a robust frame loss, each frame's residuals scaled
+// by sqrt(L(C_k) / C_k) so that their sum of squares is still the cost, frame_loss.h), so J^T J
+// of their Jacobian J is a curvature that is
 // positive semi-definite everywhere and exact up to the residuals' own curvature, which is small
 // near a good fit; Levenberg-Marquardt damps it into a trust region, so a wrong quadratic model
 // costs a rejected step, not a divergence.

@@ -258,12 +258,6 @@ Status SolverOptions::Validate() const {
     return json::Invalid("max_seconds", max_seconds, "must be a finite number >= 0");
   if (refine_iterations < 0)
     return json::Invalid("refine_iterations", refine_iterations, AtLeast(0));
-  // The refinement keeps its point by comparing its least-squares cost with L-BFGS's.
-  if (refine_iterations > 0 && cost.frame_loss != FrameLossKind::kSquared) {
-    return json::Invalid("refine_iterations", refine_iterations,
-                         "must be 0 with cost.frame_loss \"cauchy\" (the refinement is least "
-                         "squares)");
-  }
   if (gradient != GradientMethod::kAdjoint && gradient != GradientMethod::kFiniteDifference) {
     return json::Invalid("gradient", static_cast<int>(gradient), kGradientRequirement);
   }

@@ -193,7 +193,8 @@ int TrajectoryObjective::NumResiduals() const {
 }
 
 Result<ObjectiveEvaluation> TrajectoryObjective::EvaluateResiduals(
-    const fem::PhysicalParameters& parameters, Eigen::VectorXd* residuals) {
+    const fem::PhysicalParameters& parameters, Eigen::VectorXd* residuals,
+    ResidualWeighting weighting) {
   SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation, Evaluate(parameters, false));
   if (evaluation.diverged) return evaluation;
   int fitted = 0;
@@ -204,8 +205,11 @@ Result<ObjectiveEvaluation> TrajectoryObjective::EvaluateResiduals(
     const ObservedFrame& frame = (*frames_)[k];
     if (frame.heldout || frame.points.empty()) continue;
     cost_->Evaluate(ObservedDisplacement(k), frame.points, nullptr, &matches_);
-    const double weight = 2.0 * frame_loss_.Weight(evaluation.frame_costs[k]) /
-                          (static_cast<double>(fitted) * frame.points.size());
+    const double c = evaluation.frame_costs[k];
+    const double loss_weight = weighting == ResidualWeighting::kReweighted
+                                   ? frame_loss_.Weight(c)
+                                   : frame_loss_.ValueOverCost(c);
+    const double weight = 2.0 * loss_weight / (static_cast<double>(fitted) * frame.points.size());
     for (const cost::PointMatch& match : matches_) {
       const double magnitude = std::sqrt(weight * match.cost);
       (*residuals)[next++] = match.matched && match.phi < 0.0 ? -magnitude : magnitude;

@@ -71,13 +71,21 @@ class TrajectoryObjective {
   // The cost as a sum of squares, for Gauss-Newton methods: one residual per observed point of
   // every fitted active frame k (N_k points, F fitted frames), in frame order,
   //   r = sign(phi) sqrt(2 w_k rho(phi) / (F N_k))   [m],   so that cost = 1/2 |r|^2
-  // with least squares (w_k = 1); with another frame loss, w_k = loss.Weight(C_k) and 1/2 |r|^2
-  // is its reweighted least-squares form at these parameters (equal gradient, not equal value).
+  // with least squares (w_k = 1). With another frame loss, `weighting` chooses w_k (below).
   // sign(phi) keeps r smooth through phi = 0 (rho ~ phi^2 / 2 there); a point matching nothing
   // (constant rho) counts as outside. Forward only; `residuals` is resized to NumResiduals().
   // The evaluation's cost and frame costs are filled as by Evaluate(parameters, false).
-  Result<ObjectiveEvaluation> EvaluateResiduals(const fem::PhysicalParameters& parameters,
-                                                Eigen::VectorXd* residuals);
+  enum class ResidualWeighting {
+    // w_k = L'(C_k): 1/2 |r|^2 is the reweighted least-squares problem at these parameters (equal
+    // gradient, not equal value): the curvature and noise scale of the uncertainty analysis.
+    kReweighted,
+    // w_k = L(C_k) / C_k: 1/2 |r|^2 is the cost itself, as a smooth function of the parameters,
+    // so that a trust-region method (Levenberg-Marquardt) compares steps by the cost it minimises.
+    kLossValue,
+  };
+  Result<ObjectiveEvaluation> EvaluateResiduals(
+      const fem::PhysicalParameters& parameters, Eigen::VectorXd* residuals,
+      ResidualWeighting weighting = ResidualWeighting::kReweighted);
   // Number of residuals of EvaluateResiduals at the current active frames.
   int NumResiduals() const;
 

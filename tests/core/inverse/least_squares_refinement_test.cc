@@ -1,12 +1,15 @@
 // Levenberg-Marquardt on the cost's least-squares form: from a start far along the coupled
 // directions of two parameters it reaches the minimum at the truth in a few iterations, with the
-// same result whether the Jacobian's columns run on one objective or two.
+// same result whether the Jacobian's columns run on one objective or two, and with the Cauchy
+// frame loss by the loss's own value.
 #include "core/inverse/least_squares_refinement.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <memory>
 
+#include "core/inverse/frame_loss.h"
 #include "core/inverse/parameter_space.h"
 #include "tests/core/inverse/inverse_test_util.h"
 
@@ -75,6 +78,49 @@ TEST_F(Refinement, ReachesTheMinimumOfTwoCoupledParametersInFewIterations) {
   ASSERT_TRUE(parallel.ok()) << parallel.status().ToString();
   EXPECT_EQ(x2, x);
   EXPECT_EQ(parallel->iterations, summary->iterations);
+}
+
+// With the Cauchy frame loss the residuals' sum of squares is the robust cost itself, so the
+// refinement compares its steps, and reports its cost, by what the L-BFGS stages minimised.
+TEST_F(Refinement, MinimisesTheCauchyFrameLossByItsValue) {
+  const fem::PhysicalParameters& truth = small_->truth;
+  Result<ParameterSpace> space =
+      ParameterSpace::Create({"youngs_modulus", "ground_plane"}, truth, 0.2);
+  ASSERT_TRUE(space.ok()) << space.status().ToString();
+  fem::PhysicalParameters start = truth;
+  start.youngs_modulus *= 1.6;
+  start.ground->offset += 0.004;
+  std::vector<double> x = space->ToVariables(start);
+  start = space->ToParameters(x.data(), truth);  // the refinement's start, as its variables give it
+  std::unique_ptr<TrajectoryObjective> objective = MakeObjective();
+  Result<ObjectiveEvaluation> at_start = objective->Evaluate(start, false);
+  ASSERT_TRUE(at_start.ok() && !at_start->diverged);
+  std::vector<double> costs = at_start->frame_costs;
+  std::sort(costs.begin(), costs.end());
+  // A scale under most of the start's frame costs: there the loss is far from least squares.
+  const FrameLoss loss{0.1 * costs[costs.size() / 2]};
+  objective->SetFrameLoss(loss);
+  Result<ObjectiveEvaluation> robust_start = objective->Evaluate(start, false);
+  Result<ObjectiveEvaluation> at_truth = objective->Evaluate(truth, false);
+  ASSERT_TRUE(robust_start.ok() && at_truth.ok() && !at_truth->diverged);
+  ASSERT_LT(robust_start->cost, 0.5 * at_start->cost);  // the premise: frames far above the scale
+
+  const double phi_max = 2.0 * objective->simulator().hex_mesh().CellSize();
+  const double scale = phi_max * phi_max;
+  RefinementOptions options;
+  options.max_iterations = 25;
+  Result<RefinementSummary> summary =
+      RefineByLevenbergMarquardt({objective.get()}, *space, truth, scale, &x, options);
+  ASSERT_TRUE(summary.ok()) << summary.status().ToString();
+  EXPECT_TRUE(summary->converged) << summary->termination;
+  EXPECT_NEAR(summary->initial_cost, robust_start->cost, 1e-9 * robust_start->cost);
+  const fem::PhysicalParameters found = space->ToParameters(x.data(), truth);
+  Result<ObjectiveEvaluation> at_found = objective->Evaluate(found, false);
+  ASSERT_TRUE(at_found.ok() && !at_found->diverged);
+  EXPECT_NEAR(summary->final_cost, at_found->cost, 1e-9 * at_found->cost);
+  EXPECT_LE(summary->final_cost, at_truth->cost * (1.0 + 1e-6));
+  EXPECT_NEAR(found.youngs_modulus, truth.youngs_modulus, 0.1 * truth.youngs_modulus);
+  EXPECT_NEAR(found.ground->offset, truth.ground->offset, 1e-3);
 }
 
 TEST_F(Refinement, RejectsMissingObjectivesAndMismatchedVariables) {

@@ -159,6 +159,13 @@ TEST(TrajectoryObjective, ACauchyFrameLossCountsEachFrameByItsRelativeMisfit) {
   EXPECT_NEAR(0.5 * residuals.squaredNorm(), reweighted, 1e-9 * reweighted);
   EXPECT_NEAR(robust->reweighted_cost, reweighted, 1e-12 * reweighted);
   EXPECT_EQ(plain->reweighted_cost, plain->cost);  // least squares
+  // Weighted by L(C_k) / C_k, the residuals' sum of squares is the robust cost itself.
+  Eigen::VectorXd value_residuals;
+  ASSERT_TRUE(objective
+                  .EvaluateResiduals(p, &value_residuals,
+                                     TrajectoryObjective::ResidualWeighting::kLossValue)
+                  .ok());
+  EXPECT_NEAR(0.5 * value_residuals.squaredNorm(), expected, 1e-9 * expected);
 }
 
 // Frames between simulation steps (device-clock jitter), a dropped frame and two frames within
