@@ -279,23 +279,24 @@ nlohmann::json DrawStart(const Benchmark& benchmark, const fem::PhysicalParamete
 Result<inverse::JobConfig> MakeStartConfig(const Benchmark& benchmark, const Row& row,
                                            const fem::PhysicalParameters& truth,
                                            const nlohmann::json& initial, bool capture_has_mass,
-                                           int max_iterations, int refine_iterations, int cores) {
+                                           const StartSettings& settings) {
   nlohmann::json fixed = fem::ToJson(truth);
   for (const std::string& name : benchmark.fit)
     fixed.erase(std::string(inverse::PhysicalParameterKey(name)));
   if (capture_has_mass) fixed.erase("density");
-  const nlohmann::json config = {
+  nlohmann::json config = {
       {"fit", benchmark.fit},
       {"initial", initial},
       {"fixed", fixed},
       {"cells", benchmark.cells},
       {"substeps", benchmark.substeps},
       {"starts", 1},
-      {"threads", std::max(1, cores)},
-      {"max_iterations", max_iterations},
-      {"refine_iterations", refine_iterations},
+      {"threads", std::max(1, settings.cores)},
+      {"max_iterations", settings.max_iterations},
+      {"refine_iterations", settings.refine_iterations},
       {"gradient", inverse::ToString(row.gradient)},
   };
+  if (!settings.frame_loss.empty()) config["cost"] = {{"frame_loss", settings.frame_loss}};
   return inverse::JobConfigFromJson(config);
 }
 

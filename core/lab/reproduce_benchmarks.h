@@ -115,13 +115,19 @@ std::vector<std::string> BenchmarkNames();
 nlohmann::json DrawStart(const Benchmark& benchmark, const fem::PhysicalParameters& truth,
                          std::mt19937_64& rng);
 
+// What a run sets for each of its starts, beside the benchmark's own settings.
+struct StartSettings {
+  int max_iterations = 0;     // optimiser iterations
+  int refine_iterations = 0;  // Levenberg-Marquardt iterations after L-BFGS
+  int cores = 1;              // threads of the start's simulation
+  std::string frame_loss;     // the job config's cost.frame_loss; empty: the job default
+};
+
 // The job config of one start: `fit`, the start values, every other parameter fixed at the truth
-// (density only when the capture has no mass), the benchmark's grid and time step, one start
-// whose simulation runs on `cores` threads.
+// (density only when the capture has no mass), the benchmark's grid and time step, one start.
 Result<inverse::JobConfig> MakeStartConfig(const Benchmark& benchmark, const Row& row,
                                            const fem::PhysicalParameters& truth,
                                            const nlohmann::json& initial, bool capture_has_mass,
-                                           int max_iterations, int refine_iterations,
-                                           int cores = 1);
+                                           const StartSettings& settings);
 
 }  // namespace softid::lab::reproduce

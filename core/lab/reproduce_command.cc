@@ -50,6 +50,7 @@ struct ReproduceFlags {
   int substeps = 0;  // 0: the benchmark's
   int max_iterations = 0;
   int refine_iterations = -1;  // -1: the benchmark's
+  std::string frame_loss;      // empty: the job default
   std::uint64_t seed = 1;
   // 1-based start numbers to run (default: all). Every start is still drawn from the seed, and the
   // cores per start are those of the full row, so a start run alone follows the same path.
@@ -277,7 +278,10 @@ Status FitStart(RowRun& r, int k, std::mutex& mutex, bool* have_base) {
   const int s = r.run[k];
   Result<inverse::JobConfig> config =
       reproduce::MakeStartConfig(b, r.row, r.truth, r.initial[s], r.capture.mass_kg.has_value(),
-                                 r.max_iterations, r.refine_iterations, r.cores_per_start);
+                                 {.max_iterations = r.max_iterations,
+                                  .refine_iterations = r.refine_iterations,
+                                  .cores = r.cores_per_start,
+                                  .frame_loss = r.flags.frame_loss});
   Status written = config.ok()
                        ? WriteJsonFile(r.config_dir / fmt::format("start-{:02d}.json", s + 1),
                                        inverse::ToJson(*config))
@@ -739,6 +743,10 @@ Command RegisterReproduce(CLI::App* app) {
                   "Levenberg-Marquardt iterations per start after L-BFGS (default: the "
                   "benchmark's, 40 for ball-bounce and pillow-ramp, 0 otherwise)")
       ->check(CLI::NonNegativeNumber);
+  app->add_option("--frame-loss", flags->frame_loss,
+                  "how the frames' costs add up: squared|cauchy (default: the job default, "
+                  "docs/job-config.md)")
+      ->check(CLI::IsMember({"squared", "cauchy"}));
   app->add_option("--seed", flags->seed, "seed of the random starts")->capture_default_str();
   app->add_option("--only-starts", flags->only_starts,
                   "run only these starts (1-based, comma-separated), each exactly as in the full "
