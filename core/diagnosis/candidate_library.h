@@ -47,6 +47,10 @@ struct Candidate {
   std::vector<Phase> phases;
   bool after_contact = false;
   bool all_frames = false;  // grows from frame 0 (spin)
+  // Its values take up the compared time step's error where the motion is stiffest (a contact
+  // law at an impact), so they describe that step only: alone, it joins the final model only when
+  // the models were compared at the job's own discretisation.
+  bool absorbs_step_error = false;
   std::string description;
 };
 

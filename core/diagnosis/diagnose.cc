@@ -936,18 +936,16 @@ struct DiagnosisRun {
   }
 
   // The final model's fit, residuals and identifiability: the winner's, or the base's.
-  // The test whose model is the final one: the winner's, except a contact law that alone
-  // explained the mismatch on a coarser step than the job's. On a coarse step the contact law
-  // takes up that step's error at the impact, and the modulus follows it: on the CalculiX block
-  // dropped on a corner, compared at 4 substeps per frame, the contact came out 20x softer than
-  // the default and E 70 % too high, and refitted at the job's step E doubled. It stays a
-  // reported nuisance; the final model is then the base model.
+  // The test whose model is the final one: the winner's, except a nuisance that alone explained
+  // the mismatch on a coarser step than the job's while its values take up that step's error
+  // (Candidate::absorbs_step_error: the modulus follows them). It stays a reported nuisance; the
+  // final model is then the base model.
   const TestedCandidate* FinalModelTest() const {
     if (report.winner < 0) return nullptr;
     const TestedCandidate& w = report.tested[report.winner];
-    const bool contact_alone =
-        w.test.nuisance && !w.test.conditional && w.test.extension == Extension::kContact;
-    return compared_coarser && contact_alone ? nullptr : &w;
+    const bool step_bound_alone =
+        w.test.nuisance && !w.test.conditional && GetCandidate(w.test.extension).absorbs_step_error;
+    return compared_coarser && step_bound_alone ? nullptr : &w;
   }
 
   Status SettleFinalModel() {
