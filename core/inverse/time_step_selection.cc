@@ -119,7 +119,7 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
       selection->substeps = selection->max_substeps;
       break;
     }
-    const int finer = std::min(2 * substeps, selection->max_substeps);
+    const int finer = 2 * substeps;  // <= max_substeps: the candidates are doublings
     SurfaceTrajectory fine =
         SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps, last_frame,
                                   finer, options.cancel)
@@ -165,8 +165,10 @@ int PredictableLastFrame(const SubstepSelection& selection, int last_frame,
 
 int LargestSubstepCandidate(double grid_nodes, const SubstepSelectionOptions& options) {
   const double affordable = options.max_node_steps_per_frame / std::max(1.0, grid_nodes);
-  return std::max(options.min_substeps,
-                  static_cast<int>(std::min<double>(options.max_substeps, std::floor(affordable))));
+  const double cap = std::min<double>(options.max_substeps, std::floor(affordable));
+  int largest = options.min_substeps;
+  while (2.0 * largest <= cap) largest *= 2;
+  return largest;
 }
 
 Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,

@@ -93,8 +93,12 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
 int PredictableLastFrame(const SubstepSelection& selection, int last_frame,
                          int min_converging_contact_frames = 3);
 
-// The largest candidate on a grid of `grid_nodes` nodes: options.max_substeps, or fewer so that
-// grid_nodes x substeps stays within options.max_node_steps_per_frame; never below min_substeps.
+// The largest candidate on a grid of `grid_nodes` nodes: the last of min_substeps x 2^k within
+// options.max_substeps and within options.max_node_steps_per_frame / grid_nodes; never below
+// min_substeps. Only doublings: each trial's difference estimates the coarser step's error,
+// and its convergence frame by frame is judged against the previous halving's, so a last step
+// short of double (32 vs 34 substeps: a difference 1/17 of the error) would pass frames as
+// converging that are not.
 int LargestSubstepCandidate(double grid_nodes, const SubstepSelectionOptions& options);
 
 nlohmann::json ToJson(const SubstepSelection& selection);

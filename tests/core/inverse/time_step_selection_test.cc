@@ -101,6 +101,13 @@ TEST(SelectSubsteps, LargeGridsTakeFewerCandidates) {
   EXPECT_EQ(LargestSubstepCandidate(1000, options), 64);
   EXPECT_EQ(LargestSubstepCandidate(6000, options), 32);
   EXPECT_EQ(LargestSubstepCandidate(1e7, options), options.min_substeps);
+  // Only doublings of min_substeps: a budget of 34 or a cap of 48 still ends at 32.
+  EXPECT_EQ(LargestSubstepCandidate(192000.0 / 34.5, options), 32);
+  SubstepSelectionOptions capped = options;
+  capped.max_substeps = 48;
+  EXPECT_EQ(LargestSubstepCandidate(1000, capped), 32);
+  capped.min_substeps = 3;
+  EXPECT_EQ(LargestSubstepCandidate(1000, capped), 48);
 
   const Result<scenes::Scene> scene = scenes::MakeBuiltinScene("ball-bounce");
   ASSERT_TRUE(scene.ok());
