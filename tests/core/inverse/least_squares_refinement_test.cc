@@ -28,18 +28,26 @@ class Refinement : public ::testing::Test {
                                                  options_, cost::SurfaceCostOptions{},
                                                  small_->frames, small_->capture.fps, 2);
   }
+  // Young's modulus and the floor, from far along their coupled directions: E x 1.6 and the floor
+  // 4 mm higher (the torus lands early and stiff).
+  Result<ParameterSpace> CoupledSpace() const {
+    return ParameterSpace::Create({"youngs_modulus", "ground_plane"}, small_->truth, 0.2);
+  }
+  fem::PhysicalParameters CoupledStart() const {
+    fem::PhysicalParameters start = small_->truth;
+    start.youngs_modulus *= 1.6;
+    start.ground->offset += 0.004;
+    return start;
+  }
   std::unique_ptr<testing::SmallCapture> small_;
   fem::SimulationOptions options_;
 };
 
 TEST_F(Refinement, ReachesTheMinimumOfTwoCoupledParametersInFewIterations) {
   const fem::PhysicalParameters& truth = small_->truth;
-  Result<ParameterSpace> space =
-      ParameterSpace::Create({"youngs_modulus", "ground_plane"}, truth, 0.2);
+  Result<ParameterSpace> space = CoupledSpace();
   ASSERT_TRUE(space.ok()) << space.status().ToString();
-  fem::PhysicalParameters start = truth;
-  start.youngs_modulus *= 1.6;
-  start.ground->offset += 0.004;  // 4 mm: the torus lands early and stiff
+  const fem::PhysicalParameters start = CoupledStart();
   std::vector<double> x = space->ToVariables(start);
   std::unique_ptr<TrajectoryObjective> objective = MakeObjective();
   const double phi_max = 2.0 * objective->simulator().hex_mesh().CellSize();
@@ -84,12 +92,9 @@ TEST_F(Refinement, ReachesTheMinimumOfTwoCoupledParametersInFewIterations) {
 // refinement compares its steps, and reports its cost, by what the L-BFGS stages minimised.
 TEST_F(Refinement, MinimisesTheCauchyFrameLossByItsValue) {
   const fem::PhysicalParameters& truth = small_->truth;
-  Result<ParameterSpace> space =
-      ParameterSpace::Create({"youngs_modulus", "ground_plane"}, truth, 0.2);
+  Result<ParameterSpace> space = CoupledSpace();
   ASSERT_TRUE(space.ok()) << space.status().ToString();
-  fem::PhysicalParameters start = truth;
-  start.youngs_modulus *= 1.6;
-  start.ground->offset += 0.004;
+  fem::PhysicalParameters start = CoupledStart();
   std::vector<double> x = space->ToVariables(start);
   start = space->ToParameters(x.data(), truth);  // the refinement's start, as its variables give it
   std::unique_ptr<TrajectoryObjective> objective = MakeObjective();
