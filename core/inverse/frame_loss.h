@@ -37,8 +37,7 @@ struct FrameLoss {
   // Value(c) / c [-], in (0, 1]: its limit 1 at c = 0 (below 1e-8 b, where log1p(x) / x = 1 to
   // 1e-8; avoids 0 / 0).
   double ValueOverCost(double c) const {
-    if (IsSquared() || c < 1e-8 * scale_m2) return 1.0;
-    return scale_m2 * std::log1p(c / scale_m2) / c;
+    return IsSquared() || c < 1e-8 * scale_m2 ? 1.0 : Value(c) / c;
   }
 };
 

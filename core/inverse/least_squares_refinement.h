@@ -7,10 +7,9 @@
 // 6.3 kPa of a true 3.45 kPa). The cost is a sum of squared point residuals
 // (TrajectoryObjective::EvaluateResiduals; with a robust frame loss, each frame's residuals scaled
 // by sqrt(L(C_k) / C_k) so that their sum of squares is still the cost, frame_loss.h), so J^T J
-// of their Jacobian J is a curvature that is
-// positive semi-definite everywhere and exact up to the residuals' own curvature, which is small
-// near a good fit; Levenberg-Marquardt damps it into a trust region, so a wrong quadratic model
-// costs a rejected step, not a divergence.
+// of their Jacobian J is a curvature that is positive semi-definite everywhere and exact up to
+// the residuals' own curvature, which is small near a good fit; Levenberg-Marquardt damps it into a
+// trust region, so a wrong quadratic model costs a rejected step, not a divergence.
 //
 // The Jacobian comes from central differences of forward runs in the optimiser's variables
 // (2 n runs for n variables): forward-mode sensitivities through the simulator would be cheaper
