@@ -323,8 +323,11 @@ struct DiagnosisRun {
     context.rest_bounds = context.mesh.Bounds();
     const double h = context.objective->simulator().hex_mesh().CellSize();
     context.truncation = config.solver.cost.truncation_cells * h;
-    context.patches =
-        MakePatches(context.objective->simulator().rest_surface(), options.patches, -p0.gravity);
+    // The rest surface lies in the grid's frame (fem::Simulator::mesh_from_grid), and so must up.
+    const fem::Simulator& sim = context.objective->simulator();
+    const Eigen::Vector3d up_in_grid =
+        sim.rest_frame().world_from_rest().linear().transpose() * -p0.gravity;
+    context.patches = MakePatches(sim.rest_surface(), options.patches, up_in_grid);
     for (const auto& f : context.observations.frames) {
       context.frame_times.push_back({f.frame, f.time});
       report.frames.push_back(f.frame);

@@ -181,7 +181,9 @@ Result<FitReport> WriteFitReport(const capture::Capture& capture,
   objective->SetCancelFlag(options.cancel);
   SOFTID_ASSIGN_OR_RETURN(auto matches, objective->MatchPoints(p));
   fem::Simulator& sim = objective->simulator();
-  const Eigen::Vector3d up = -p.gravity.normalized();
+  // Up in the grid's frame, where the rest surface lies (fem::Simulator::mesh_from_grid).
+  const Eigen::Vector3d up =
+      sim.rest_frame().world_from_rest().linear().transpose() * -p.gravity.normalized();
   const ResidualMap map =
       BuildResidualMap(observations, matches, MakePatches(sim.rest_surface(), kPatches, up),
                        config.solver.cost.truncation_cells * sim.hex_mesh().CellSize());

@@ -444,7 +444,11 @@ struct Screening {
     // (the only steady free rotations), so these six directions are where a start is worth
     // trying; the refit frees all three components anyway.
     if (v.extension == Extension::kInitialSpin) {
-      for (const Eigen::Vector3d& axis : PrincipalAxes(objective.simulator().hex_mesh())) {
+      // The hex mesh lies in the grid's frame; the spin is a world vector.
+      const Eigen::Matrix3d world_from_grid =
+          objective.simulator().rest_frame().world_from_rest().linear();
+      for (const Eigen::Vector3d& grid_axis : PrincipalAxes(objective.simulator().hex_mesh())) {
+        const Eigen::Vector3d axis = world_from_grid * grid_axis;
         for (const Eigen::Vector3d& turn : {Eigen::Vector3d(axis), Eigen::Vector3d(-axis)}) {
           if (turn.dot(spin_direction) > 0.99) continue;  // the score's ladder already covers it
           for (double f : kLadder) {

@@ -34,9 +34,15 @@ Eigen::Vector3d TurnedBackGradient(const std::array<Eigen::Matrix3d, 3>& dR,
 
 }  // namespace
 
-RestFrame::RestFrame(const InitialPose& pose, const Eigen::Vector3d& centre_m)
-    : identity_(pose.IsIdentity()), centre_(centre_m), X_WS_(pose.WorldFromRest(centre_m)) {
-  dR_ = RotationDerivatives(pose.rotation, X_WS_.linear());
+RestFrame::RestFrame(const InitialPose& pose, const Eigen::Vector3d& centre_m,
+                     const Eigen::Matrix3d& mesh_from_grid)
+    : identity_(pose.IsIdentity() && mesh_from_grid == Eigen::Matrix3d::Identity()),
+      centre_(centre_m) {
+  const Eigen::Isometry3d world_from_mesh = pose.WorldFromRest(centre_m);
+  dR_ = RotationDerivatives(pose.rotation, world_from_mesh.linear());
+  for (Eigen::Matrix3d& d : dR_) d = d * mesh_from_grid;
+  X_WS_.linear() = world_from_mesh.linear() * mesh_from_grid;
+  X_WS_.translation() = centre_m + pose.translation - X_WS_.linear() * centre_m;
 }
 
 PhysicalParameters RestFrame::ToRest(const PhysicalParameters& world) const {

@@ -1,7 +1,9 @@
 // The initial pose (PhysicalParameters::initial_pose) as a change of frame. The simulation runs in
-// the rest mesh's own frame S, where the grid was built, and the world sees the rest mesh turned
-// and moved: X_W = R (X_S - c) + c + t (c the rest mesh's bounding-box centre). Gravity, the
-// ground and the initial velocities go into S; positions, displacements and gradients come back.
+// the grid's frame S, where the rest mesh lies turned by R0^T about c (R0 = mesh_from_grid: the
+// identity unless the grid follows the body, SimulationOptions::grid_orientation), and the world
+// sees the rest mesh turned and moved: X_W = R (R0 (X_S - c) + c - c) + c + t =
+// R R0 (X_S - c) + c + t (c the rest mesh's bounding-box centre). Gravity, the ground and the
+// initial velocities go into S; positions, displacements and gradients come back.
 // Elasticity, mass, drag and contact laws are the same in both frames (isotropic, rigid-
 // invariant), so this is exactly the posed body's motion, and the pose needs no adjoint of its own
 // inside the simulation.
@@ -20,7 +22,9 @@ namespace softid::fem {
 class RestFrame {
  public:
   RestFrame() = default;  // the identity: no pose
-  RestFrame(const InitialPose& pose, const Eigen::Vector3d& centre_m);
+  // @param mesh_from_grid R0, a proper rotation.
+  RestFrame(const InitialPose& pose, const Eigen::Vector3d& centre_m,
+            const Eigen::Matrix3d& mesh_from_grid = Eigen::Matrix3d::Identity());
 
   bool is_identity() const { return identity_; }
   const Eigen::Isometry3d& world_from_rest() const { return X_WS_; }
@@ -48,7 +52,7 @@ class RestFrame {
   bool identity_ = true;
   Eigen::Vector3d centre_ = Eigen::Vector3d::Zero();
   Eigen::Isometry3d X_WS_ = Eigen::Isometry3d::Identity();
-  // d R / d rotation[k].
+  // d (R R0) / d rotation[k].
   std::array<Eigen::Matrix3d, 3> dR_{Eigen::Matrix3d::Zero(), Eigen::Matrix3d::Zero(),
                                      Eigen::Matrix3d::Zero()};
 };

@@ -8,6 +8,14 @@
 
 namespace softid::fem {
 
+const char* ToString(GridOrientation orientation) {
+  switch (orientation) {
+    case GridOrientation::kWorld: return "world";
+    case GridOrientation::kBody: return "body";
+  }
+  return "invalid";  // a value cast from an out-of-range integer
+}
+
 Status SimulationOptions::Validate() const {
   using json::Invalid;
   if (cell_size <= 0.0 && cells_along_longest_side < 2) {

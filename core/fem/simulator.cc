@@ -105,6 +105,17 @@ Eigen::Vector3d ClampFacePlanes(const Eigen::AlignedBox3d& fixed_region,
 
 }  // namespace
 
+Eigen::Matrix3d ChooseGridAxes(const geometry::TriangleMesh& rest_mesh,
+                               const SimulationOptions& options, bool clamped) {
+  if (options.grid_orientation != GridOrientation::kBody || clamped)
+    return Eigen::Matrix3d::Identity();
+  const geometry::GridAlignment alignment = geometry::AlignGridToSurface(rest_mesh);
+  const bool flat_faces = alignment.score >= SimulationOptions::kMinAlignedScore;
+  const bool gains =
+      alignment.score > alignment.identity_score + SimulationOptions::kMinAlignmentGain;
+  return flat_faces && gains ? alignment.mesh_from_grid : Eigen::Matrix3d::Identity();
+}
+
 Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalParameters& parameters,
                      const SimulationOptions& options,
                      const std::optional<Eigen::AlignedBox3d>& fixed_region)
@@ -112,14 +123,16 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
   ThrowIfError(parameters.Validate());
   ThrowIfError(options.Validate());
   SOFTID_THROW_UNLESS(!rest_mesh.triangles.empty(), "rest mesh has no triangles");
-  length_ = rest_mesh.Bounds().sizes().maxCoeff();
-  SOFTID_THROW_UNLESS(length_ > 0.0, "rest mesh has zero extent");
   pose_centre_ = rest_mesh.Bounds().center();
-  rest_frame_ = RestFrame(parameters.initial_pose, pose_centre_);
+  mesh_from_grid_ = ChooseGridAxes(rest_mesh, options, fixed_region.has_value());
+  const geometry::TriangleMesh grid_mesh = TurnedIntoGrid(rest_mesh);
+  length_ = grid_mesh.Bounds().sizes().maxCoeff();
+  SOFTID_THROW_UNLESS(length_ > 0.0, "rest mesh has zero extent");
+  rest_frame_ = RestFrame(parameters.initial_pose, pose_centre_, mesh_from_grid_);
   parameters_ = rest_frame_.ToRest(parameters);
 
-  BuildGrid(rest_mesh, fixed_region);
-  EmbedSurface(rest_mesh);
+  BuildGrid(grid_mesh, fixed_region);
+  EmbedSurface(grid_mesh);
   team_ = std::make_unique<ThreadTeam>(AssemblyThreads());
   PartitionElements();
   AssignSurfacePointsToChunks();
@@ -137,6 +150,18 @@ Simulator::Simulator(const geometry::TriangleMesh& rest_mesh, const PhysicalPara
   residual_.resize(3 * n);
   update_.resize(3 * n);
   ApplyParameters();
+}
+
+geometry::TriangleMesh Simulator::TurnedIntoGrid(const geometry::TriangleMesh& rest_mesh) const {
+  geometry::TriangleMesh turned = rest_mesh;
+  if (mesh_from_grid_ == Eigen::Matrix3d::Identity()) return turned;
+  for (Eigen::Vector3d& x : turned.vertices)
+    x = mesh_from_grid_.transpose() * (x - pose_centre_) + pose_centre_;
+  return turned;
+}
+
+Eigen::Vector3d Simulator::ElementCentreInMesh(int e) const {
+  return mesh_from_grid_ * (mesh_.ElementCentre(e) - pose_centre_) + pose_centre_;
 }
 
 void Simulator::BuildGrid(const geometry::TriangleMesh& rest_mesh,
@@ -227,7 +252,7 @@ void Simulator::AssignSurfacePointsToChunks() {
 void Simulator::SetParameters(const PhysicalParameters& parameters) {
   ThrowIfError(parameters.Validate());
   world_parameters_ = parameters;
-  rest_frame_ = RestFrame(parameters.initial_pose, pose_centre_);
+  rest_frame_ = RestFrame(parameters.initial_pose, pose_centre_, mesh_from_grid_);
   parameters_ = rest_frame_.ToRest(parameters);
   ApplyParameters();
 }
@@ -258,7 +283,7 @@ void Simulator::BuildMassAndStiffness() {
   const double mu = parameters.LameMu();
   for (int e = 0; e < mesh_.NumElements(); ++e) {
     AddLumpedMass(e);
-    const double scale = parameters.stiffness_field.Scale(mesh_.ElementCentre(e));
+    const double scale = parameters.stiffness_field.Scale(ElementCentreInMesh(e));
     // Ghost stiffness (as in CutFEM): nearly empty octants keep a small floor of stiffness, so
     // nodes that only touch slivers of material are not free to be pushed around by contact.
     std::array<double, 8> stiffness_weights = mesh_.element_weights[e].octant_volume;

@@ -32,6 +32,7 @@
 #include "core/fem/step_tangent_operator.h"
 #include "core/fem/surface_embedding.h"
 #include "core/fem/thread_team.h"
+#include "core/geometry/grid_alignment.h"
 #include "core/geometry/signed_distance_field.h"
 #include "core/geometry/triangle_mesh.h"
 
@@ -67,6 +68,12 @@ struct Energies {
   double Total() const { return kinetic + elastic + gravitational; }
 };
 
+// The grid's axes in the rest mesh's frame (the columns; Simulator::mesh_from_grid): the mesh's
+// own unless options.grid_orientation is kBody, the body is not clamped, and it has flat faces that
+// the turned grid follows clearly better (SimulationOptions::kMinAlignedScore, kMinAlignmentGain).
+Eigen::Matrix3d ChooseGridAxes(const geometry::TriangleMesh& rest_mesh,
+                               const SimulationOptions& options, bool clamped);
+
 class Simulator {
  public:
   // @throws std::invalid_argument naming the field when parameters or options are invalid, or when
@@ -82,6 +89,11 @@ class Simulator {
   // the world.
   const RestFrame& rest_frame() const { return rest_frame_; }
   const SimulationOptions& options() const { return options_; }
+  // The grid's frame S is the rest mesh turned by mesh_from_grid()^T about its bounding box's
+  // centre (SimulationOptions::grid_orientation; the identity on a world-aligned grid): the signed
+  // distance, the hex mesh, the rest surface and state() are in S. A direction d in the rest
+  // mesh's coordinates is mesh_from_grid()^T d in S.
+  const Eigen::Matrix3d& mesh_from_grid() const { return mesh_from_grid_; }
   const geometry::SignedDistanceField& signed_distance() const { return sdf_; }
   const HexMesh& hex_mesh() const { return mesh_; }
   // The rest surface carried by the grid (the input mesh, subdivided where coarser than the grid).
@@ -91,7 +103,7 @@ class Simulator {
   double total_mass() const { return mass_.sum(); }
   bool is_fixed(int node) const { return fixed_[node] != 0; }
   int num_fixed_nodes() const;
-  // Longest side of the rest mesh bounds [m].
+  // Longest side of the rest mesh bounds in the grid's frame [m].
   double characteristic_length() const { return length_; }
   const ContactLaw& contact_law() const { return contact_; }
   // Threads the simulation runs on (SimulationOptions::threads, limited by the mesh's size).
@@ -243,6 +255,9 @@ class Simulator {
   void FactorizeReference();
   // The constructor's stages: the hex grid from the rest mesh's signed distance, the embedded
   // surface, the assembly's threads and their element and surface-point ranges.
+  geometry::TriangleMesh TurnedIntoGrid(const geometry::TriangleMesh& rest_mesh) const;
+  // Element e's centre in the rest mesh's coordinates (where a StiffnessField is given).
+  Eigen::Vector3d ElementCentreInMesh(int e) const;
   void BuildGrid(const geometry::TriangleMesh& rest_mesh,
                  const std::optional<Eigen::AlignedBox3d>& fixed_region);
   void EmbedSurface(const geometry::TriangleMesh& rest_mesh);
@@ -297,6 +312,7 @@ class Simulator {
   PhysicalParameters parameters_;
   RestFrame rest_frame_;
   Eigen::Vector3d pose_centre_ = Eigen::Vector3d::Zero();  // rest mesh's bounding-box centre [m]
+  Eigen::Matrix3d mesh_from_grid_ = Eigen::Matrix3d::Identity();
   SimulationOptions options_;
   double length_ = 0.0;
   // Diagonal of the FE nodes' rest bounding box [m] (the divergence test's yardstick).

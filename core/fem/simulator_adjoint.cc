@@ -174,14 +174,14 @@ void Simulator::ResidualAdjointPass::AddElement(int e, const LameDerivatives& la
   }
   // Stiffness field: r_e is proportional to the element's scale s.
   if (field.kind == StiffnessField::Kind::kRegions) {
-    const Eigen::Vector3d centre = mesh.ElementCentre(e);
+    const Eigen::Vector3d centre = sim.ElementCentreInMesh(e);
     int region = -1;
     for (size_t i = 0; i < field.regions.size(); ++i) {
       if (field.regions[i].box.contains(centre)) region = static_cast<int>(i);
     }
     if (region >= 0) share->stiffness_field[region] -= work / scale;
   } else if (field.kind == StiffnessField::Kind::kLinear) {
-    const Eigen::Vector3d offset = mesh.ElementCentre(e) - field.origin;
+    const Eigen::Vector3d offset = sim.ElementCentreInMesh(e) - field.origin;
     for (int i = 0; i < 3; ++i) share->stiffness_field[i] -= work * offset[i];
   }
 }

@@ -12,6 +12,7 @@
 
 #include "core/capture/capture.h"
 #include "core/common/json_fields.h"
+#include "core/geometry/grid_alignment.h"
 #include "core/inverse/fit_checkpoint.h"
 #include "core/inverse/flight_stage.h"
 #include "core/inverse/horizon_continuation.h"
@@ -632,8 +633,8 @@ Status ChooseGrid(const capture::Capture& capture, const geometry::TriangleMesh&
                   const JobConfig& config, const fem::PhysicalParameters& start, int last_frame,
                   const std::atomic<bool>* cancel, fem::SimulationOptions* simulation,
                   FitResult* result) {
-  const double length = mesh.Bounds().sizes().maxCoeff();
   result->element = config.solver.element;
+  const double length = geometry::BoundsInGrid(mesh, result->mesh_from_grid).sizes().maxCoeff();
   if (config.solver.cell_size_m > 0.0) {
     result->cell_size_m = config.solver.cell_size_m;
     return Status::Ok();
@@ -836,6 +837,9 @@ Result<FitSetup> SetUpFit(const capture::Capture& capture, const JobConfig& conf
 Status DiscretiseFit(const capture::Capture& capture, const JobConfig& config,
                      const FitOptions& options, FitSetup* setup, FitResult* result) {
   const int num_starts = static_cast<int>(setup->starts.size());
+  result->grid_orientation = config.solver.grid_orientation;
+  result->mesh_from_grid =
+      fem::ChooseGridAxes(setup->mesh, setup->simulation, capture.fixed_region.has_value());
   if (options.resume_from != nullptr) {
     return TakeDiscretisation(*options.resume_from, config, num_starts, &setup->simulation, result);
   }
@@ -1090,6 +1094,11 @@ nlohmann::json HeldParametersJson(const FitResult& result) {
 }
 
 // Time spent over every start, and per simulated forward plus adjoint step.
+// The angle of the turn from the mesh's axes to the grid's [degrees].
+double GridTurnDegrees(const Eigen::Matrix3d& mesh_from_grid) {
+  return Eigen::AngleAxisd(mesh_from_grid).angle() * 180.0 / M_PI;
+}
+
 nlohmann::json TimingJson(const FitResult& result) {
   int evaluations = 0;
   long long steps = 0;
@@ -1131,7 +1140,9 @@ nlohmann::json ToJson(const FitResult& result) {
   // How finely space and time were resolved; "selection" only when the job asked for "auto".
   out["grid"] = {{"cells", result.cells},
                  {"cell_size_m", result.cell_size_m},
-                 {"element", fem::ToString(result.element)}};
+                 {"element", fem::ToString(result.element)},
+                 {"orientation", fem::ToString(result.grid_orientation)},
+                 {"turned_deg", GridTurnDegrees(result.mesh_from_grid)}};
   if (result.grid_selection) out["grid"]["selection"] = ToJson(*result.grid_selection);
   if (!result.frame_loss.IsSquared()) {
     out["frame_loss"] = {{"kind", ToString(FrameLossKind::kCauchy)},

@@ -18,7 +18,8 @@
 //    "cost_history_last_frame": [..],  // the last frame that cost is over (continuation stages
 //                                      // fit a prefix of the frames; see StartResult)
 //    "fixed": {..},                  // every parameter the fit did not change, public JSON
-//    "grid": {"cells": 16, "cell_size_m": .., "element": "..", "selection": {..}},  // when "auto"
+//    "grid": {"cells": 16, "cell_size_m": .., "element": "..", "orientation": "world" | "body",
+//             "turned_deg": .., "selection": {..}},  // selection when "auto"
 //    "time_step": {"substeps": 4, "selection": {..}},  // selection: when chosen ("auto")
 //    "timing": {"total_seconds": .., "evaluations": .., "ms_per_forward_adjoint_step": .., ..}}
 // Vectors are arrays and the ground plane is {"normal": [..], "offset": ..}.
@@ -158,6 +159,9 @@ struct FitResult {
   double cell_size_m = 0.0;
   std::optional<GridSelection> grid_selection;                                    // when chosen
   fem::ElementFormulation element = fem::ElementFormulation::kIncompatibleModes;  // the config's
+  // The config's grid orientation, and the grid's axes it gave (fem::ChooseGridAxes).
+  fem::GridOrientation grid_orientation = fem::GridOrientation::kWorld;
+  Eigen::Matrix3d mesh_from_grid = Eigen::Matrix3d::Identity();
   // How the frames' costs added up (SolverOptions::cost.frame_loss, its scale from the depth
   // noise of frame 0, depth_noise_m [m]; 0 when least squares did not need it).
   FrameLoss frame_loss;

@@ -12,6 +12,7 @@ fem::SimulationOptions SimulationOptionsFor(const SolverOptions& solver) {
   if (solver.rho_infinity != SolverOptions::kNewmark)
     simulation.UseGeneralizedAlpha(solver.rho_infinity);
   simulation.element = solver.element;
+  simulation.grid_orientation = solver.grid_orientation;
   // The band must fit in the padding, and the cost must be truncated where the grid cuts it off.
   simulation.padding_cells = std::max(
       {simulation.padding_cells, static_cast<int>(std::ceil(solver.cost.truncation_cells)) + 1,

@@ -20,6 +20,7 @@ constexpr const char* kRhoInfinityRequirement = "must be a number in [0, 1]";
 constexpr const char* kPositiveRequirement = "must be a finite number > 0";
 constexpr const char* kGradientRequirement = "must be \"adjoint\" or \"finite_difference\"";
 constexpr const char* kElementRequirement = "must be \"trilinear\" or \"incompatible_modes\"";
+constexpr const char* kGridOrientationRequirement = "must be \"world\" or \"body\"";
 constexpr const char* kRestSdfRequirement = "must be \"surface_fitted\", \"exact\" or \"sampled\"";
 constexpr const char* kFrameLossRequirement = "must be \"squared\" or \"cauchy\"";
 constexpr auto kCostKeys = std::to_array<std::string_view>(
@@ -93,6 +94,15 @@ Result<fem::ElementFormulation> ParseElement(const Json& value) {
   return json::Invalid("element", value, kElementRequirement);
 }
 
+Result<fem::GridOrientation> ParseGridOrientation(const Json& value) {
+  for (fem::GridOrientation orientation :
+       {fem::GridOrientation::kWorld, fem::GridOrientation::kBody}) {
+    if (value.is_string() && value.get<std::string>() == fem::ToString(orientation))
+      return orientation;
+  }
+  return json::Invalid("grid_orientation", value, kGridOrientationRequirement);
+}
+
 Result<GradientMethod> ParseGradient(const Json& value) {
   for (GradientMethod method : {GradientMethod::kAdjoint, GradientMethod::kFiniteDifference}) {
     if (value.is_string() && value.get<std::string>() == ToString(method)) return method;
@@ -135,6 +145,9 @@ Status ParseDiscretisation(const Json& j, SolverOptions* options) {
   }
   if (j.contains("element")) {
     SOFTID_ASSIGN_OR_RETURN(options->element, ParseElement(j["element"]));
+  }
+  if (j.contains("grid_orientation")) {
+    SOFTID_ASSIGN_OR_RETURN(options->grid_orientation, ParseGridOrientation(j["grid_orientation"]));
   }
   return Status::Ok();
 }
@@ -245,6 +258,11 @@ Status SolverOptions::Validate() const {
       element != fem::ElementFormulation::kTrilinear) {
     return json::Invalid("element", static_cast<int>(element), kElementRequirement);
   }
+  if (grid_orientation != fem::GridOrientation::kWorld &&
+      grid_orientation != fem::GridOrientation::kBody) {
+    return json::Invalid("grid_orientation", static_cast<int>(grid_orientation),
+                         kGridOrientationRequirement);
+  }
   if (starts < 1) return json::Invalid("starts", starts, AtLeast(1));
   if (threads < 0) return json::Invalid("threads", threads, AtLeast(0));
   if (max_iterations < 1) return json::Invalid("max_iterations", max_iterations, AtLeast(1));
@@ -282,6 +300,7 @@ void WriteJson(const SolverOptions& options, Json* job_config) {
   j["cells"] = options.cells == kAutoCells ? Json("auto") : Json(options.cells);
   j["substeps"] = options.substeps == kAutoSubsteps ? Json("auto") : Json(options.substeps);
   j["element"] = fem::ToString(options.element);
+  j["grid_orientation"] = fem::ToString(options.grid_orientation);
   j["starts"] = options.starts;
   j["threads"] = options.threads;
   j["seed"] = options.seed;

@@ -14,6 +14,7 @@
 #include "core/common/status.h"
 #include "core/cost/sparse_surface_cost.h"
 #include "core/fem/hex_element.h"
+#include "core/fem/simulation_options.h"
 #include "core/inverse/frame_loss.h"
 
 namespace softid::inverse {
@@ -83,6 +84,10 @@ struct SolverOptions {
   // is too stiff and biases Young's modulus low. Not yet the default: see docs/benchmarks.md,
   // "Element".
   fem::ElementFormulation element = fem::ElementFormulation::kTrilinear;
+  // How the grid lies over the rest mesh (fem::SimulationOptions::grid_orientation): "world"
+  // (the mesh's own axes) or "body" (turned to the body's flat faces when that aligns clearly more
+  // of its surface).
+  fem::GridOrientation grid_orientation = fem::GridOrientation::kWorld;
 
   // Independent optimisations from random starts (drawn from the initial ranges); the best result
   // wins. Contact-rich fits have local minima, so one start is rarely enough.
@@ -161,6 +166,7 @@ inline constexpr auto kSolverOptionKeys = std::to_array<std::string_view>({
     "substeps",
     "rho_infinity",
     "element",
+    "grid_orientation",
     "starts",
     "threads",
     "seed",

@@ -46,6 +46,8 @@ def parse_args(argv):
     parser.add_argument("--cells", default="auto", help='"auto" (default) or a number')
     parser.add_argument("--element", choices=["trilinear", "incompatible_modes"],
                         default="trilinear", help="the job config's \"element\"")
+    parser.add_argument("--grid-orientation", choices=["world", "body"], default="world",
+                        help="the job config's \"grid_orientation\"")
     parser.add_argument("--frame-loss", choices=["squared", "cauchy"], default="squared",
                         help="the job config's \"cost\": {\"frame_loss\"} (docs/job-config.md)")
     parser.add_argument("--diagnose", action="store_true",
@@ -83,7 +85,8 @@ def job_config(truth, args):
     cells = args.cells if args.cells == "auto" else int(args.cells)
     return {"fit": fit, "fixed": fixed, "initial": initial, "starts": args.starts,
             "max_iterations": args.max_iterations, "cells": cells, "uncertainty": True,
-            "element": args.element, "diagnose": args.diagnose,
+            "element": args.element, "grid_orientation": args.grid_orientation,
+            "diagnose": args.diagnose,
             "cost": {"frame_loss": args.frame_loss}}
 
 

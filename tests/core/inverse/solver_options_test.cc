@@ -42,6 +42,8 @@ TEST(SolverOptions, ValidateNamesEveryFieldOutOfRange) {
       {[](SolverOptions& o) { o.rho_infinity = kNaN; }, "rho_infinity = ", "in [0, 1]"},
       {[](SolverOptions& o) { o.element = static_cast<fem::ElementFormulation>(5); },
        "element = 5: ", "\"trilinear\" or \"incompatible_modes\""},
+      {[](SolverOptions& o) { o.grid_orientation = static_cast<fem::GridOrientation>(4); },
+       "grid_orientation = 4: ", "\"world\" or \"body\""},
       {[](SolverOptions& o) { o.starts = 0; }, "starts = 0: ", "integer >= 1"},
       {[](SolverOptions& o) { o.threads = -1; }, "threads = -1: ", "integer >= 0"},
       {[](SolverOptions& o) { o.max_iterations = 0; }, "max_iterations = 0: ", "integer >= 1"},
@@ -82,6 +84,7 @@ TEST(SolverOptions, JsonRoundTripKeepsEveryField) {
   options.substeps = 6;
   options.rho_infinity = 0.8;
   options.element = fem::ElementFormulation::kIncompatibleModes;
+  options.grid_orientation = fem::GridOrientation::kBody;
   options.starts = 3;
   options.threads = 2;
   options.seed = 12345678901234ULL;
@@ -120,6 +123,13 @@ TEST(SolverOptions, JsonRoundTripKeepsEveryField) {
   const Result<SolverOptions> robust_read = SolverOptionsFromJson(robust_json);
   ASSERT_TRUE(robust_read.ok()) << robust_read.status().ToString();
   EXPECT_EQ(*robust_read, robust);
+}
+
+TEST(SolverOptions, AnUnknownGridOrientationIsRejectedByName) {
+  const Result<SolverOptions> read = SolverOptionsFromJson(json{{"grid_orientation", "diagonal"}});
+  ASSERT_FALSE(read.ok());
+  EXPECT_EQ(read.status().message().rfind("grid_orientation = \"diagonal\": ", 0), 0u)
+      << read.status().message();
 }
 
 TEST(SolverOptions, AnUnknownFrameLossIsRejectedByName) {

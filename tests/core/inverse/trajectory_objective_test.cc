@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -11,6 +12,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <thread>
 
 #include "core/capture/capture.h"
@@ -29,13 +31,16 @@ fem::SimulationOptions EightCells() {
   return options;
 }
 
-// Checks the adjoint gradient of a torus drop's objective over `frames` against central finite
+// Checks the adjoint gradient of a small capture's objective over `frames` against central finite
 // differences, parameter by parameter.
 // With `robust`, the frames add up through a Cauchy frame loss whose scale is the median frame
 // cost there, so that the frames' weights differ.
-void ExpectAdjointMatchesFiniteDifferences(const testing::SmallCapture& small,
-                                           std::shared_ptr<const std::vector<ObservedFrame>> frames,
-                                           bool robust = false) {
+// With `grid_turn`, the rest mesh is given turned by it about its centre and turned back by the
+// initial pose, and the grid follows the body (fem::GridOrientation::kBody): the gradient then
+// crosses the grid's turn as well.
+void ExpectAdjointMatchesFiniteDifferences(
+    const testing::SmallCapture& small, std::shared_ptr<const std::vector<ObservedFrame>> frames,
+    bool robust = false, const std::optional<Eigen::Matrix3d>& grid_turn = std::nullopt) {
   fem::SimulationOptions options;
   options.cells_along_longest_side = 8;
   options.newton_tolerance = 1e-11;
@@ -52,8 +57,18 @@ void ExpectAdjointMatchesFiniteDifferences(const testing::SmallCapture& small,
   p.initial_pose.rotation = Eigen::Vector3d(0.03, -0.02, 0.05);
   p.initial_pose.translation = Eigen::Vector3d(0.002, -0.003, 0.001);
   p.initial_angular_velocity = Eigen::Vector3d(0.4, -0.6, 0.3);
-  TrajectoryObjective objective(small.mesh, std::nullopt, p, options, {}, frames, small.capture.fps,
-                                2);
+  geometry::TriangleMesh mesh = small.mesh;
+  if (grid_turn) {
+    const Eigen::Vector3d centre = mesh.Bounds().center();
+    for (Eigen::Vector3d& x : mesh.vertices) x = *grid_turn * (x - centre) + centre;
+    const Eigen::AngleAxisd back(grid_turn->transpose());
+    p.initial_pose.rotation += back.angle() * back.axis();
+    options.grid_orientation = fem::GridOrientation::kBody;
+  }
+  TrajectoryObjective objective(mesh, std::nullopt, p, options, {}, frames, small.capture.fps, 2);
+  if (grid_turn) {
+    ASSERT_GT(Eigen::AngleAxisd(objective.simulator().mesh_from_grid()).angle(), 0.1);
+  }
   if (robust) {
     Result<ObjectiveEvaluation> plain = objective.Evaluate(p, false);
     ASSERT_TRUE(plain.ok() && !plain->diverged);
@@ -116,6 +131,15 @@ TEST(TrajectoryObjective, AdjointGradientMatchesFiniteDifferences) {
   testing::SmallCapture small = testing::MakeSmallCapture("torus-drop", 0.3);
   ASSERT_TRUE(small.ok) << small.error;
   ExpectAdjointMatchesFiniteDifferences(small, small.frames);
+}
+
+// A box (the pillow) given turned: its grid turns with it.
+TEST(TrajectoryObjective, AdjointGradientMatchesFiniteDifferencesOnAGridTurnedWithTheBody) {
+  testing::SmallCapture small = testing::MakeSmallCapture("pillow-ramp", 0.3);
+  ASSERT_TRUE(small.ok) << small.error;
+  const Eigen::Matrix3d turn =
+      Eigen::AngleAxisd(0.5, Eigen::Vector3d(1.0, -2.0, 0.5).normalized()).toRotationMatrix();
+  ExpectAdjointMatchesFiniteDifferences(small, small.frames, /*robust=*/false, turn);
 }
 
 // The Cauchy frame loss (frame_loss.h) weights each frame's gradient by its own cost.
