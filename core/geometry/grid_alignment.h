@@ -1,7 +1,7 @@
 // The orientation of a hexahedral grid that best fits a body's flat faces. A grid at an angle to a
-// flat face cuts it into a staircase of cut cells whose shape changes with the resolution: a cube
-// resting 25 degrees from the world's axes moved its simulated surface 6.4 mm between 8 and 12
-// cells on a world-aligned grid, and 0.09 mm on a grid turned with it (docs/benchmarks.md,
+// flat face cuts it into a staircase of cut cells whose shape changes with the resolution: the
+// CalculiX cube square to its 25-degree ramp moved its simulated surface 6.4 mm between 8 and 12
+// cells on a world-aligned grid, and 0.4 mm on a grid turned with it (docs/benchmarks.md,
 // "Independent validation").
 #pragma once
 
