@@ -626,6 +626,14 @@ int LastNominalFrame(const std::vector<ObservedFrame>& frames, double fps) {
   return static_cast<int>(std::ceil(frames.back().time * fps - 1e-9));
 }
 
+// The grid's orientation the fit's simulations take (fem::ChooseGridAxes), for the record.
+void RecordGridAxes(const capture::Capture& capture, const geometry::TriangleMesh& mesh,
+                    const JobConfig& config, const fem::SimulationOptions& simulation,
+                    FitResult* result) {
+  result->grid_orientation = config.solver.grid_orientation;
+  result->mesh_from_grid = fem::ChooseGridAxes(mesh, simulation, capture.fixed_region.has_value());
+}
+
 // The grid of the fit: config.solver.cells, or chosen by refinement (grid_selection.h) against the
 // depth noise of frame 0 (rest_frame_noise.h) when "auto". Sets simulation's grid and result's
 // record.
@@ -634,6 +642,7 @@ Status ChooseGrid(const capture::Capture& capture, const geometry::TriangleMesh&
                   const std::atomic<bool>* cancel, fem::SimulationOptions* simulation,
                   FitResult* result) {
   result->element = config.solver.element;
+  RecordGridAxes(capture, mesh, config, *simulation, result);
   const double length = geometry::BoundsInGrid(mesh, result->mesh_from_grid).sizes().maxCoeff();
   if (config.solver.cell_size_m > 0.0) {
     result->cell_size_m = config.solver.cell_size_m;
@@ -837,10 +846,8 @@ Result<FitSetup> SetUpFit(const capture::Capture& capture, const JobConfig& conf
 Status DiscretiseFit(const capture::Capture& capture, const JobConfig& config,
                      const FitOptions& options, FitSetup* setup, FitResult* result) {
   const int num_starts = static_cast<int>(setup->starts.size());
-  result->grid_orientation = config.solver.grid_orientation;
-  result->mesh_from_grid =
-      fem::ChooseGridAxes(setup->mesh, setup->simulation, capture.fixed_region.has_value());
   if (options.resume_from != nullptr) {
+    RecordGridAxes(capture, setup->mesh, config, setup->simulation, result);
     return TakeDiscretisation(*options.resume_from, config, num_starts, &setup->simulation, result);
   }
   return ChooseDiscretisation(capture, setup->mesh, config, *setup->frames, options.cancel,

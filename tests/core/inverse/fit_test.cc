@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <fstream>
 
+#include "core/inverse/fit_checkpoint.h"
 #include "tests/core/inverse/inverse_test_util.h"
 
 namespace softid::inverse {
@@ -235,6 +236,34 @@ TEST(Fit, AutoSubstepsChoosesAndReportsTheTimeStep) {
   EXPECT_EQ(result->substeps, 3);
   EXPECT_FALSE(result->substep_selection.has_value());
   EXPECT_FALSE(ToJson(*result)["time_step"].contains("selection"));
+}
+
+// With "grid_orientation": "body" the pillow (a 30 x 20 x 10 cm box turned by 5 degrees about y)
+// gets a grid along its faces: "cells" counts along its own longest side, not along its world
+// bounds', and the record gives the turn.
+TEST(Fit, AGridAlongTheBodyIsRecorded) {
+  testing::SmallCapture small = testing::MakeSmallCapture("pillow-ramp", 0.3);
+  ASSERT_TRUE(small.ok) << small.error;
+  JobConfig config = YoungsModulusConfig(small.truth);
+  config.solver.cells = 8;
+  config.solver.substeps = 2;
+  config.solver.starts = 1;
+  config.solver.max_iterations = 1;
+  config.solver.grid_orientation = fem::GridOrientation::kBody;
+  const Result<FitCheckpoint> prepared = PrepareFit(small.capture, config);
+  ASSERT_TRUE(prepared.ok()) << prepared.status().ToString();
+  EXPECT_NEAR(prepared->cell_size_m, 0.3 / 8, 1e-6);
+  const Result<FitResult> result = Fit(small.capture, config);
+  ASSERT_TRUE(result.ok()) << result.status().ToString();
+  EXPECT_NEAR(result->cell_size_m, 0.3 / 8, 1e-6);
+  const nlohmann::json grid = ToJson(*result)["grid"];
+  EXPECT_EQ(grid["orientation"], "body");
+  EXPECT_NEAR(grid["turned_deg"].get<double>(), 5.0, 1e-3);
+
+  config.solver.grid_orientation = fem::GridOrientation::kWorld;
+  const Result<FitCheckpoint> world = PrepareFit(small.capture, config);
+  ASSERT_TRUE(world.ok()) << world.status().ToString();
+  EXPECT_GT(world->cell_size_m, 0.3 / 8 + 1e-4);  // the turned box's world bounds are longer
 }
 
 TEST(Fit, AutoCellsChoosesAndReportsTheGrid) {
