@@ -44,6 +44,10 @@ std::string CandidateTest::Reason() const {
   }
   if (!plausible) why << sep() << "implausible: " << plausibility_note;
   if (!identifiable) why << sep() << "not identifiable: " << identifiability_note;
+  if (!step_passed) {
+    why << sep() << "the improvement does not hold at half the step: LR there " << lr_at_finer_step
+        << " <= critical " << critical_value;
+  }
   return why.str();
 }
 
@@ -63,8 +67,10 @@ void ApplyDecisionRule(const DecisionOptions& options, const Candidate& candidat
   test->misfit_passed =
       test->returned_to_noise ||
       (test->refit_error.empty() && test->excess_explained >= options.min_excess_explained);
+  test->step_passed = !test->step_checked || test->lr_at_finer_step > test->critical_value;
   test->accepted = test->refit_error.empty() && test->lr_passed && test->heldout_passed &&
-                   test->misfit_passed && test->plausible && test->identifiable;
+                   test->misfit_passed && test->plausible && test->identifiable &&
+                   test->step_passed;
 }
 
 void ApplyNuisanceCheck(const DecisionOptions& options, const Candidate& nuisance,

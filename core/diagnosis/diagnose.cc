@@ -231,7 +231,9 @@ struct DiagnosisRun {
   inverse::FitResult base;
   fem::PhysicalParameters p0;  // the base fit's parameters
   Context context;
-  ModelResiduals r0;   // at p0
+  ModelResiduals r0;  // at p0
+  // The base's objective at twice the compared substeps, when the step's error was estimated.
+  std::unique_ptr<inverse::TrajectoryObjective> finer_objective;
   double sigma = 0.0;  // noise floor [m]
   EffectiveSampleSize ess0;
   ModelResiduals final_residuals;
@@ -388,6 +390,7 @@ struct DiagnosisRun {
                    at_half_step.status().message());
       return Status::Ok();
     }
+    finer_objective = std::move(finer);
     const std::optional<Sensitivities> sensitivities = BaseSensitivities();
     report.time_step_error =
         EstimateTimeStepError(r0.map, at_half_step->map, sensitivities ? &*sensitivities : nullptr,
@@ -598,6 +601,7 @@ struct DiagnosisRun {
     tested->uncertainty = nullptr;
     ApplyDecisionRule(rule, candidate, &tested->test);
     if (tested->test.accepted) RefitTheNullModel(candidate, fit_config, *r1, ess, tested);
+    if (tested->test.accepted && !candidate.nuisance) CheckAtHalfTheStep(candidate, tested);
     if (tested->test.accepted) ProfileTheFoundValue(candidate, *r1, ess, tested);
     if (tested->test.accepted && options.identifiability) {
       CheckIdentifiability(candidate, *fit, fit_config, ess, tested);
@@ -631,6 +635,7 @@ struct DiagnosisRun {
       const bool lower = rn->cost < tested->test.cost_before;
       tested->null_refit = {{"cost", rn->cost}, {"heldout", rn->heldout}, {"replaced_null", lower}};
       if (lower) {
+        tested->before_parameters = null_fit->Best().final;
         tested->test.cost_before = rn->cost;
         tested->test.heldout_before = rn->heldout;
         tested->test.lr = LikelihoodRatioStatistic(rn->cost, r1.cost, ess.n_eff);
@@ -640,6 +645,30 @@ struct DiagnosisRun {
       tested->null_refit = {
           {"error", !null_fit.ok() ? null_fit.status().message() : rn.status().message()}};
     }
+  }
+
+  // 1f. Does the improvement hold at half the step? The null and the candidate once more on the
+  // finer objective of EstimateComparedStepError (decision.h).
+  void CheckAtHalfTheStep(const Candidate& candidate, TestedCandidate* tested) {
+    if (!finer_objective || !report.time_step_error) return;
+    Stage(std::string("the ") + ToString(candidate.extension) + " refit at " +
+          std::to_string(report.time_step_error->finer_substeps) + " substeps per frame");
+    Result<ModelResiduals> before =
+        ResidualsOf(*finer_objective, context, tested->before_parameters);
+    Result<ModelResiduals> after = ResidualsOf(*finer_objective, context, tested->parameters);
+    for (const Result<ModelResiduals>* run : {&before, &after}) {
+      if (!run->ok()) {
+        spdlog::warn("diagnosis: gate f not checked for {}: {}", ToString(candidate.extension),
+                     run->status().message());
+        return;
+      }
+    }
+    CandidateTest& test = tested->test;
+    test.step_checked = true;
+    test.cost_before_at_finer_step = before->cost;
+    test.cost_after_at_finer_step = after->cost;
+    test.lr_at_finer_step = LikelihoodRatioStatistic(before->cost, after->cost, test.n_eff);
+    ApplyDecisionRule(rule, candidate, &test);
   }
 
   // 1e. Does the motion determine the found value? Its profile at +-25 %.
@@ -694,6 +723,7 @@ struct DiagnosisRun {
     for (RefitPlan& plan : plans) {
       TestedCandidate tested;
       tested.test.extension = plan.candidate->extension;
+      tested.before_parameters = p0;
       tested.test.cost_before = r0.cost;
       tested.test.floor_cost = 0.5 * sigma * sigma;
       tested.test.heldout_before = r0.heldout;
@@ -757,6 +787,7 @@ struct DiagnosisRun {
       tested.test.extension = candidate.extension;
       tested.test.conditional = true;
       tested.test.given = nuisance_candidate.extension;
+      tested.before_parameters = nuisance.parameters;
       tested.test.cost_before = nuisance.test.cost_after;
       tested.test.floor_cost = 0.5 * sigma * sigma;
       tested.test.heldout_before = nuisance.test.heldout_after;
@@ -1001,7 +1032,13 @@ struct DiagnosisRun {
     if (job_fit != nullptr) final_config = inverse::WithFitDiscretisation(final_config, *job_fit);
     double& limit = final_config.solver.max_seconds;
     if (options.max_seconds > 0.0) {
-      const double left = std::max(1e-3, options.max_seconds - ElapsedSeconds());
+      const double left = options.max_seconds - ElapsedSeconds();
+      if (left <= 0.0) {
+        report.compared_at["final_refit"] = {
+            {"skipped", "the comparison took the whole time budget (max_seconds " +
+                            std::to_string(options.max_seconds) + " s)"}};
+        return;
+      }
       limit = limit > 0.0 ? std::min(limit, left) : left;
     }
     Stage("final model refitted at the job's discretisation (compared at " +

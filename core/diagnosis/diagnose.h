@@ -73,10 +73,12 @@ struct DiagnoseOptions {
   bool remove_time_step_error = true;
   // The diagnosis' wall-time budget [s], >= 0; 0 = none. Only the final refit at the job's
   // discretisation gives way to it: its optimisation stops at its first iteration that ends past
-  // the budget (SolverOptions::max_seconds) and keeps its best point, and the report says so.
-  // The comparison is not cut short (the decision needs every stage). 600: a one-second,
-  // one-camera capture diagnosed on 2 cores within about 10 minutes; past it, the final values
-  // lie between the compared optimum and the job's, and a fit of the found model gives the rest.
+  // the budget (SolverOptions::max_seconds) and keeps its best point, and the report says so;
+  // when the comparison has spent the budget it is not started (its grid and time-step checks
+  // alone took 6 minutes on a CalculiX block, for no iteration). The comparison is not cut short
+  // (the decision needs every stage). 600: a one-second, one-camera capture diagnosed on 2 cores
+  // within about 10 minutes; past it, the final values lie between the compared optimum and the
+  // job's, and a fit of the found model gives the rest.
   double max_seconds = 600.0;
   // Folder for the PNG plots; empty = no plots.
   std::filesystem::path plot_directory;
@@ -102,6 +104,9 @@ struct TestedCandidate {
   nlohmann::json fit;  // result.json of the refit
   Localization after;  // residuals of the refit, normalised by the base noise floor
   fem::PhysicalParameters parameters;
+  // The null model's parameters the test compares with (the base fit's, the nuisance's refit's,
+  // or the null refitted from this refit when that went lower): gate f runs them again.
+  fem::PhysicalParameters before_parameters;
   std::vector<double> cost_history;  // initial cost, then after each iteration [m^2]
   // Each start of the refit: {"start": values, "found": values, "cost"} (or "error"); a
   // two-sided variable is refitted from both sides of its null, the lowest cost is kept.

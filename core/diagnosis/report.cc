@@ -56,6 +56,11 @@ nlohmann::json ToJson(const CandidateTest& t) {
           {"identifiability_checked", t.identifiability_checked},
           {"identifiable", t.identifiable},
           {"identifiability_note", t.identifiability_note},
+          {"step_checked", t.step_checked},
+          {"cost_before_at_finer_step", t.cost_before_at_finer_step},
+          {"cost_after_at_finer_step", t.cost_after_at_finer_step},
+          {"lr_at_finer_step", t.lr_at_finer_step},
+          {"step_passed", t.step_passed},
           {"accepted", t.accepted},
           {"reason", t.Reason()}};
 }
@@ -226,6 +231,9 @@ void WriteComparedAtText(const nlohmann::json& compared_at, std::ostream& out) {
     if (refit.contains("error")) {
       out << "; the final refit on the job's discretisation failed: "
           << refit["error"].get<std::string>();
+    } else if (refit.contains("skipped")) {
+      out << "; not refitted on the job's discretisation (" << refit["skipped"].get<std::string>()
+          << "): the final values are the compared optimum's";
     } else if (refit.contains("reused")) {
       out << "; final model: " << refit["reused"].get<std::string>() << " on "
           << refit.value("cells", 0) << " cells, " << refit.value("substeps", 0) << " substeps";

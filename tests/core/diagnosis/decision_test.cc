@@ -55,6 +55,18 @@ TEST(DecisionRule, EachGateRejects) {
   vague.identifiable = false;
   ApplyDecisionRule(options, friction, &vague);
   EXPECT_FALSE(vague.accepted);
+
+  // Gate f: an improvement that vanishes at half the step rejects; unchecked, nothing is assumed.
+  CandidateTest step_bound = Passing(Extension::kFriction);
+  step_bound.step_checked = true;
+  step_bound.lr_at_finer_step = 3.0;
+  ApplyDecisionRule(options, friction, &step_bound);
+  EXPECT_FALSE(step_bound.accepted);
+  EXPECT_FALSE(step_bound.step_passed);
+  EXPECT_NE(step_bound.Reason().find("half the step"), std::string::npos);
+  step_bound.lr_at_finer_step = 30.0;
+  ApplyDecisionRule(options, friction, &step_bound);
+  EXPECT_TRUE(step_bound.accepted) << step_bound.Reason();
 }
 
 // Gate c on physics another code wrote: cells the codes' own difference keeps above the threshold
