@@ -84,7 +84,7 @@ TEST(SolverOptions, JsonRoundTripKeepsEveryField) {
   options.substeps = 6;
   options.rho_infinity = 0.8;
   options.element = fem::ElementFormulation::kIncompatibleModes;
-  options.grid_orientation = fem::GridOrientation::kBody;
+  options.grid_orientation = fem::GridOrientation::kWorld;
   options.starts = 3;
   options.threads = 2;
   options.seed = 12345678901234ULL;
