@@ -634,6 +634,12 @@ void RecordGridAxes(const capture::Capture& capture, const geometry::TriangleMes
   result->mesh_from_grid = fem::ChooseGridAxes(mesh, simulation, capture.fixed_region.has_value());
 }
 
+// The wall time the grid and time-step choices of a fit may take together [s], 0 = no limit: half
+// the fit's SolverOptions::max_seconds, so that a fit under a limit keeps time to iterate.
+double DiscretisationSeconds(const SolverOptions& solver) {
+  return solver.max_seconds > 0.0 ? 0.5 * solver.max_seconds : 0.0;
+}
+
 // The grid of the fit: config.solver.cells, or chosen by refinement (grid_selection.h) against the
 // depth noise of frame 0 (rest_frame_noise.h) when "auto". Sets simulation's grid and result's
 // record.
@@ -655,6 +661,7 @@ Status ChooseGrid(const capture::Capture& capture, const geometry::TriangleMesh&
     const double sigma = noise.ok() ? noise->sigma_m : DepthQuantisationSigma(capture);
     GridSelectionOptions grid_options;
     grid_options.cancel = cancel;
+    grid_options.max_seconds = DiscretisationSeconds(config.solver);
     if (config.solver.substeps != kAutoSubsteps) grid_options.substeps = config.solver.substeps;
     SOFTID_ASSIGN_OR_RETURN(GridSelection selection,
                             SelectGrid(mesh, capture.fixed_region, start, *simulation, capture.fps,
@@ -672,6 +679,7 @@ Status ChooseDiscretisation(const capture::Capture& capture, const geometry::Tri
                             const JobConfig& config, const std::vector<ObservedFrame>& frames,
                             const std::atomic<bool>* cancel, fem::SimulationOptions* simulation,
                             FitResult* result) {
+  const auto begin = Clock::now();
   const fem::PhysicalParameters central = CentralStart(config, result->base);
   const int last_frame = LastNominalFrame(frames, capture.fps);
   SOFTID_RETURN_IF_ERROR(
@@ -680,6 +688,12 @@ Status ChooseDiscretisation(const capture::Capture& capture, const geometry::Tri
   if (config.solver.substeps != kAutoSubsteps) return Status::Ok();
   SubstepSelectionOptions selection_options;
   selection_options.cancel = cancel;
+  if (config.solver.max_seconds > 0.0) {
+    // What the grid's choice left of the discretisation's share (a few seconds at least: the
+    // first run, at the coarsest step, is cheap and always made).
+    selection_options.max_seconds =
+        std::max(1e-3, DiscretisationSeconds(config.solver) - SecondsSince(begin));
+  }
   SOFTID_ASSIGN_OR_RETURN(SubstepSelection selection,
                           SelectSubsteps(mesh, capture.fixed_region, central, *simulation,
                                          capture.fps, last_frame, selection_options));

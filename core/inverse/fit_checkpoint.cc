@@ -128,6 +128,7 @@ GridSelection ReadGridSelection(const Json& j) {
   selection.depth_noise_m = j.at("depth_noise_m").get<double>();
   selection.tolerance_m = j.at("tolerance_m").get<double>();
   selection.within_tolerance = j.at("within_tolerance").get<bool>();
+  selection.stopped_at_time_limit = j.value("stopped_at_time_limit", false);  // older: absent
   for (const Json& t : j.at("trials")) {
     GridTrial trial;
     trial.cells = t.at("cells").get<int>();
@@ -151,6 +152,7 @@ SubstepSelection ReadSubstepSelection(const Json& j) {
   selection.within_tolerance = j.at("within_tolerance").get<bool>();
   // Checkpoints written before these keys existed still resume.
   selection.converging = j.value("converging", true);
+  selection.stopped_at_time_limit = j.value("stopped_at_time_limit", false);
   selection.max_substeps = j.value("max_substeps", 16);  // the largest candidate before it was kept
   for (const Json& t : j.at("trials")) {
     SubstepTrial trial;

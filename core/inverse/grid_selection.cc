@@ -18,6 +18,10 @@ bool Cancelled(const std::atomic<bool>* cancel) {
   return cancel != nullptr && cancel->load(std::memory_order_relaxed);
 }
 
+double SecondsSince(Clock::time_point begin) {
+  return std::chrono::duration<double>(Clock::now() - begin).count();
+}
+
 fem::SimulationOptions WithCells(fem::SimulationOptions simulation, int cells) {
   simulation.cells_along_longest_side = cells;
   simulation.cell_size = 0.0;
@@ -73,16 +77,27 @@ Status RefineGridUntilConverged(const geometry::TriangleMesh& rest_mesh,
   auto affordable = [&](int cells) {
     return GridNodeEstimate(size, cells) <= options.max_grid_nodes;
   };
-  auto started = Clock::now();
+  const auto begin = Clock::now();
+  auto started = begin;
   selection->cells = options.candidates.front();
   SurfaceRun coarse = run(selection->cells);
+  double last_run_s = SecondsSince(started);
   for (size_t i = 1; i < options.candidates.size() && affordable(options.candidates[i]); ++i) {
     const int finer_cells = options.candidates[i];
+    // A run's time grows with the grid's nodes: the next one's is the last one's, scaled.
+    const double next_run_s = last_run_s * GridNodeEstimate(size, finer_cells) /
+                              GridNodeEstimate(size, options.candidates[i - 1]);
+    if (options.max_seconds > 0.0 && SecondsSince(begin) + next_run_s > options.max_seconds) {
+      selection->stopped_at_time_limit = true;
+      break;
+    }
+    const auto run_begin = Clock::now();
     SurfaceRun fine = run(finer_cells);
+    last_run_s = SecondsSince(run_begin);
     if (Cancelled(options.cancel)) return Status::Cancelled("the grid choice was cancelled");
     GridTrial trial = CompareGrids(selection->cells, finer_cells, coarse, fine, rest_mesh,
                                    selection->tolerance_m);
-    trial.seconds = std::chrono::duration<double>(Clock::now() - started).count();
+    trial.seconds = SecondsSince(started);
     started = Clock::now();
     selection->trials.push_back(trial);
     spdlog::info(
@@ -122,6 +137,8 @@ Status GridSelectionOptions::Validate() const {
         fmt::format("max_grid_nodes = {}: must be >= 1", max_grid_nodes));
   if (substeps < 1)
     return Status::InvalidArgument(fmt::format("substeps = {}: must be >= 1", substeps));
+  if (!(max_seconds >= 0.0) || !std::isfinite(max_seconds))
+    return Status::InvalidArgument(fmt::format("max_seconds = {}: must be >= 0", max_seconds));
   return Status::Ok();
 }
 
@@ -143,7 +160,12 @@ Result<GridSelection> SelectGrid(const geometry::TriangleMesh& rest_mesh,
   } catch (const std::invalid_argument& error) {
     return Status::InvalidArgument(error.what());
   }
-  if (!selection.within_tolerance) {
+  if (selection.stopped_at_time_limit) {
+    spdlog::warn(
+        "grid: {} cells along the longest side, the finest the time limit ({:.0f} s) let the "
+        "choice compare; it was not shown to be within tolerance of a finer grid",
+        selection.cells, options.max_seconds);
+  } else if (!selection.within_tolerance) {
     spdlog::warn(
         "grid: {} cells along the longest side leave the surface {:.3g} mm from the next finer "
         "grid from frame {} on (tolerance {:.3g} mm: {} x the depth noise {:.3g} mm), and no finer "
@@ -181,6 +203,7 @@ nlohmann::json ToJson(const GridSelection& selection) {
           {"depth_noise_m", selection.depth_noise_m},
           {"tolerance_m", selection.tolerance_m},
           {"within_tolerance", selection.within_tolerance},
+          {"stopped_at_time_limit", selection.stopped_at_time_limit},
           {"trials", trials}};
 }
 

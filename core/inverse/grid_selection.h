@@ -44,6 +44,10 @@ struct GridSelectionOptions {
   // Steps per camera frame of the comparison runs [-], >= 1: fine enough that the time step does
   // not hide the grid's error.
   int substeps = 8;
+  // Wall time of the choice [s], >= 0; 0 = no limit. A finer grid whose run would end past it
+  // (the last run's time scaled by the nodes) is not simulated: the finest grid run so far is
+  // taken, and the selection says so (a fit under SolverOptions::max_seconds keeps time to fit).
+  double max_seconds = 0.0;
   // Checked every simulation step; when set, selection stops with StatusCode::kCancelled.
   const std::atomic<bool>* cancel = nullptr;
 
@@ -68,6 +72,8 @@ struct GridSelection {
   double depth_noise_m = 0.0;
   double tolerance_m = 0.0;
   bool within_tolerance = false;  // false: the finest affordable candidate, tolerance not met
+  // GridSelectionOptions::max_seconds ended the refinement before a finer grid was tried.
+  bool stopped_at_time_limit = false;
   // (No analogue of SubstepSelection::converging: a grid's difference does not shrink steadily
   // enough to tell chaos by. A ball bouncing: 0.66 then 0.83 mm at 6/9 and 9/13 cells, the cut
   // cells' fit to the surface changes with the grid; a block rocking chaotically: 22.5 then

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <chrono>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -11,6 +12,12 @@
 
 namespace softid::inverse {
 namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double SecondsSince(Clock::time_point begin) {
+  return std::chrono::duration<double>(Clock::now() - begin).count();
+}
 
 bool Cancelled(const std::atomic<bool>* cancel) {
   return cancel != nullptr && cancel->load(std::memory_order_relaxed);
@@ -33,6 +40,10 @@ Status CheckSubstepSelectionInputs(const SubstepSelectionOptions& options, doubl
   if (!(options.tolerance_fraction > 0.0)) {
     return Status::InvalidArgument(
         fmt::format("tolerance_fraction = {}: must be positive", options.tolerance_fraction));
+  }
+  if (!(options.max_seconds >= 0.0) || !std::isfinite(options.max_seconds)) {
+    return Status::InvalidArgument(
+        fmt::format("max_seconds = {}: must be >= 0", options.max_seconds));
   }
   if (!(fps > 0.0)) return Status::InvalidArgument(fmt::format("fps = {}: must be > 0", fps));
   if (last_frame < 1) {
@@ -102,6 +113,7 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
                                     int last_frame, const SubstepSelectionOptions& options,
                                     SubstepSelection* selection) {
   int substeps = options.min_substeps;
+  const auto begin = Clock::now();
   SurfaceRun first = SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps,
                                                last_frame, substeps, options.cancel);
   if (Cancelled(options.cancel)) return Status::Cancelled("the time-step choice was cancelled");
@@ -114,16 +126,25 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
         selection->max_substeps, first.grid_nodes, options.max_node_steps_per_frame);
   }
   std::vector<double> previous_per_frame_m;
+  double last_run_s = SecondsSince(begin);
   while (true) {
     if (substeps >= selection->max_substeps) {
       selection->substeps = selection->max_substeps;
       break;
     }
+    // A run's time grows with its steps: the next one, at twice the steps, takes twice as long.
+    if (options.max_seconds > 0.0 && SecondsSince(begin) + 2.0 * last_run_s > options.max_seconds) {
+      selection->substeps = substeps;
+      selection->stopped_at_time_limit = true;
+      break;
+    }
     const int finer = 2 * substeps;  // <= max_substeps: the candidates are doublings
+    const auto run_begin = Clock::now();
     SurfaceTrajectory fine =
         SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps, last_frame,
                                   finer, options.cancel)
             .frames;
+    last_run_s = SecondsSince(run_begin);
     if (Cancelled(options.cancel)) {
       return Status::Cancelled("the time-step choice was cancelled");
     }
@@ -154,7 +175,9 @@ int PredictableLastFrame(const SubstepSelection& selection, int last_frame,
   // chaotic frames rises and falls at random (13.3 then 10.0 mm at 16/32 and 32/64 substeps on a
   // block rocking on a 10-cell grid, 9.1 then 16.7 mm on 16 cells); each frame's own
   // convergence says where the motion stops being predictable.
-  if (selection.within_tolerance || selection.trials.size() < 2) return -1;
+  // A choice the time limit ended has no evidence of chaos: its last halving is not the finest.
+  if (selection.within_tolerance || selection.stopped_at_time_limit || selection.trials.size() < 2)
+    return -1;
   const SubstepTrial& last = selection.trials.back();
   if (last.diverged || last.frames_converging > last_frame) return -1;
   if (last.frames_converging < last.frames_within_tolerance + min_converging_contact_frames) {
@@ -186,7 +209,12 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
     return Status::InvalidArgument(error.what());
   }
   selection.converging = LastHalvingConverged(selection.trials);
-  if (!selection.within_tolerance && !selection.converging) {
+  if (selection.stopped_at_time_limit) {
+    spdlog::warn(
+        "time step: {} substeps per frame, the finest the time limit ({:.0f} s) let the choice "
+        "compare; it was not shown to be within tolerance of half the step",
+        selection.substeps, options.max_seconds);
+  } else if (!selection.within_tolerance && !selection.converging) {
     const SubstepTrial& previous = selection.trials[selection.trials.size() - 2];
     const SubstepTrial& last = selection.trials.back();
     spdlog::warn(
@@ -219,9 +247,13 @@ nlohmann::json ToJson(const SubstepSelection& selection) {
                       {"frames_converging", t.frames_converging},
                       {"diverged", t.diverged}});
   }
-  return {{"substeps", selection.substeps},       {"max_substeps", selection.max_substeps},
-          {"tolerance_m", selection.tolerance_m}, {"within_tolerance", selection.within_tolerance},
-          {"converging", selection.converging},   {"trials", trials}};
+  return {{"substeps", selection.substeps},
+          {"max_substeps", selection.max_substeps},
+          {"tolerance_m", selection.tolerance_m},
+          {"within_tolerance", selection.within_tolerance},
+          {"converging", selection.converging},
+          {"stopped_at_time_limit", selection.stopped_at_time_limit},
+          {"trials", trials}};
 }
 
 }  // namespace softid::inverse

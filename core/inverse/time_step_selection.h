@@ -43,6 +43,10 @@ struct SubstepSelectionOptions {
   // (0.6 mm here, under a depth camera's noise) takes 8. (With gamma 1/2 the differences are 21,
   // 0.32 and 0.09 mm and 4 substeps give 0.2 %: see SimulationOptions::newmark_gamma.)
   double tolerance_fraction = 2e-3;
+  // Wall time of the choice [s], >= 0; 0 = no limit. A halving of the step whose run would end
+  // past it (twice the last run's time) is not simulated: the finest step run so far is taken,
+  // and the selection says so.
+  double max_seconds = 0.0;
   // Checked every simulation step; when set, selection stops with StatusCode::kCancelled.
   const std::atomic<bool>* cancel = nullptr;
 };
@@ -66,6 +70,8 @@ struct SubstepSelection {
   int max_substeps = 0;
   double tolerance_m = 0.0;
   bool within_tolerance = false;  // false: max_substeps taken without meeting the tolerance
+  // SubstepSelectionOptions::max_seconds ended the halving before max_substeps.
+  bool stopped_at_time_limit = false;
   // False when the last halving of the step shrank the difference by less than a quarter, where
   // a step error halves at least (first order, in contact): the motion itself is then sensitive
   // to the smallest change (an undamped block rocking on a floor is chaotic: 7.4, 22 and 14 mm
@@ -87,9 +93,9 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
 // The last frame a fit should compare when `selection` found the motion chaotic: the last of the
 // leading frames in which the last halving of the step still shrank the difference
 // (trials.back().frames_converging), or -1 (every frame) when the last trial met the tolerance,
-// fewer than two trials ran, every frame converges, or fewer than `min_converging_contact_frames`
-// converge after those already within the tolerance (then not even the first impact converges, and
-// the frames before it would not tell the fit anything).
+// the time limit ended the choice, fewer than two trials ran, every frame converges, or fewer than
+// `min_converging_contact_frames` converge after those already within the tolerance (then not even
+// the first impact converges, and the frames before it would not tell the fit anything).
 int PredictableLastFrame(const SubstepSelection& selection, int last_frame,
                          int min_converging_contact_frames = 3);
 

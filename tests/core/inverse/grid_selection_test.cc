@@ -132,5 +132,28 @@ TEST_F(SelectGridTest, StopsWhenCancelled) {
   EXPECT_EQ(result.status().code(), StatusCode::kCancelled);
 }
 
+// A time limit the first run already uses up: no finer grid is simulated, the coarsest run is
+// taken and the selection says why; a limit of 0 is none, a negative one is refused.
+TEST_F(SelectGridTest, TakesTheFinestGridRunWithinTheTimeLimit) {
+  GridSelectionOptions options = SmallGrids();
+  options.max_seconds = 1e-6;
+  const Result<GridSelection> limited = Select(1e-9, options);
+  ASSERT_TRUE(limited.ok()) << limited.status().ToString();
+  EXPECT_EQ(limited->cells, 4);
+  EXPECT_TRUE(limited->trials.empty());
+  EXPECT_TRUE(limited->stopped_at_time_limit);
+  EXPECT_FALSE(limited->within_tolerance);
+  EXPECT_TRUE(ToJson(*limited).at("stopped_at_time_limit").get<bool>());
+  options.max_seconds = 0.0;
+  const Result<GridSelection> unlimited = Select(1e-9, options);
+  ASSERT_TRUE(unlimited.ok());
+  EXPECT_EQ(unlimited->cells, 9);
+  EXPECT_FALSE(unlimited->stopped_at_time_limit);
+  options.max_seconds = -1.0;
+  const Result<GridSelection> refused = Select(1e-9, options);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("max_seconds = -1"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace softid::inverse

@@ -160,5 +160,37 @@ TEST(SelectSubsteps, RejectsInvalidOptionsNamingThem) {
   EXPECT_NE(selection.status().message().find("last_frame = 0"), std::string::npos);
 }
 
+// A time limit the first run already uses up: the step is not halved, the first candidate is
+// taken and the selection says why, and its trials are no evidence of chaos.
+TEST(SelectSubsteps, TakesTheFinestStepRunWithinTheTimeLimit) {
+  const Result<scenes::Scene> scene = scenes::MakeBuiltinScene("ball-bounce");
+  ASSERT_TRUE(scene.ok());
+  SubstepSelectionOptions options;
+  options.min_substeps = 1;
+  options.max_substeps = 8;
+  options.tolerance_fraction = 1e-9;  // unreachable: only the limit ends the halving
+  options.max_seconds = 1e-6;
+  const Result<SubstepSelection> limited = SelectSubsteps(
+      scene->mesh, scene->fixed_region, scene->parameters, CoarseGrid(), 60.0, 30, options);
+  ASSERT_TRUE(limited.ok()) << limited.status().ToString();
+  EXPECT_EQ(limited->substeps, 1);
+  EXPECT_TRUE(limited->trials.empty());
+  EXPECT_TRUE(limited->stopped_at_time_limit);
+  EXPECT_TRUE(ToJson(*limited).at("stopped_at_time_limit").get<bool>());
+  SubstepSelection chaotic_looking;
+  chaotic_looking.trials.resize(2);
+  chaotic_looking.trials[1].substeps = 2;
+  chaotic_looking.trials[1].frames_within_tolerance = 3;
+  chaotic_looking.trials[1].frames_converging = 12;
+  EXPECT_EQ(PredictableLastFrame(chaotic_looking, 30), 11);
+  chaotic_looking.stopped_at_time_limit = true;
+  EXPECT_EQ(PredictableLastFrame(chaotic_looking, 30), -1);
+  options.max_seconds = -1.0;
+  const Result<SubstepSelection> refused = SelectSubsteps(
+      scene->mesh, scene->fixed_region, scene->parameters, CoarseGrid(), 60.0, 30, options);
+  ASSERT_FALSE(refused.ok());
+  EXPECT_NE(refused.status().message().find("max_seconds = -1"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace softid::inverse
