@@ -107,10 +107,13 @@ ResidualMap WithoutTimeStepComponent(const ResidualMap& map, const TimeStepError
       rr += static_cast<double>(f.phi[i]) * f.phi[i];
     }
     if (!(ee > 0.0) || !(rr > 0.0)) continue;
-    const double amplitude = re / ee;
+    // The amplitude is bounded: where the estimated error is tiny (round-off on a frame the finer
+    // step barely changes), a free amplitude scales it up to absorb a real misfit along it.
+    const double amplitude = std::clamp(re / ee, -kMaxStepErrorAmplitude, kMaxStepErrorAmplitude);
     for (size_t i = 0; i < f.phi.size() && i < e.size(); ++i)
       if (f.matched[i]) f.phi[i] -= static_cast<float>(amplitude * e[i]);
-    const double removed = std::clamp(re * re / ee / rr, 0.0, 1.0);
+    const double removed =
+        std::clamp((2.0 * amplitude * re - amplitude * amplitude * ee) / rr, 0.0, 1.0);
     f.cost *= 1.0 - removed;
     f.misfit = std::sqrt(2.0 * f.cost);
     if (share != nullptr) (*share)[k] = removed;
@@ -124,7 +127,8 @@ nlohmann::json ToJson(const TimeStepError& error) {
           {"method",
            "residual change at half the step, less what the base parameters absorb (least "
            "squares on their finite-difference sensitivities), x r / (r - 1) (Richardson, first "
-           "order); its least-squares component removed from each frame's residuals"},
+           "order); its least-squares component (amplitude at most 2) removed from each frame's "
+           "residuals"},
           {"change_m", error.change_m},
           {"unabsorbed_m", error.unabsorbed_m},
           {"frame_m", error.frame_m},

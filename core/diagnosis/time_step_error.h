@@ -11,9 +11,13 @@
 // r = 2 (Richardson, first order: the integrator is first order in time, inverse/
 // discretisation_error.h): e = (d - J delta) r / (r - 1).
 //
-// WithoutTimeStepComponent removes from each frame's residuals their component along e (one free
-// amplitude per frame, least squares): what is left is the misfit no step error explains, which
-// localization.h then flags. A projection only lowers a misfit, so it cannot invent one where
+// WithoutTimeStepComponent removes from each frame's residuals their component along e (one
+// amplitude per frame, least squares, bounded by kMaxStepErrorAmplitude): what is left is the
+// misfit no step error explains, which localization.h then flags. The bound matters where e is
+// round-off (a frame the finer step barely changes, e ~ 1e-11 m): a free amplitude of 1e6 would
+// scale that noise up until it took a real effect's misfit with it (air drag's slow lag was
+// half removed so). The extrapolation is first order, so a true amplitude far from 1 means e is
+// not the step's error. A projection only lowers a misfit, so it cannot invent one where
 // the extrapolation is poor, and a missing effect whose pattern differs from the step's error
 // (a stiffness contrast tilting the body, friction holding it back) keeps its misfit.
 #pragma once
@@ -24,6 +28,9 @@
 #include "core/diagnosis/residual_map.h"
 
 namespace softid::diagnosis {
+
+// The largest factor by which WithoutTimeStepComponent scales the estimated error e [-].
+inline constexpr double kMaxStepErrorAmplitude = 2.0;
 
 struct TimeStepError {
   int substeps = 0;        // the compared time step [substeps per frame]

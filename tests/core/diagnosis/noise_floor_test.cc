@@ -182,5 +182,34 @@ TEST(TimeStepError, TheStepsComponentIsLeftOutOfTheMisfit) {
             (std::vector<std::string>{"impact", "rest"}));
 }
 
+// Where the estimated step error is round-off (1e-11 m) but happens to lie along a real misfit
+// (here exactly parallel: the worst case), it takes at most its bounded amplitude with it, not
+// the misfit: air drag's slow lag stays in the frames the finer step barely changes.
+TEST(TimeStepError, ARoundOffErrorDoesNotTakeARealMisfit) {
+  ResidualMap map = Synthetic({0.003, 0.003});
+  TimeStepError step;
+  step.point_m.resize(2);
+  for (int k = 0; k < 2; ++k) {
+    FrameResiduals& f = map.frames[k];
+    double sum = 0.0;
+    for (size_t i = 0; i < f.phi.size(); ++i) {
+      const double pattern = i % 3 == 0 ? 1.0 : -0.5;
+      f.phi[i] += static_cast<float>(0.006 * pattern);                 // the real effect's misfit
+      step.point_m[k].push_back(static_cast<float>(1e-11 * pattern));  // round-off along it
+      sum += 0.5 * f.phi[i] * f.phi[i];
+    }
+    f.cost = sum / f.phi.size();
+    f.misfit = std::sqrt(2.0 * f.cost);
+  }
+  step.point_m[1].assign(step.point_m[1].size(), 0.0f);
+  std::vector<double> share;
+  const ResidualMap left = WithoutTimeStepComponent(map, step, &share);
+  EXPECT_LT(share[0], 1e-6);
+  EXPECT_NEAR(left.frames[0].misfit, map.frames[0].misfit, 1e-6 * map.frames[0].misfit);
+  EXPECT_DOUBLE_EQ(left.frames[1].misfit, map.frames[1].misfit);
+  for (size_t i = 0; i < map.frames[0].phi.size(); ++i)
+    EXPECT_NEAR(left.frames[0].phi[i], map.frames[0].phi[i], 1e-9);
+}
+
 }  // namespace
 }  // namespace softid::diagnosis
