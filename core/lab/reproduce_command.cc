@@ -16,6 +16,7 @@
 #include <limits>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 
 #include "core/capture/capture.h"
@@ -228,6 +229,8 @@ struct RowRun {
   int max_iterations = 0, refine_iterations = 0;
   int cores_per_start = 1;
   inverse::FitResult combined;
+  // Per run start, its fit without the start (grid, time step, frame loss: its "auto" choices).
+  std::vector<std::optional<inverse::FitResult>> records;
   std::vector<inverse::JobConfig> configs;  // per run start
   nlohmann::json start_scores = nlohmann::json::array();
   std::vector<std::vector<double>> errors;  // per quantity, of the converged starts
@@ -295,6 +298,8 @@ Status FitStart(RowRun& r, int k, std::mutex& mutex, bool* have_base) {
     start = fit->starts[0];
     if (!*have_base) r.combined.base = fit->base;
     *have_base = true;
+    r.records[k] = std::move(*fit);
+    r.records[k]->starts.clear();
   } else {
     start.failed = true;
     start.termination = fit.status().message();
@@ -316,12 +321,24 @@ Status FitStart(RowRun& r, int k, std::mutex& mutex, bool* have_base) {
   return Status::Ok();
 }
 
+// The combined result reports how its best start was fitted (its grid, time step and frame loss:
+// each start makes its own "auto" choices), with every start's result.
+void TakeFitRecord(const inverse::FitResult& record, RowRun* r) {
+  inverse::FitResult combined = record;
+  combined.fitted = std::move(r->combined.fitted);
+  combined.base = std::move(r->combined.base);
+  combined.starts = std::move(r->combined.starts);
+  combined.best = r->combined.best;
+  r->combined = std::move(combined);
+}
+
 // Fits the run starts, `threads` at a time, into `combined`, whose best is the cheapest.
 Status FitStarts(RowRun& r) {
   const int num_run = r.num_run();
   inverse::FitResult& combined = r.combined;
   combined.fitted = r.b.fit;
   combined.starts.resize(num_run);
+  r.records.resize(num_run);
   r.configs.resize(num_run);
   bool have_base = false;
   std::atomic<int> next{0};
@@ -348,6 +365,7 @@ Status FitStarts(RowRun& r) {
     if (combined.best < 0 || start.final_cost < combined.starts[combined.best].final_cost)
       combined.best = s;
   }
+  if (combined.best >= 0 && r.records[combined.best]) TakeFitRecord(*r.records[combined.best], &r);
   combined.total_seconds = SecondsSince(r.begin);
   return Status::Ok();
 }

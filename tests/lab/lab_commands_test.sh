@@ -70,4 +70,14 @@ python3 -c "import json,sys; d=json.load(open(sys.argv[1])); assert 'decision' i
 touch "$work/file"
 refuses "cannot create its folder $work/file/sub" fit "$work/capture" --config "$work/job.json" \
   -o "$work/file/sub/result.json" --no-report
+# A reproduce row's result records the grid and time step its starts were fitted on.
+"$lab" reproduce table1 --quick --starts 1 --max-iterations 1 --cells 6 --substeps 2 \
+  --out "$work/reproduce" >"$work/reproduce.log" 2>&1 || true  # one iteration misses the target
+python3 - "$work"/reproduce/table1-*.json <<'PY' || fail "reproduce row: $(tail -5 "$work/reproduce.log")"
+import json, sys
+row = [f for f in sys.argv[1:] if not f.endswith("summary.json")][0]
+r = json.load(open(row))
+assert r["grid"]["cells"] == 6 and r["grid"]["cell_size_m"] > 0, r["grid"]
+assert r["time_step"]["substeps"] == 2, r["time_step"]
+PY
 echo "softid-lab commands: ok"
