@@ -1,6 +1,9 @@
 #include "core/inverse/flight_stage.h"
 
+#include <spdlog/spdlog.h>
+
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <stdexcept>
@@ -175,6 +178,17 @@ Result<FlightStageResult> MeasureLaunchInFlight(TrajectoryObjective& objective,
     RefinementOptions refine;
     refine.max_iterations = options.max_iterations;
     refine.cancel = cancel;
+    // Progress: on a fine grid at a short step one iteration (a Jacobian of central differences)
+    // takes minutes.
+    const auto round_begin = std::chrono::steady_clock::now();
+    const int last_frame = frames[flight.count - 1].frame;
+    refine.on_iteration = [&](int iteration, double cost, double) {
+      spdlog::info(
+          "flight: the launch on frames 0-{} (round {}), iteration {}/{}: cost {:.4e} m^2, "
+          "{:.0f} s",
+          last_frame, round + 1, iteration, options.max_iterations, cost,
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - round_begin).count());
+    };
     Result<RefinementSummary> summary =
         RefineByLevenbergMarquardt({&objective}, space, result.parameters, scale, &x, refine);
     objective.SetActiveFrames(all);
