@@ -162,7 +162,7 @@ Result<GridSelection> SelectGrid(const geometry::TriangleMesh& rest_mesh,
   }
   if (selection.stopped_at_time_limit) {
     spdlog::warn(
-        "grid: {} cells along the longest side, the finest the time limit ({:.0f} s) let the "
+        "grid: {} cells along the longest side, the finest the time limit ({:.3g} s) let the "
         "choice compare; it was not shown to be within tolerance of a finer grid",
         selection.cells, options.max_seconds);
   } else if (!selection.within_tolerance) {

@@ -211,7 +211,7 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
   selection.converging = LastHalvingConverged(selection.trials);
   if (selection.stopped_at_time_limit) {
     spdlog::warn(
-        "time step: {} substeps per frame, the finest the time limit ({:.0f} s) let the choice "
+        "time step: {} substeps per frame, the finest the time limit ({:.3g} s) let the choice "
         "compare; it was not shown to be within tolerance of half the step",
         selection.substeps, options.max_seconds);
   } else if (!selection.within_tolerance && !selection.converging) {

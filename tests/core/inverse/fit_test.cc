@@ -177,6 +177,21 @@ TEST(Fit, ATimeLimitStopsEachStartAtItsBestPointSoFar) {
   EXPECT_EQ(start.final.youngs_modulus, start.initial.youngs_modulus);
   EXPECT_EQ(start.final_cost, start.initial_cost);
 
+  // With "auto" grid and time step the choices stop at their first candidates; the time step
+  // then takes at least the grid check's 8 substeps, not the 2 of its first run.
+  JobConfig automatic = config;
+  automatic.solver.cells = kAutoCells;
+  automatic.solver.substeps = kAutoSubsteps;
+  Result<FitResult> chosen = Fit(small.capture, automatic);
+  ASSERT_TRUE(chosen.ok()) << chosen.status().ToString();
+  ASSERT_TRUE(chosen->grid_selection.has_value() && chosen->substep_selection.has_value());
+  EXPECT_TRUE(chosen->grid_selection->stopped_at_time_limit);
+  EXPECT_EQ(chosen->cells, GridSelectionOptions{}.candidates.front());
+  EXPECT_TRUE(chosen->substep_selection->stopped_at_time_limit);
+  EXPECT_TRUE(chosen->substep_selection->trials.empty());
+  EXPECT_EQ(chosen->substeps, GridSelectionOptions{}.substeps);
+  EXPECT_EQ(ToJson(*chosen)["time_step"]["substeps"].get<int>(), GridSelectionOptions{}.substeps);
+
   config.solver.max_seconds = 0.0;
   config.solver.refine_iterations = 0;
   Result<FitResult> free = Fit(small.capture, config);
