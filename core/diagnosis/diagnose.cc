@@ -1163,7 +1163,7 @@ Result<bool> KeepPredictableComparedFrames(const capture::Capture& capture,
   if (last < 0 || (compared->frames.last >= 0 && last >= compared->frames.last)) return false;
   spdlog::warn(
       "diagnosis: the frames after frame {} are not compared: halving the step no longer "
-      "converges there (the motion is chaotic), and the job's fit leaves them out too",
+      "converges there (no affordable step predicts them), and the job's fit leaves them out too",
       last);
   compared->frames.last = last;
   return true;

@@ -224,7 +224,8 @@ void WriteComparedAtText(const nlohmann::json& compared_at, std::ostream& out) {
       << compared_at.value("substeps", 0) << " substeps per frame";
   if (compared_at.contains("predictable_last_frame")) {
     out << ", up to frame " << compared_at["predictable_last_frame"].get<int>()
-        << " (after it the motion is chaotic: halving the step no longer converges)";
+        << " (after it halving the step no longer converges: no affordable step predicts the "
+           "motion)";
   }
   if (compared_at.contains("final_refit")) {
     const nlohmann::json& refit = compared_at["final_refit"];

@@ -913,8 +913,9 @@ void KeepPredictableFrames(const JobConfig& config, double fps, FitSetup* setup,
       std::count_if(kept.begin(), kept.end(), [](const ObservedFrame& f) { return !f.heldout; });
   if (fitted < 2) return;
   spdlog::warn(
-      "fit: frames {}-{} left out: halving the time step no longer converges there (the motion is "
-      "chaotic: no step predicts it), so the fit compares frames up to {} only "
+      "fit: frames {}-{} left out: halving the time step no longer converges there (no affordable "
+      "step predicts them; they would carry the step's error), so the fit compares frames up to {} "
+      "only "
       "(\"predictable_frames_only\": false fits them all)",
       last + 1, last_frame, last);
   setup->frames = std::make_shared<const std::vector<ObservedFrame>>(std::move(kept));

@@ -219,10 +219,10 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
     const SubstepTrial& last = selection.trials.back();
     spdlog::warn(
         "time step: halving the step did not shrink the surface's difference ({:.3g} mm at {} vs "
-        "{} substeps per frame, {:.3g} mm at {} vs {}; tolerance {:.3g} mm): from frame {} on the "
-        "motion is sensitive to the smallest change, not to the step (undamped contact rocks "
-        "chaotically; damping settles it), and no step makes those frames predictable; {} "
-        "substeps taken",
+        "{} substeps per frame, {:.3g} mm at {} vs {}; tolerance {:.3g} mm): from frame {} on no "
+        "affordable step predicts the "
+        "motion (an undamped body rocking on its corners converges with the step too slowly, and "
+        "later turns chaotic; damping settles it); {} substeps taken",
         1e3 * previous.difference_m, previous.substeps, 2 * previous.substeps,
         1e3 * last.difference_m, last.substeps, 2 * last.substeps, 1e3 * selection.tolerance_m,
         last.frames_converging, selection.substeps);
