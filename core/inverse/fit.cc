@@ -704,8 +704,8 @@ Status ChooseDiscretisation(const capture::Capture& capture, const geometry::Tri
   SubstepSelectionOptions selection_options;
   selection_options.cancel = cancel;
   if (config.solver.max_seconds > 0.0) {
-    // What the grid's choice left of the discretisation's share (a few seconds at least: the
-    // first run, at the coarsest step, is cheap and always made).
+    // What the grid's choice left of the discretisation's share (the first run, at the coarsest
+    // step, is made whatever is left).
     selection_options.max_seconds =
         std::max(1e-3, DiscretisationSeconds(config.solver) - SecondsSince(begin));
   }
