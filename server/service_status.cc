@@ -23,7 +23,8 @@ ServiceStatus::ServiceStatus(const Status& status) : message_(status.message()) 
     case StatusCode::kOk: code_ = ServiceCode::kOk; break;
     case StatusCode::kInvalidArgument: code_ = ServiceCode::kInvalidArgument; break;
     case StatusCode::kNotFound: code_ = ServiceCode::kNotFound; break;
-    case StatusCode::kFailedPrecondition: code_ = ServiceCode::kFailedPrecondition; break;
+    case StatusCode::kFailedPrecondition:
+    case StatusCode::kDeadlineExceeded: code_ = ServiceCode::kFailedPrecondition; break;
     case StatusCode::kIoError:
     case StatusCode::kInternal: code_ = ServiceCode::kInternal; break;
     case StatusCode::kCancelled: code_ = ServiceCode::kCancelled; break;

@@ -18,7 +18,8 @@ enum class StatusCode {
   kIoError,          // a read or write that failed for reasons outside the input
   kFailedPrecondition,
   kInternal,
-  kCancelled,  // stopped because the caller asked (a cancel flag was set)
+  kCancelled,         // stopped because the caller asked (a cancel flag was set)
+  kDeadlineExceeded,  // not done: the time limit given cannot hold the work (names the limit)
 };
 
 const char* ToString(StatusCode code);
@@ -45,6 +46,9 @@ class [[nodiscard]] Status {
   static Status Cancelled(std::string message) {
     return {StatusCode::kCancelled, std::move(message)};
   }
+  static Status DeadlineExceeded(std::string message) {
+    return {StatusCode::kDeadlineExceeded, std::move(message)};
+  }
 
   bool ok() const { return code_ == StatusCode::kOk; }
   StatusCode code() const { return code_; }
@@ -69,7 +73,7 @@ class [[nodiscard]] Result {
   Result(T value) : storage_(std::move(value)) {}          // NOLINT: implicit by design
   Result(StatusT status) : storage_(std::move(status)) {}  // NOLINT: implicit by design
   Result(const Status& status)                             // NOLINT: implicit by design
-    requires(!std::is_same_v<StatusT, Status>)
+      requires(!std::is_same_v<StatusT, Status>)
       : storage_(StatusT(status)) {}
 
   bool ok() const { return std::holds_alternative<T>(storage_); }

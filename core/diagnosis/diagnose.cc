@@ -1047,6 +1047,12 @@ struct DiagnosisRun {
     const auto refit_begin = Clock::now();
     Result<inverse::FitResult> fit = std::move(RunFits({final_config}).front());
     const double seconds = std::chrono::duration<double>(Clock::now() - refit_begin).count();
+    if (fit.status().code() == StatusCode::kDeadlineExceeded) {
+      // Its grid and time-step choices left too little of the budget for one evaluation.
+      report.compared_at["final_refit"] = {{"skipped", fit.status().message()},
+                                           {"seconds", seconds}};
+      return;
+    }
     if (!fit.ok()) {
       report.compared_at["final_refit"] = {{"error", fit.status().message()}, {"seconds", seconds}};
       return;

@@ -922,6 +922,39 @@ void KeepPredictableFrames(const JobConfig& config, double fps, FitSetup* setup,
   result->predictable_last_frame = last;
 }
 
+// An evaluation of the cost and its gradient costs a forward run and an adjoint one; the adjoint
+// took 0.7-2.7 times the forward run's time in the fits of docs/benchmarks.md' independent
+// captures, so two forward runs are a low estimate.
+constexpr double kForwardRunsPerEvaluation = 2.0;
+
+// The wall time of one evaluation over the fitted frames at the chosen grid and time step [s],
+// scaled from the time per step the grid or time-step choice measured on that grid; 0 when
+// neither ran (a given discretisation, a resumed fit).
+double EstimatedEvaluationSeconds(const FitResult& result, const std::vector<ObservedFrame>& frames,
+                                  double fps) {
+  double seconds_per_step = 0.0;
+  if (result.substep_selection) seconds_per_step = result.substep_selection->seconds_per_step;
+  if (seconds_per_step <= 0.0 && result.grid_selection)
+    seconds_per_step = result.grid_selection->seconds_per_step;
+  const double steps = static_cast<double>(result.substeps) * LastNominalFrame(frames, fps);
+  return kForwardRunsPerEvaluation * seconds_per_step * steps;
+}
+
+// DeadlineExceeded when the time the grid and time-step choices left of max_seconds cannot hold
+// one evaluation at their choice: the fit would overrun its limit before its first step (a
+// diagnosis' final refit of a friction cube took 257 s of 197 s that way).
+Status CheckTimeForAnEvaluation(const JobConfig& config, double fps, const FitSetup& setup,
+                                const FitResult& result, Clock::time_point fit_begin) {
+  if (config.solver.max_seconds <= 0.0) return Status::Ok();
+  const double needed_s = EstimatedEvaluationSeconds(result, *setup.frames, fps);
+  const double left_s = config.solver.max_seconds - SecondsSince(fit_begin);
+  if (needed_s <= 0.0 || needed_s <= left_s) return Status::Ok();  // unmeasured, or it fits
+  return Status::DeadlineExceeded(fmt::format(
+      "max_seconds = {:.4g}: one evaluation at {} cells and {} substeps per frame takes about "
+      "{:.3g} s (scaled from the grid and time-step choices' runs), and they left {:.3g} s",
+      config.solver.max_seconds, result.cells, result.substeps, needed_s, std::max(0.0, left_s)));
+}
+
 // The fit's checkpoint with the starts a resumed checkpoint finished, which also go into
 // result->starts.
 FitCheckpoint ResumedCheckpoint(const FitOptions& options, int num_starts, FitResult* result) {
@@ -1039,6 +1072,7 @@ Result<FitResult> Fit(const capture::Capture& capture, const JobConfig& config,
   SOFTID_RETURN_IF_ERROR(DiscretiseFit(capture, config, options, &setup, &result));
   ChooseFrameLoss(capture, setup.mesh, config, &result);
   KeepPredictableFrames(config, capture.fps, &setup, &result);
+  SOFTID_RETURN_IF_ERROR(CheckTimeForAnEvaluation(config, capture.fps, setup, result, begin));
   SOFTID_ASSIGN_OR_RETURN(std::vector<int> to_run, StartsToRun(options, num_starts));
   FitCheckpoint checkpoint = ResumedCheckpoint(options, num_starts, &result);
   if (options.on_checkpoint) options.on_checkpoint(checkpoint);

@@ -113,6 +113,7 @@ Status RefineGridUntilConverged(const geometry::TriangleMesh& rest_mesh,
     coarse = std::move(fine);
   }
   if (Cancelled(options.cancel)) return Status::Cancelled("the grid choice was cancelled");
+  selection->seconds_per_step = coarse.SecondsPerStep();  // coarse is the chosen grid's run
   return Status::Ok();
 }
 

@@ -79,6 +79,10 @@ struct GridSelection {
   // cells' fit to the surface changes with the grid; a block rocking chaotically: 22.5 then
   // 9.8 mm.)
   std::vector<GridTrial> trials;
+  // The chosen grid's run's wall time per time step (at GridSelectionOptions::substeps) [s],
+  // measured (0: unknown, e.g. read back from a checkpoint): a fit under a time limit scales its
+  // evaluations' cost from it.
+  double seconds_per_step = 0.0;
 };
 
 // @param depth_noise_m the capture's depth noise sigma [m], > 0 (EstimateRestFrameNoise).

@@ -1,6 +1,7 @@
 #include "core/inverse/surface_trajectory.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 
 #include "core/fem/simulator.h"
@@ -15,6 +16,10 @@ SurfaceRun SimulateSurfaceTrajectory(const geometry::TriangleMesh& rest_mesh,
   auto cancelled = [cancel] {
     return cancel != nullptr && cancel->load(std::memory_order_relaxed);
   };
+  const auto begin = std::chrono::steady_clock::now();
+  auto stop_clock = [begin](SurfaceRun* run) {
+    run->seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
+  };
   simulation.time_step = 1.0 / (fps * substeps);
   fem::Simulator sim(rest_mesh, parameters, simulation, fixed_region);
   SurfaceRun run;
@@ -27,11 +32,14 @@ SurfaceRun SimulateSurfaceTrajectory(const geometry::TriangleMesh& rest_mesh,
       const bool diverged = cancelled() || sim.Step().diverged || !sim.state().u.allFinite();
       if (diverged) {
         frames.clear();
+        stop_clock(&run);
         return run;
       }
+      ++run.steps;
     }
     frames.push_back(sim.SurfacePositions());
   }
+  stop_clock(&run);
   return run;
 }
 

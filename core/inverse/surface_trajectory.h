@@ -20,6 +20,11 @@ using SurfaceTrajectory = std::vector<std::vector<Eigen::Vector3d>>;
 struct SurfaceRun {
   SurfaceTrajectory frames;  // empty when the run diverged or was cancelled
   int grid_nodes = 0;        // of the simulation's hexahedral mesh
+  int steps = 0;             // time steps run
+  double seconds = 0.0;      // wall time of the run, setup included [s]
+
+  // Wall time per time step [s] (0 before a step): what a fit's evaluation on this grid scales.
+  double SecondsPerStep() const { return steps > 0 ? seconds / steps : 0.0; }
 };
 
 // Simulates frames 0..last_frame at `substeps` steps per frame (simulation.time_step is replaced

@@ -118,6 +118,7 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
                                                last_frame, substeps, options.cancel);
   if (Cancelled(options.cancel)) return Status::Cancelled("the time-step choice was cancelled");
   SurfaceTrajectory coarse = std::move(first.frames);
+  selection->seconds_per_step = first.SecondsPerStep();
   selection->max_substeps = LargestSubstepCandidate(first.grid_nodes, options);
   if (selection->max_substeps < options.max_substeps) {
     spdlog::info(
@@ -140,10 +141,9 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
     }
     const int finer = 2 * substeps;  // <= max_substeps: the candidates are doublings
     const auto run_begin = Clock::now();
-    SurfaceTrajectory fine =
-        SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation, fps, last_frame,
-                                  finer, options.cancel)
-            .frames;
+    SurfaceRun fine_run = SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation,
+                                                    fps, last_frame, finer, options.cancel);
+    SurfaceTrajectory fine = std::move(fine_run.frames);
     last_run_s = SecondsSince(run_begin);
     if (Cancelled(options.cancel)) {
       return Status::Cancelled("the time-step choice was cancelled");
@@ -163,6 +163,7 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
     }
     substeps = finer;
     coarse = std::move(fine);
+    selection->seconds_per_step = fine_run.SecondsPerStep();
   }
   return Status::Ok();
 }

@@ -59,7 +59,8 @@ struct SubstepTrial {
   int frames_within_tolerance = 0;
   // Leading frames in which this halving of the step shrank the difference of the previous one
   // to at most 3/4 or met the tolerance: where the motion converges with the step. Beyond them
-  // it is sensitive to the smallest change (chaotic). The first trial: frames_within_tolerance.
+  // no affordable step predicts it (contacts that converge too slowly, or later chaos). The
+  // first trial: frames_within_tolerance.
   int frames_converging = 0;
   bool diverged = false;  // either run failed
 };
@@ -73,12 +74,15 @@ struct SubstepSelection {
   // SubstepSelectionOptions::max_seconds ended the halving before max_substeps.
   bool stopped_at_time_limit = false;
   // False when the last halving of the step shrank the difference by less than a quarter, where
-  // a step error halves at least (first order, in contact): the motion itself is then sensitive
-  // to the smallest change (an undamped block rocking on a floor is chaotic: 7.4, 22 and 14 mm
-  // between 8/16, 16/32 and 32/64 substeps, docs/benchmarks.md), and no step makes its frames from
+  // a step error halves at least (first order, in contact): an undamped block rocking on a floor
+  // (7.4, 22 and 14 mm between 8/16, 16/32 and 32/64 substeps, docs/benchmarks.md) converges too
+  // slowly for any affordable step, and turns chaotic later; no step makes its frames from
   // trials.back().frames_converging on predictable.
   bool converging = true;
   std::vector<SubstepTrial> trials;
+  // A run's wall time per time step at the chosen step [s], measured (0: unknown, e.g. read back
+  // from a checkpoint): a fit under a time limit scales its evaluations' cost from it.
+  double seconds_per_step = 0.0;
 };
 
 // @param last_frame the last frame the fit compares (frames 0..last_frame are simulated).
@@ -90,7 +94,8 @@ Result<SubstepSelection> SelectSubsteps(const geometry::TriangleMesh& rest_mesh,
                                         int last_frame,
                                         const SubstepSelectionOptions& options = {});
 
-// The last frame a fit should compare when `selection` found the motion chaotic: the last of the
+// The last frame a fit should compare when `selection` found no affordable step that predicts the
+// motion to the end: the last of the
 // leading frames in which the last halving of the step still shrank the difference
 // (trials.back().frames_converging), or -1 (every frame) when the last trial met the tolerance,
 // the time limit ended the choice, fewer than two trials ran, every frame converges, or fewer than

@@ -178,19 +178,32 @@ TEST(Fit, ATimeLimitStopsEachStartAtItsBestPointSoFar) {
   EXPECT_EQ(start.final_cost, start.initial_cost);
 
   // With "auto" grid and time step the choices stop at their first candidates; the time step
-  // then takes at least the grid check's 8 substeps, not the 2 of its first run.
+  // then takes at least the grid check's 8 substeps, not the 2 of its first run. Both measure a
+  // run's time per step.
   JobConfig automatic = config;
   automatic.solver.cells = kAutoCells;
   automatic.solver.substeps = kAutoSubsteps;
-  Result<FitResult> chosen = Fit(small.capture, automatic);
+  Result<FitCheckpoint> chosen = PrepareFit(small.capture, automatic);
   ASSERT_TRUE(chosen.ok()) << chosen.status().ToString();
   ASSERT_TRUE(chosen->grid_selection.has_value() && chosen->substep_selection.has_value());
   EXPECT_TRUE(chosen->grid_selection->stopped_at_time_limit);
   EXPECT_EQ(chosen->cells, GridSelectionOptions{}.candidates.front());
+  EXPECT_GT(chosen->grid_selection->seconds_per_step, 0.0);
   EXPECT_TRUE(chosen->substep_selection->stopped_at_time_limit);
   EXPECT_TRUE(chosen->substep_selection->trials.empty());
   EXPECT_EQ(chosen->substeps, GridSelectionOptions{}.substeps);
-  EXPECT_EQ(ToJson(*chosen)["time_step"]["substeps"].get<int>(), GridSelectionOptions{}.substeps);
+  EXPECT_GT(chosen->substep_selection->seconds_per_step, 0.0);
+  // The fit itself then refuses to start an evaluation its limit cannot hold, naming the limit
+  // and the discretisation, rather than overrunning it.
+  Result<FitResult> overrun = Fit(small.capture, automatic);
+  ASSERT_FALSE(overrun.ok());
+  EXPECT_EQ(overrun.status().code(), StatusCode::kDeadlineExceeded);
+  EXPECT_EQ(overrun.status().ToString().rfind("DEADLINE_EXCEEDED: max_seconds", 0), 0u);
+  EXPECT_NE(overrun.status().message().find("max_seconds = 0.001"), std::string::npos)
+      << overrun.status().message();
+  EXPECT_NE(overrun.status().message().find(std::to_string(chosen->cells) + " cells"),
+            std::string::npos)
+      << overrun.status().message();
 
   config.solver.max_seconds = 0.0;
   config.solver.refine_iterations = 0;
