@@ -81,7 +81,7 @@ Status RefineGridUntilConverged(const geometry::TriangleMesh& rest_mesh,
   auto started = begin;
   selection->cells = options.candidates.front();
   SurfaceRun coarse = run(selection->cells);
-  double last_run_s = SecondsSince(started);
+  double last_run_s = coarse.seconds;
   for (size_t i = 1; i < options.candidates.size() && affordable(options.candidates[i]); ++i) {
     const int finer_cells = options.candidates[i];
     // A run's time grows with the grid's nodes: the next one's is the last one's, scaled.
@@ -91,9 +91,8 @@ Status RefineGridUntilConverged(const geometry::TriangleMesh& rest_mesh,
       selection->stopped_at_time_limit = true;
       break;
     }
-    const auto run_begin = Clock::now();
     SurfaceRun fine = run(finer_cells);
-    last_run_s = SecondsSince(run_begin);
+    last_run_s = fine.seconds;
     if (Cancelled(options.cancel)) return Status::Cancelled("the grid choice was cancelled");
     GridTrial trial = CompareGrids(selection->cells, finer_cells, coarse, fine, rest_mesh,
                                    selection->tolerance_m);

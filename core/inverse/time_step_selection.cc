@@ -127,7 +127,7 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
         selection->max_substeps, first.grid_nodes, options.max_node_steps_per_frame);
   }
   std::vector<double> previous_per_frame_m;
-  double last_run_s = SecondsSince(begin);
+  double last_run_s = first.seconds;
   while (true) {
     if (substeps >= selection->max_substeps) {
       selection->substeps = selection->max_substeps;
@@ -140,11 +140,10 @@ Status DoubleSubstepsUntilConverged(const geometry::TriangleMesh& rest_mesh,
       break;
     }
     const int finer = 2 * substeps;  // <= max_substeps: the candidates are doublings
-    const auto run_begin = Clock::now();
     SurfaceRun fine_run = SimulateSurfaceTrajectory(rest_mesh, fixed_region, parameters, simulation,
                                                     fps, last_frame, finer, options.cancel);
     SurfaceTrajectory fine = std::move(fine_run.frames);
-    last_run_s = SecondsSince(run_begin);
+    last_run_s = fine_run.seconds;
     if (Cancelled(options.cancel)) {
       return Status::Cancelled("the time-step choice was cancelled");
     }
