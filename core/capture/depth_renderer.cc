@@ -87,6 +87,41 @@ void AttachMeshInCameraFrame(RTCDevice device, bool backface_culling,
   rtcReleaseGeometry(geometry);
 }
 
+// Ray from the camera centre with direction (x, y, 1) in C: the hit distance t (in units of the
+// direction) is then the depth along the camera z axis.
+void SetRay(const Eigen::Vector3d& dir_C, unsigned id, RTCRayHit* ray_hit) {
+  ray_hit->ray.org_x = ray_hit->ray.org_y = ray_hit->ray.org_z = 0.0f;
+  ray_hit->ray.dir_x = static_cast<float>(dir_C.x());
+  ray_hit->ray.dir_y = static_cast<float>(dir_C.y());
+  ray_hit->ray.dir_z = 1.0f;
+  ray_hit->ray.tnear = 0.0f;
+  ray_hit->ray.tfar = std::numeric_limits<float>::infinity();
+  ray_hit->ray.time = 0.0f;
+  ray_hit->ray.mask = std::numeric_limits<unsigned>::max();
+  ray_hit->ray.id = id;
+  ray_hit->ray.flags = 0;
+  ray_hit->hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  ray_hit->hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+}
+
+// mesh_W added to `scene` in the camera's frame, committed.
+void BuildScene(RTCDevice device, bool backface_culling, const geometry::TriangleMesh& mesh_W,
+                const PinholeCamera& camera, RTCScene scene) {
+  CheckTriangleIndices(mesh_W);
+  rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST);
+  rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_LOW);  // one build per frame
+  AttachMeshInCameraFrame(device, backface_culling, mesh_W, camera, scene);
+  rtcCommitScene(scene);
+  ThrowOnDeviceError(device, "rtcCommitScene");
+}
+
+Eigen::Vector3d RayDirection_C(const PinholeCamera& camera, const PixelRays* lens_rays, int col,
+                               int row) {
+  return lens_rays == nullptr
+             ? camera.RayDirection_C(col, row)
+             : Eigen::Vector3d(lens_rays->at(col, row).x(), lens_rays->at(col, row).y(), 1.0);
+}
+
 }  // namespace
 
 DepthRenderer::DepthRenderer() : impl_(std::make_unique<Impl>()) {
@@ -124,15 +159,8 @@ DepthImage DepthRenderer::RenderRays(const geometry::TriangleMesh& mesh_W,
   SOFTID_THROW_UNLESS(camera_valid.ok(), camera_valid.message());
   DepthImage image = DepthImage::Zeros(camera.width, camera.height);
   if (mesh_W.vertices.empty() || mesh_W.triangles.empty()) return image;
-
-  CheckTriangleIndices(mesh_W);
-  RTCDevice device = impl_->device;
-  SceneHandle scene{rtcNewScene(device)};
-  rtcSetSceneFlags(scene.scene, RTC_SCENE_FLAG_ROBUST);
-  rtcSetSceneBuildQuality(scene.scene, RTC_BUILD_QUALITY_LOW);  // one build per frame
-  AttachMeshInCameraFrame(device, impl_->backface_culling, mesh_W, camera, scene.scene);
-  rtcCommitScene(scene.scene);
-  ThrowOnDeviceError(device, "rtcCommitScene");
+  SceneHandle scene{rtcNewScene(impl_->device)};
+  BuildScene(impl_->device, impl_->backface_culling, mesh_W, camera, scene.scene);
 
   // One coherent stream of rays per image row (Embree's stream API traces them as packets).
   RTCIntersectContext context;
@@ -141,25 +169,7 @@ DepthImage DepthRenderer::RenderRays(const geometry::TriangleMesh& mesh_W,
   std::vector<RTCRayHit> rays(static_cast<size_t>(camera.width));
   for (int row = 0; row < camera.height; ++row) {
     for (int col = 0; col < camera.width; ++col) {
-      // Ray from the camera centre with direction (x, y, 1) in C: the hit distance t (in units of
-      // the direction) is then the depth along the camera z axis.
-      const Eigen::Vector3d dir_C =
-          lens_rays == nullptr
-              ? camera.RayDirection_C(col, row)
-              : Eigen::Vector3d(lens_rays->at(col, row).x(), lens_rays->at(col, row).y(), 1.0);
-      RTCRayHit& ray_hit = rays[col];
-      ray_hit.ray.org_x = ray_hit.ray.org_y = ray_hit.ray.org_z = 0.0f;
-      ray_hit.ray.dir_x = static_cast<float>(dir_C.x());
-      ray_hit.ray.dir_y = static_cast<float>(dir_C.y());
-      ray_hit.ray.dir_z = 1.0f;
-      ray_hit.ray.tnear = 0.0f;
-      ray_hit.ray.tfar = std::numeric_limits<float>::infinity();
-      ray_hit.ray.time = 0.0f;
-      ray_hit.ray.mask = std::numeric_limits<unsigned>::max();
-      ray_hit.ray.id = static_cast<unsigned>(col);
-      ray_hit.ray.flags = 0;
-      ray_hit.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-      ray_hit.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+      SetRay(RayDirection_C(camera, lens_rays, col, row), static_cast<unsigned>(col), &rays[col]);
     }
     rtcIntersect1M(scene.scene, &context, rays.data(), static_cast<unsigned>(rays.size()),
                    sizeof(RTCRayHit));
@@ -168,6 +178,118 @@ DepthImage DepthRenderer::RenderRays(const geometry::TriangleMesh& mesh_W,
     }
   }
   return image;
+}
+
+std::vector<float> DepthRenderer::RenderPixels(const geometry::TriangleMesh& mesh_W,
+                                               const PinholeCamera& camera,
+                                               const PixelRays& lens_rays,
+                                               const std::vector<int>& pixels) const {
+  SOFTID_THROW_UNLESS(impl_ != nullptr, "DepthRenderer::RenderPixels on a moved-from renderer");
+  const Status camera_valid = camera.Validate();
+  SOFTID_THROW_UNLESS(camera_valid.ok(), camera_valid.message());
+  SOFTID_THROW_UNLESS(lens_rays.width == camera.width && lens_rays.height == camera.height &&
+                          lens_rays.xy.size() == static_cast<size_t>(camera.width) * camera.height,
+                      "DepthRenderer::RenderPixels: the pixel rays must have the camera's size");
+  const int count = camera.width * camera.height;
+  for (const int p : pixels) {
+    SOFTID_THROW_UNLESS(p >= 0 && p < count, "DepthRenderer::RenderPixels: pixel off the image");
+  }
+  std::vector<float> depth(pixels.size(), 0.0f);
+  if (mesh_W.vertices.empty() || mesh_W.triangles.empty() || pixels.empty()) return depth;
+  SceneHandle scene{rtcNewScene(impl_->device)};
+  BuildScene(impl_->device, impl_->backface_culling, mesh_W, camera, scene.scene);
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  constexpr size_t kStream = 256;
+  std::vector<RTCRayHit> rays(std::min(kStream, pixels.size()));
+  for (size_t first = 0; first < pixels.size(); first += kStream) {
+    const size_t n = std::min(kStream, pixels.size() - first);
+    for (size_t i = 0; i < n; ++i) {
+      const int p = pixels[first + i];
+      SetRay(RayDirection_C(camera, &lens_rays, p % camera.width, p / camera.width),
+             static_cast<unsigned>(i), &rays[i]);
+    }
+    rtcIntersect1M(scene.scene, &context, rays.data(), static_cast<unsigned>(n), sizeof(RTCRayHit));
+    for (size_t i = 0; i < n; ++i) {
+      if (rays[i].hit.geomID != RTC_INVALID_GEOMETRY_ID) depth[first + i] = rays[i].ray.tfar;
+    }
+  }
+  return depth;
+}
+
+struct RigidMeshRenderer::Impl {
+  // Released in reverse order: the scene before its device.
+  struct Device {
+    RTCDevice device = nullptr;
+    bool backface_culling = false;
+    ~Device() {
+      if (device != nullptr) rtcReleaseDevice(device);
+    }
+  } device;
+  SceneHandle scene;
+};
+
+RigidMeshRenderer::RigidMeshRenderer(const geometry::TriangleMesh& mesh_S)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->device.device = rtcNewDevice("verbose=0");
+  if (impl_->device.device == nullptr) {
+    throw std::runtime_error(
+        fmt::format("RigidMeshRenderer: cannot create an Embree device (error {})",
+                    static_cast<int>(rtcGetDeviceError(nullptr))));
+  }
+  impl_->device.backface_culling =
+      rtcGetDeviceProperty(impl_->device.device, RTC_DEVICE_PROPERTY_BACKFACE_CULLING_ENABLED) != 0;
+  impl_->scene.scene = rtcNewScene(impl_->device.device);
+  if (mesh_S.vertices.empty() || mesh_S.triangles.empty()) {
+    rtcCommitScene(impl_->scene.scene);
+    return;
+  }
+  PinholeCamera identity;  // the mesh's own frame stands in for the camera's
+  BuildScene(impl_->device.device, impl_->device.backface_culling, mesh_S, identity,
+             impl_->scene.scene);
+}
+
+RigidMeshRenderer::~RigidMeshRenderer() = default;
+RigidMeshRenderer::RigidMeshRenderer(RigidMeshRenderer&&) noexcept = default;
+RigidMeshRenderer& RigidMeshRenderer::operator=(RigidMeshRenderer&&) noexcept = default;
+
+std::vector<float> RigidMeshRenderer::RenderPixels(const Eigen::Isometry3d& X_CS,
+                                                   const PixelRays& rays,
+                                                   const std::vector<int>& pixels) const {
+  SOFTID_THROW_UNLESS(impl_ != nullptr, "RigidMeshRenderer::RenderPixels on a moved-from renderer");
+  const int count = rays.width * rays.height;
+  for (const int p : pixels) {
+    SOFTID_THROW_UNLESS(p >= 0 && p < count,
+                        "RigidMeshRenderer::RenderPixels: pixel off the image");
+  }
+  std::vector<float> depth(pixels.size(), 0.0f);
+  if (pixels.empty()) return depth;
+  // Rays from the camera's centre, in the mesh's frame: origin X_SC * 0, direction R_SC (x, y, 1).
+  const Eigen::Isometry3d X_SC = X_CS.inverse();
+  const Eigen::Vector3d origin_S = X_SC.translation();
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  constexpr size_t kStream = 256;
+  std::vector<RTCRayHit> hits(std::min(kStream, pixels.size()));
+  for (size_t first = 0; first < pixels.size(); first += kStream) {
+    const size_t n = std::min(kStream, pixels.size() - first);
+    for (size_t i = 0; i < n; ++i) {
+      const Eigen::Vector2d& xy = rays.xy[pixels[first + i]];
+      const Eigen::Vector3d dir_S = X_SC.linear() * Eigen::Vector3d(xy.x(), xy.y(), 1.0);
+      SetRay(dir_S, static_cast<unsigned>(i), &hits[i]);
+      hits[i].ray.org_x = static_cast<float>(origin_S.x());
+      hits[i].ray.org_y = static_cast<float>(origin_S.y());
+      hits[i].ray.org_z = static_cast<float>(origin_S.z());
+      hits[i].ray.dir_z = static_cast<float>(dir_S.z());
+    }
+    rtcIntersect1M(impl_->scene.scene, &context, hits.data(), static_cast<unsigned>(n),
+                   sizeof(RTCRayHit));
+    for (size_t i = 0; i < n; ++i) {
+      // t is in units of the direction, whose z in the camera's frame is 1: the depth.
+      if (hits[i].hit.geomID != RTC_INVALID_GEOMETRY_ID) depth[first + i] = hits[i].ray.tfar;
+    }
+  }
+  return depth;
 }
 
 }  // namespace softid::capture

@@ -2,6 +2,7 @@
 #pragma once
 
 #include <memory>
+#include <vector>
 
 #include "core/capture/camera.h"
 #include "core/capture/depth_image.h"
@@ -37,11 +38,43 @@ class DepthRenderer {
   DepthImage Render(const geometry::TriangleMesh& mesh_W, const PinholeCamera& camera,
                     const PixelRays& rays) const;
 
+  // As above, only through the pixels listed (row-major indices, each in the image): the depth
+  // seen through each, 0 where its ray misses. A few pixels of a large image cost their number,
+  // not the image's size. Throws as Render, and std::invalid_argument for a pixel off the image.
+  std::vector<float> RenderPixels(const geometry::TriangleMesh& mesh_W, const PinholeCamera& camera,
+                                  const PixelRays& rays, const std::vector<int>& pixels) const;
+
  private:
   // Render's implementation: pinhole rays when `lens_rays` is null.
   DepthImage RenderRays(const geometry::TriangleMesh& mesh_W, const PinholeCamera& camera,
                         const PixelRays* lens_rays) const;
 
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Depths of one rigid mesh seen from changing poses, through listed pixels: its scene is built
+// once, in the mesh's own frame, and each call casts the pixels' rays moved into that frame (a
+// rigid move keeps the depth along a ray). Following a body from frame to frame, a scene rebuilt
+// for every pose cost more than its rays. Move-only; one per thread.
+class RigidMeshRenderer {
+ public:
+  // mesh_S in its own frame [m]. Throws std::invalid_argument for a triangle index out of range
+  // or a vertex that is not finite, std::runtime_error when Embree cannot create a device.
+  explicit RigidMeshRenderer(const geometry::TriangleMesh& mesh_S);
+  ~RigidMeshRenderer();
+  RigidMeshRenderer(RigidMeshRenderer&&) noexcept;
+  RigidMeshRenderer& operator=(RigidMeshRenderer&&) noexcept;
+  RigidMeshRenderer(const RigidMeshRenderer&) = delete;
+  RigidMeshRenderer& operator=(const RigidMeshRenderer&) = delete;
+
+  // The depth along the camera's z axis seen through each listed pixel (row-major indices into
+  // `rays`) with the mesh at pose X_CS in the camera's frame; 0 where the ray misses. Throws
+  // std::invalid_argument for a pixel off the image.
+  std::vector<float> RenderPixels(const Eigen::Isometry3d& X_CS, const PixelRays& rays,
+                                  const std::vector<int>& pixels) const;
+
+ private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -109,4 +109,20 @@ Eigen::Vector2d ProjectDistorted(const PinholeCamera& camera,
   return {pixels[0].x, pixels[0].y};
 }
 
+std::vector<Eigen::Vector2d> ProjectDistorted(const PinholeCamera& camera,
+                                              const DistortionCoefficients& distortion,
+                                              const std::vector<Eigen::Vector3d>& points_C) {
+  std::vector<cv::Point3d> points;
+  points.reserve(points_C.size());
+  for (const Eigen::Vector3d& p : points_C) points.emplace_back(p.x(), p.y(), p.z());
+  std::vector<Eigen::Vector2d> out;
+  if (points.empty()) return out;
+  std::vector<cv::Point2d> pixels;
+  cv::projectPoints(points, cv::Vec3d(0, 0, 0), cv::Vec3d(0, 0, 0), CameraMatrix(camera),
+                    distortion.empty() ? cv::Mat() : cv::Mat(distortion), pixels);
+  out.reserve(pixels.size());
+  for (const cv::Point2d& pixel : pixels) out.emplace_back(pixel.x, pixel.y);
+  return out;
+}
+
 }  // namespace softid::capture

@@ -43,4 +43,9 @@ Eigen::Vector2d ProjectDistorted(const PinholeCamera& camera,
                                  const DistortionCoefficients& distortion,
                                  const Eigen::Vector3d& p_C);
 
+// The same for many points at once (one call of OpenCV's projectPoints).
+std::vector<Eigen::Vector2d> ProjectDistorted(const PinholeCamera& camera,
+                                              const DistortionCoefficients& distortion,
+                                              const std::vector<Eigen::Vector3d>& points_C);
+
 }  // namespace softid::capture

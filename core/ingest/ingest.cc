@@ -16,6 +16,7 @@
 #include "core/capture/pixel_rays.h"
 #include "core/common/for_each_index.h"
 #include "core/ingest/camera_view.h"
+#include "core/ingest/capture_frames.h"
 #include "core/ingest/contact_sheet.h"
 #include "core/ingest/release_pose.h"
 #include "core/ingest/timeline.h"
@@ -134,28 +135,22 @@ Status TrackFrame(const recording::Recording& rec, int c, int k, const DepthImag
   return Status::Ok();
 }
 
-// Receives the object's points of each recording frame of a camera; called from several threads
-// at once for different frames.
-using FrameSink = std::function<Status(int frame, const std::vector<Eigen::Vector3d>& points_C)>;
-
-// Segments and tracks the object through every frame of camera c; hands each frame's points to
-// `sink`, keeps frame 0's and every frame's centre in *view.
+// Segments and tracks the object through every frame of camera c; keeps each frame's mask in
+// *report, frame 0's points and every frame's centre in *view.
 Status SegmentCamera(const recording::Recording& rec, int c, double object_radius_m,
-                     const IngestOptions& options, const FrameSink& sink, CameraView* view,
-                     CameraIngest* report, const IngestProgress& progress) {
+                     const IngestOptions& options, CameraView* view, CameraIngest* report,
+                     const IngestProgress& progress) {
   const recording::RecordingCamera& camera = rec.cameras[c];
   const int n = static_cast<int>(camera.frames.size());
   ObjectTracker tracker(object_radius_m, options.tracking);
   int frames_on_border = 0;
   // Frames are read and segmented side by side, a few per worker at a time (memory stays bounded
-  // on long recordings); tracking follows them in order; the sink (a PNG per frame) runs side by
-  // side again.
+  // on long recordings); tracking follows them in order.
   const int workers = options.threads > 0 ? options.threads : CoreCount();
   const int chunk = 2 * workers;
   std::vector<Result<DepthImage>> images(chunk, Status::Internal("unread"));
   std::vector<Result<Foreground>> segmented(chunk, Status::Internal("unsegmented"));
-  std::vector<std::vector<Eigen::Vector3d>> points(chunk);
-  std::vector<Status> sunk(chunk);
+  std::vector<Eigen::Vector3d> points;
   for (int first = 0; first < n; first += chunk) {
     SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
     const int count = std::min(chunk, n - first);
@@ -168,13 +163,10 @@ Status SegmentCamera(const recording::Recording& rec, int c, double object_radiu
     for (int i = 0; i < count; ++i) {
       SOFTID_RETURN_IF_ERROR(segmented[i].status());
       SOFTID_RETURN_IF_ERROR(TrackFrame(rec, c, first + i, *images[i], *segmented[i], &tracker,
-                                        &points[i], view, report));
+                                        &points, view, report));
       frames_on_border += OnBorderAnywhere(report->object_masks.back(), *images[i]) ? 1 : 0;
+      if (first + i == 0) view->release_points_C = points;
     }
-    ForEachIndex(count, workers,
-                 [&](size_t i) { sunk[i] = sink(first + static_cast<int>(i), points[i]); });
-    for (int i = 0; i < count; ++i) SOFTID_RETURN_IF_ERROR(sunk[i]);
-    if (first == 0) view->release_points_C = std::move(points[0]);
     for (int i = 0; i < count; ++i) {
       SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
       if (progress) progress("segmentation", first + i + 1, n);
@@ -196,22 +188,6 @@ Status CheckSomeCameraSeesTheWholeObject(const recording::Recording& rec,
       "off (move the camera back or the object into view)",
       rec.cameras[0].camera.name, rec.cameras[0].frames.size(),
       rec.NumCameras() > 1 ? ", as in every other camera" : ""));
-}
-
-// The object's points drawn into the camera's ideal pinhole image: each point at its nearest
-// pixel, the nearest point winning (never a blend of depths).
-DepthImage SplatToPinhole(const std::vector<Eigen::Vector3d>& points_C,
-                          const capture::PinholeCamera& camera) {
-  DepthImage image = DepthImage::Zeros(camera.width, camera.height);
-  for (const Eigen::Vector3d& p : points_C) {
-    if (p.z() <= 0.0) continue;
-    const int col = static_cast<int>(std::lround(camera.fx * p.x() / p.z() + camera.cx));
-    const int row = static_cast<int>(std::lround(camera.fy * p.y() / p.z() + camera.cy));
-    if (col < 0 || row < 0 || col >= camera.width || row >= camera.height) continue;
-    float& z = image.at(col, row);
-    if (z == 0.0f || p.z() < z) z = static_cast<float>(p.z());
-  }
-  return image;
 }
 
 Status WriteIngestJson(const std::filesystem::path& path, const IngestReport& report) {
@@ -236,6 +212,7 @@ Status IngestOptions::Validate() const {
   SOFTID_RETURN_IF_ERROR(floor.Validate());
   SOFTID_RETURN_IF_ERROR(tracking.Validate());
   SOFTID_RETURN_IF_ERROR(registration.Validate());
+  SOFTID_RETURN_IF_ERROR(mask_completion.Validate());
   if (max_static_frames < 1) {
     return Status::InvalidArgument(
         fmt::format("max_static_frames = {}: must be >= 1", max_static_frames));
@@ -249,7 +226,7 @@ Status IngestOptions::Validate() const {
 }
 
 double IngestStageSeconds::Total() const {
-  return static_scene + floor + segmentation + registration + finishing;
+  return static_scene + floor + segmentation + registration + masks + finishing;
 }
 
 nlohmann::json IngestReport::ToJson() const {
@@ -259,6 +236,7 @@ nlohmann::json IngestReport::ToJson() const {
                     {"static_scene_from", c.static_from_background ? "background" : "frames"},
                     {"object_pixels", c.object_pixels},
                     {"rejected_regions", c.rejected_regions},
+                    {"completed_pixels", c.completed_pixels},
                     {"cut_off", c.cut_off}});
   }
   return {{"format", "softid-ingest/1"},
@@ -287,6 +265,7 @@ nlohmann::json IngestReport::ToJson() const {
             {"floor", seconds.floor},
             {"segmentation", seconds.segmentation},
             {"registration", seconds.registration},
+            {"masks", seconds.masks},
             {"finishing", seconds.finishing},
             {"total", seconds.Total()}}}};
 }
@@ -385,46 +364,16 @@ capture::Capture CaptureHeader(const recording::Recording& rec) {
   return capture;
 }
 
-// Hands camera c's recording frames to `writer` at their capture frames on the timeline, the
-// object's points splatted on the camera's ideal pinhole.
-FrameSink CaptureFrameSink(const recording::Recording& rec, int c, const Timeline& timeline,
-                           capture::CaptureWriter* writer) {
-  std::vector<std::vector<int>> capture_frames(rec.cameras[c].frames.size());
-  for (size_t i = 0; i < timeline.frames.size(); ++i) {
-    const int k = timeline.frames[i].frame_of[c];
-    if (k >= 0) capture_frames[k].push_back(static_cast<int>(i));
-  }
-  const capture::PinholeCamera camera = rec.cameras[c].camera;
-  return [c, camera, writer, capture_frames = std::move(capture_frames)](
-             int k, const std::vector<Eigen::Vector3d>& points_C) -> Status {
-    if (capture_frames[k].empty()) return Status::Ok();
-    const DepthImage image = SplatToPinhole(points_C, camera);
-    for (const int i : capture_frames[k]) SOFTID_RETURN_IF_ERROR(writer->WriteFrame(c, i, image));
-    return Status::Ok();
-  };
-}
-
-// Stage 3 for camera c: the object's pixels in every frame, written to the capture as they are
-// found; empty images where the camera has no frame at a capture frame's moment.
-Status SegmentAndWriteCamera(const recording::Recording& rec, int c, double object_radius_m,
-                             const IngestOptions& options, const Timeline& timeline,
-                             capture::CaptureWriter* writer, CameraView* view, IngestReport* report,
-                             const IngestProgress& progress) {
+// Stage 3 for camera c: the object's pixels in every frame (written once the mesh is posed).
+Status SegmentCameraFrames(const recording::Recording& rec, int c, double object_radius_m,
+                           const IngestOptions& options, CameraView* view, IngestReport* report,
+                           const IngestProgress& progress) {
   if (!report->cameras[c].static_from_background)
     SOFTID_RETURN_IF_ERROR(MarkHiddenPixels(rec, c, report->floor_W, options, view));
-  SOFTID_RETURN_IF_ERROR(SegmentCamera(rec, c, object_radius_m, options,
-                                       CaptureFrameSink(rec, c, timeline, writer), view,
-                                       &report->cameras[c], progress));
-  const capture::PinholeCamera& camera = rec.cameras[c].camera;
-  const DepthImage empty = DepthImage::Zeros(camera.width, camera.height);
-  for (size_t i = 0; i < timeline.frames.size(); ++i) {
-    if (timeline.frames[i].frame_of[c] < 0)
-      SOFTID_RETURN_IF_ERROR(writer->WriteFrame(c, static_cast<int>(i), empty));
-  }
-  return Status::Ok();
+  return SegmentCamera(rec, c, object_radius_m, options, view, &report->cameras[c], progress);
 }
 
-// Stage 5: the capture folder's mesh and capture.json (the frames are written): one clock, the
+// Stage 6: the capture folder's mesh and capture.json (the frames are written): one clock, the
 // cameras' poses, the floor. ingest.json follows.
 Status FinishIngestedCapture(const recording::Recording& rec, const geometry::TriangleMesh& mesh_S,
                              const Timeline& timeline, const std::vector<CameraView>& views,
@@ -479,15 +428,15 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
   // 2. The floor and the world frame.
   SOFTID_RETURN_IF_ERROR(FloorAndWorld(rec, options, &views, &report));
   report.seconds.floor = clock.Lap();
-  // 3. The object's pixels in every frame, on one clock, into the capture.
+  // 3. The object's pixels in every frame; the capture's frames on one clock.
   const double object_radius_m = 0.5 * mesh_S.Bounds().diagonal().norm();
   const Timeline timeline = MergeTimeline(rec, options.same_time_s);
   SOFTID_ASSIGN_OR_RETURN(capture::CaptureWriter writer,
                           capture::CaptureWriter::Create(capture_dir, CaptureHeader(rec),
                                                          static_cast<int>(timeline.frames.size())));
   for (int c = 0; c < rec.NumCameras(); ++c) {
-    SOFTID_RETURN_IF_ERROR(SegmentAndWriteCamera(rec, c, object_radius_m, options, timeline,
-                                                 &writer, &views[c], &report, progress));
+    SOFTID_RETURN_IF_ERROR(
+        SegmentCameraFrames(rec, c, object_radius_m, options, &views[c], &report, progress));
   }
   SOFTID_RETURN_IF_ERROR(CheckSomeCameraSeesTheWholeObject(rec, report));
   report.seconds.segmentation = clock.Lap();
@@ -497,7 +446,13 @@ Result<IngestReport> Ingest(const recording::Recording& rec,
   SOFTID_RETURN_IF_ERROR(CheckTheObjectIsReleasedAndMoves(rec, mesh_S, views, report));
   SOFTID_RETURN_IF_ERROR(CheckNotCancelled(options));
   report.seconds.registration = clock.Lap();
-  // 5. The capture, a picture of what the ingest saw, and last the report with every stage's time.
+  // 5. Every frame's mask completed by the posed mesh, into the capture.
+  for (int c = 0; c < rec.NumCameras(); ++c) {
+    SOFTID_RETURN_IF_ERROR(WriteCameraFrames(rec, c, mesh_S, report.X_WS, options, timeline,
+                                             views[c], &writer, &report.cameras[c], progress));
+  }
+  report.seconds.masks = clock.Lap();
+  // 6. The capture, a picture of what the ingest saw, and last the report with every stage's time.
   SOFTID_RETURN_IF_ERROR(
       FinishIngestedCapture(rec, mesh_S, timeline, views, capture_dir, &writer, &report));
   SOFTID_RETURN_IF_ERROR(

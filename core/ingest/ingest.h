@@ -16,6 +16,7 @@
 #include "core/common/status.h"
 #include "core/ingest/floor_plane.h"
 #include "core/ingest/foreground.h"
+#include "core/ingest/mask_completion.h"
 #include "core/ingest/mesh_registration.h"
 #include "core/ingest/object_tracking.h"
 #include "core/ingest/static_scene.h"
@@ -30,6 +31,7 @@ struct IngestOptions {
   FloorPlaneOptions floor;
   ObjectTrackingOptions tracking;
   MeshRegistrationOptions registration;
+  MaskCompletionOptions mask_completion;
   // Without background frames, the static scene comes from at most this many frames spread over
   // the recording (memory stays bounded for long recordings).
   int max_static_frames = 64;
@@ -52,18 +54,23 @@ struct CameraIngest {
   std::vector<int> object_pixels;     // per recording frame (0: object not found)
   std::vector<int> rejected_regions;  // per recording frame: foreground left out
   bool cut_off = false;               // the object touches the image border in every frame
-  // Per recording frame: the object's pixels (row-major indices in the raw, distorted image).
+  // Per recording frame: the object's pixels (row-major indices in the raw, distorted image),
+  // completed by the posed mesh (mask_completion.h).
   std::vector<std::vector<int>> object_masks;
+  // Per recording frame: the pixels the posed mesh added to the mask, or -1 where no pose was
+  // found (the mask is as segmented); empty when the completion is off.
+  std::vector<int> completed_pixels;
 };
 
-// Wall time of the ingest's stages [s]. Only the segmentation grows with the recording's length:
-// the static scene reads at most max_static_frames frames (or the background frames), and the
-// others work on the first frame or on the whole capture's summary.
+// Wall time of the ingest's stages [s]. Only the segmentation and the masks grow with the
+// recording's length: the static scene reads at most max_static_frames frames (or the background
+// frames), and the others work on the first frame or on the whole capture's summary.
 struct IngestStageSeconds {
   double static_scene = 0.0;  // every camera's lens and static scene
   double floor = 0.0;         // the floor and the world frame
-  double segmentation = 0.0;  // every frame of every camera read, segmented, tracked and written
+  double segmentation = 0.0;  // every frame of every camera read, segmented and tracked
   double registration = 0.0;  // the mesh's pose at the release and the checks on the motion
+  double masks = 0.0;         // every frame read again, its mask completed and written
   double finishing = 0.0;     // the mesh, capture.json and the contact sheet
   double Total() const;
 };
@@ -99,9 +106,10 @@ using IngestProgress = std::function<void(std::string_view stage, int done, int 
 // stage, the camera and the frame: no foreground, the object on the image border in every frame of
 // every camera, a mesh whose size cannot match the object's points, a registration that does not
 // converge (overlap and RMS), no floor. Cancelled when options.cancel is set meanwhile. Frames
-// are written as they are segmented (capture_writer.h): of each frame only the object's mask
-// stays in memory (the report's), not its images or points; an ingest that fails before its capture
-// is complete (segmentation, registration) leaves an earlier capture in `capture_dir` as it was.
+// are written as their masks are completed (capture_writer.h): of each frame only the object's
+// mask stays in memory (the report's), not its images or points; an ingest that fails before its
+// capture is complete (segmentation, registration) leaves an earlier capture in `capture_dir` as
+// it was.
 Result<IngestReport> Ingest(const recording::Recording& recording,
                             const std::filesystem::path& capture_dir,
                             const IngestOptions& options = {}, const IngestProgress& progress = {});

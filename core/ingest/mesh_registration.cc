@@ -1,6 +1,7 @@
 #include "core/ingest/mesh_registration.h"
 
 #include <fmt/format.h>
+#include <open3d/geometry/KDTreeFlann.h>
 #include <open3d/geometry/PointCloud.h>
 #include <open3d/geometry/TriangleMesh.h>
 #include <open3d/pipelines/registration/CorrespondenceChecker.h>
@@ -286,6 +287,87 @@ Result<MeshRegistration> RefineMeshPose(const geometry::TriangleMesh& mesh_S,
   return FromIcp(
       FineIcp(*FinalPoints(observed), *model, scale.fine_distance_m, X_CS.inverse().matrix()),
       scale.fine_distance_m);
+}
+
+// At most this many observed points in a tracked pose: it places a silhouette, to a fraction of
+// a pixel, not a registration.
+constexpr size_t kTrackingPoints = 500;
+
+struct MeshSurface::Samples {
+  std::shared_ptr<o3d::geometry::PointCloud> cloud;
+  o3d::geometry::KDTreeFlann tree;
+};
+
+MeshSurface::MeshSurface(const geometry::TriangleMesh& mesh_S, int points)
+    : samples_(std::make_unique<Samples>()) {
+  samples_->cloud = SampleSurface(mesh_S, std::max(1, points));
+  samples_->tree.SetGeometry(*samples_->cloud);
+}
+
+MeshSurface::~MeshSurface() = default;
+MeshSurface::MeshSurface(MeshSurface&&) noexcept = default;
+MeshSurface& MeshSurface::operator=(MeshSurface&&) noexcept = default;
+
+namespace {
+
+// Point-to-plane ICP of `observed` onto the surface from T (observed -> model) with pairs within
+// distance_m, until an iteration changes the share of paired points by less than 1e-3 and their
+// RMS by less than 1 % (the model's samples lie millimetres apart: the RMS jitters by that much
+// as a pose slides over them), or 30 iterations; the fitness and RMS at the result. (Judged on
+// the residual, not the pose: a torus turns freely about its axis.) Open3D's RegistrationICP
+// builds the model's k-d tree on every call: a tracker calls this twice a frame, and the tree of
+// 10,000 samples cost more than the iterations.
+reg::RegistrationResult IcpOnSurface(const o3d::geometry::PointCloud& observed,
+                                     const MeshSurface::Samples& model, double distance_m,
+                                     Eigen::Matrix4d T) {
+  const reg::TransformationEstimationPointToPlane estimation;
+  o3d::geometry::PointCloud moved = observed;
+  std::vector<int> index(1);
+  std::vector<double> squared(1);
+  reg::RegistrationResult result(T);
+  for (int iteration = 0; iteration <= 30; ++iteration) {
+    moved.points_ = observed.points_;
+    moved.Transform(T);
+    reg::CorrespondenceSet pairs;
+    double error = 0.0;
+    for (size_t i = 0; i < moved.points_.size(); ++i) {
+      if (model.tree.SearchKNN(moved.points_[i], 1, index, squared) > 0 &&
+          squared[0] <= distance_m * distance_m) {
+        pairs.emplace_back(static_cast<int>(i), index[0]);
+        error += squared[0];
+      }
+    }
+    const double fitness =
+        static_cast<double>(pairs.size()) / std::max<size_t>(1, moved.points_.size());
+    const double rmse = pairs.empty() ? 0.0 : std::sqrt(error / pairs.size());
+    const bool settled = iteration > 0 && std::abs(fitness - result.fitness_) < 1e-3 &&
+                         std::abs(rmse - result.inlier_rmse_) < 1e-2 * result.inlier_rmse_;
+    result.transformation_ = T;
+    result.fitness_ = fitness;
+    result.inlier_rmse_ = rmse;
+    if (settled || iteration == 30 || pairs.size() < 3) break;
+    T = estimation.ComputeTransformation(moved, *model.cloud, pairs) * T;
+  }
+  return result;
+}
+
+}  // namespace
+
+Result<MeshRegistration> TrackMeshPose(const MeshSurface& surface,
+                                       const std::vector<Eigen::Vector3d>& observed_C,
+                                       const Eigen::Isometry3d& X_CS, double capture_m,
+                                       double noise_sigma_m) {
+  if (observed_C.size() < 30) {
+    return Status::InvalidArgument(
+        fmt::format("tracking: {} observed points of the object (at least 30)", observed_C.size()));
+  }
+  const size_t every = (observed_C.size() + kTrackingPoints - 1) / kTrackingPoints;
+  o3d::geometry::PointCloud observed;
+  for (size_t i = 0; i < observed_C.size(); i += every) observed.points_.push_back(observed_C[i]);
+  const reg::RegistrationResult coarse =
+      IcpOnSurface(observed, surface.samples(), capture_m, X_CS.inverse().matrix());
+  const double fine_m = std::min(capture_m, std::max(3.0 * noise_sigma_m, 1e-4));
+  return FromIcp(IcpOnSurface(observed, surface.samples(), fine_m, coarse.transformation_), fine_m);
 }
 
 }  // namespace softid::ingest

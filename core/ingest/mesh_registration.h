@@ -5,6 +5,7 @@
 #pragma once
 
 #include <Eigen/Geometry>
+#include <memory>
 #include <vector>
 
 #include "core/common/status.h"
@@ -58,5 +59,31 @@ Result<MeshRegistration> RefineMeshPose(const geometry::TriangleMesh& mesh_S,
                                         const std::vector<Eigen::Vector3d>& observed_C,
                                         const Eigen::Isometry3d& X_CS,
                                         const MeshRegistrationOptions& options = {});
+
+// The mesh's surface as ICP's target, sampled once (with its triangles' normals) for a pose
+// refined frame after frame. Move-only.
+class MeshSurface {
+ public:
+  // `points` samples spread uniformly over the area of mesh_S (metres, its own frame S), > 0.
+  MeshSurface(const geometry::TriangleMesh& mesh_S, int points);
+  ~MeshSurface();
+  MeshSurface(MeshSurface&&) noexcept;
+  MeshSurface& operator=(MeshSurface&&) noexcept;
+
+  struct Samples;
+  const Samples& samples() const { return *samples_; }
+
+ private:
+  std::unique_ptr<Samples> samples_;
+};
+
+// The pose of a moving mesh in a later frame, from a prediction X_CS: point-to-plane ICP of
+// `observed_C` onto `surface`, first pairing points within `capture_m` (the prediction's error:
+// the object's motion between frames), then within 3 noise sigmas as RefineMeshPose. Fewer than 30
+// points: InvalidArgument. The overlap is reported, not checked.
+Result<MeshRegistration> TrackMeshPose(const MeshSurface& surface,
+                                       const std::vector<Eigen::Vector3d>& observed_C,
+                                       const Eigen::Isometry3d& X_CS, double capture_m,
+                                       double noise_sigma_m);
 
 }  // namespace softid::ingest

@@ -96,12 +96,9 @@ Status PoseMeshAtRelease(const recording::Recording& rec, const geometry::Triang
   const std::vector<Eigen::Vector3d>& first = views[0].release_points_C;
   SOFTID_RETURN_IF_ERROR(CheckMeshScale(mesh_S, first, rec.cameras[0].camera.name));
   MeshRegistrationOptions registration = options.registration;
-  std::vector<float> sigmas = views[0].scene.sigma_m;
-  std::erase(sigmas, 0.0f);
-  if (!sigmas.empty()) {
-    std::nth_element(sigmas.begin(), sigmas.begin() + sigmas.size() / 2, sigmas.end());
-    registration.noise_sigma_m = std::max<double>(sigmas[sigmas.size() / 2], 1e-4);
-  }
+  const std::vector<float>& sigmas = views[0].scene.sigma_m;
+  if (std::any_of(sigmas.begin(), sigmas.end(), [](float sigma) { return sigma > 0.0f; }))
+    registration.noise_sigma_m = MedianSigma(views[0].scene);
   std::vector<int> cameras;
   const std::vector<Eigen::Vector3d> points = ReleasePoints(rec, options, views, &cameras);
   report->registration_cameras.clear();

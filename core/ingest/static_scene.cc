@@ -11,6 +11,14 @@
 #include "core/common/for_each_index.h"
 
 namespace softid::ingest {
+
+double MedianSigma(const StaticScene& scene) {
+  std::vector<float> sigmas = scene.sigma_m;
+  std::erase(sigmas, 0.0f);
+  if (sigmas.empty()) return 1e-4;
+  std::nth_element(sigmas.begin(), sigmas.begin() + sigmas.size() / 2, sigmas.end());
+  return std::max<double>(sigmas[sigmas.size() / 2], 1e-4);
+}
 namespace {
 
 float Median(std::vector<float>& values) {

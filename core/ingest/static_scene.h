@@ -30,6 +30,10 @@ struct StaticScene {
   float sigma(int col, int row) const { return sigma_m[static_cast<size_t>(row) * width + col]; }
 };
 
+// The median of the scene's nonzero sigmas [m], at least 0.1 mm: the depth noise of a typical
+// pixel (0.1 mm when no pixel has a sigma).
+double MedianSigma(const StaticScene& scene);
+
 struct StaticSceneOptions {
   // Samples within this distance of a pixel's farthest reading belong to the static scene [m]:
   // larger than the depth noise, smaller than the object's height above what is behind it.

@@ -29,9 +29,9 @@ void PrintSummary(const ingest::IngestReport& report, double seconds,
   const ingest::IngestStageSeconds& stage = report.seconds;
   std::printf(
       "ingested in %.1f s into %s (static scene %.1f s, floor %.1f s, segmentation %.1f s, mesh "
-      "pose %.1f s, writing %.1f s)\n",
+      "pose %.1f s, masks completed and written %.1f s, finishing %.1f s)\n",
       seconds, out.c_str(), stage.static_scene, stage.floor, stage.segmentation, stage.registration,
-      stage.finishing);
+      stage.masks, stage.finishing);
   for (const ingest::CameraIngest& camera : report.cameras) {
     int found = 0;
     for (const int pixels : camera.object_pixels) found += pixels > 0 ? 1 : 0;

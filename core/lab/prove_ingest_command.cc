@@ -97,9 +97,9 @@ Result<double> FitYoungsModulus(const fs::path& capture_dir, const fem::Physical
 }
 
 // The ingest of a 100-frame recording from this one's stage times (ingest.h, IngestStageSeconds):
-// the segmentation grows with the frames, and so does the static scene up to max_static_frames
-// when it comes from the frames themselves (background frames are read once whatever the
-// length); the floor, the mesh pose and the finishing are paid once.
+// the segmentation and the masks grow with the frames, and so does the static scene up to
+// max_static_frames when it comes from the frames themselves (background frames are read once
+// whatever the length); the floor, the mesh pose and the finishing are paid once.
 double Ingest100FramesSeconds(const ingest::IngestReport& report, int frames) {
   const ingest::IngestStageSeconds& s = report.seconds;
   const double per_frame = 100.0 / std::max(1, frames);
@@ -108,7 +108,8 @@ double Ingest100FramesSeconds(const ingest::IngestReport& report, int frames) {
       report.cameras.at(0).static_from_background
           ? s.static_scene
           : s.static_scene * std::min(100, max_static) / std::max(1, std::min(frames, max_static));
-  return static_scene + s.floor + s.segmentation * per_frame + s.registration + s.finishing;
+  return static_scene + s.floor + (s.segmentation + s.masks) * per_frame + s.registration +
+         s.finishing;
 }
 
 Result<CaseOutcome> RunCase(const ProveIngestFlags& flags, const IngestCase& c,

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "core/capture/pixel_rays.h"
 #include "core/geometry/primitives.h"
 
 namespace softid::capture {
@@ -109,6 +110,70 @@ TEST(DepthRenderer, EmptyMeshRendersNothing) {
       renderer.Render(geometry::TriangleMesh{}, MakeCamera(Eigen::Isometry3d::Identity()));
   EXPECT_EQ(image.width, 121);
   EXPECT_EQ(image.NumValid(), 0);
+}
+
+// The depths of listed pixels through a distorted lens are the whole image's at those pixels,
+// misses included; a pixel off the image is refused.
+TEST(DepthRenderer, ListedPixelsSeeWhatTheImageShows) {
+  const DepthRenderer renderer;
+  const PinholeCamera camera = MakeCamera(
+      LookAt(Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitX(), Eigen::Vector3d::UnitZ()));
+  const geometry::TriangleMesh sphere =
+      Translated(geometry::MakeSphere(kRadius, 3), Eigen::Vector3d(kDistance, 0.02, 0.01));
+  const Result<PixelRays> rays = ComputePixelRays(camera, {-0.2, 0.05, 0.001, -0.002, 0.0});
+  ASSERT_TRUE(rays.ok()) << rays.status().ToString();
+  const DepthImage image = renderer.Render(sphere, camera, *rays);
+  std::vector<int> pixels;
+  for (int p = 0; p < camera.width * camera.height; p += 7) pixels.push_back(p);
+  const std::vector<float> listed = renderer.RenderPixels(sphere, camera, *rays, pixels);
+  ASSERT_EQ(listed.size(), pixels.size());
+  int hits = 0, misses = 0;
+  for (size_t i = 0; i < pixels.size(); ++i) {
+    EXPECT_EQ(listed[i], image.depth[pixels[i]]) << "pixel " << pixels[i];
+    (listed[i] > 0.0f ? hits : misses) += 1;
+  }
+  EXPECT_GT(hits, 100);
+  EXPECT_GT(misses, 100);
+  EXPECT_TRUE(renderer.RenderPixels(sphere, camera, *rays, {}).empty());
+  EXPECT_THROW(renderer.RenderPixels(sphere, camera, *rays, {camera.width * camera.height}),
+               std::invalid_argument);
+}
+
+// A rigid mesh's scene, built once in its own frame, shows from any pose what a scene of the mesh
+// moved there shows.
+TEST(RigidMeshRenderer, SeesWhatTheMovedMeshShows) {
+  const geometry::TriangleMesh box_S = geometry::MakeBox(Eigen::Vector3d(0.3, 0.2, 0.1), 0.05);
+  const PinholeCamera camera = MakeCamera(Eigen::Isometry3d::Identity());
+  const Result<PixelRays> rays = ComputePixelRays(camera, {-0.2, 0.05, 0.001, -0.002, 0.0});
+  ASSERT_TRUE(rays.ok()) << rays.status().ToString();
+  std::vector<int> pixels;
+  for (int p = 0; p < camera.width * camera.height; p += 3) pixels.push_back(p);
+  const RigidMeshRenderer rigid(box_S);
+  const DepthRenderer renderer;
+  for (const double turn : {0.0, 0.4, 1.3}) {
+    Eigen::Isometry3d X_CS = Eigen::Isometry3d::Identity();
+    X_CS.linear() = Eigen::AngleAxisd(turn, Eigen::Vector3d(1, 2, 0.5).normalized()).matrix();
+    X_CS.translation() = Eigen::Vector3d(0.05, -0.02, 0.9);
+    geometry::TriangleMesh box_C = box_S;
+    for (Eigen::Vector3d& v : box_C.vertices) v = X_CS * v;
+    const std::vector<float> expected = renderer.RenderPixels(box_C, camera, *rays, pixels);
+    const std::vector<float> found = rigid.RenderPixels(X_CS, *rays, pixels);
+    ASSERT_EQ(found.size(), pixels.size());
+    int hits = 0;
+    for (size_t i = 0; i < pixels.size(); ++i) {
+      // A ray grazing an edge may hit in one frame and pass in the other (float rounding).
+      if ((found[i] > 0.0f) != (expected[i] > 0.0f)) continue;
+      EXPECT_NEAR(found[i], expected[i], 1e-5) << "turn " << turn << ", pixel " << pixels[i];
+      hits += found[i] > 0.0f ? 1 : 0;
+    }
+    int disagreements = 0;
+    for (size_t i = 0; i < pixels.size(); ++i)
+      disagreements += (found[i] > 0.0f) != (expected[i] > 0.0f) ? 1 : 0;
+    EXPECT_LE(disagreements, 3) << "turn " << turn;
+    EXPECT_GT(hits, 200) << "turn " << turn;
+  }
+  EXPECT_THROW(rigid.RenderPixels(Eigen::Isometry3d::Identity(), *rays, {-1}),
+               std::invalid_argument);
 }
 
 }  // namespace

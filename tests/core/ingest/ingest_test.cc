@@ -172,6 +172,44 @@ TEST(Ingest, ThreeCamerasRegisterTheMeshToAllTheirFirstFrames) {
   IngestAndCompare(0, {}, 3);
 }
 
+// A pillow landing on a ramp, seen by three cameras 2 m away: where it lies on the ramp its lowest
+// pixels read within the noise of the ramp behind them (about 11 mm), and no depth threshold tells
+// them from it. The mesh, posed on each frame's surely-object pixels, completes the masks
+// (mask_completion.h); without it the worst frame loses a tenth of the pillow. (This coarse
+// generator, 20 cells at 4 substeps, squashes the pillow more on landing than the one of
+// `softid-lab prove-ingest`, and the rest shape's silhouette then fits it less well: 0.943
+// against 0.968 there.)
+TEST(Ingest, ThePosedMeshCompletesThePillowsMasksOnTheRamp) {
+  Result<scenes::Scene> scene = scenes::MakeBuiltinScene("pillow-ramp");
+  ASSERT_TRUE(scene.ok());
+  RawDir raw("pillow"), with("pillow_with"), without("pillow_without");
+  scenes::RawSynthesisOptions options = RecordingOptions(3, 3);
+  options.run.duration = 0.6;
+  ASSERT_TRUE(scenes::SynthesizeRawRecording(*scene, options, raw.path).ok());
+  Result<recording::Recording> rec = recording::ReadRecording(raw.path);
+  ASSERT_TRUE(rec.ok()) << rec.status().ToString();
+  IngestOptions off;
+  off.mask_completion.enabled = false;
+  Result<IngestReport> completed = Ingest(*rec, with.path);
+  Result<IngestReport> segmented = Ingest(*rec, without.path, off);
+  ASSERT_TRUE(completed.ok()) << completed.status().ToString();
+  ASSERT_TRUE(segmented.ok()) << segmented.status().ToString();
+  Result<lab::IngestAccuracy> a = lab::CompareIngestWithTruth(raw.path, *rec, *completed);
+  Result<lab::IngestAccuracy> b = lab::CompareIngestWithTruth(raw.path, *rec, *segmented);
+  ASSERT_TRUE(a.ok() && b.ok());
+  std::printf("pillow on a ramp: worst IoU %.3f (%s frame %d) with the posed mesh, %.3f without\n",
+              a->worst_iou, a->worst_iou_camera.c_str(), a->worst_iou_frame, b->worst_iou);
+  EXPECT_GE(a->worst_iou, 0.93);
+  EXPECT_GT(a->worst_iou, b->worst_iou + 0.03);
+  for (const CameraIngest& camera : completed->cameras) {
+    ASSERT_EQ(camera.completed_pixels.size(), camera.object_masks.size());
+    int posed = 0;
+    for (const int added : camera.completed_pixels) posed += added >= 0 ? 1 : 0;
+    EXPECT_GT(posed, static_cast<int>(camera.object_masks.size()) / 2) << camera.name;
+  }
+  EXPECT_TRUE(segmented->cameras[0].completed_pixels.empty());
+}
+
 // A short raw recording with background frames for the refusals below.
 fs::path WriteSmallRecording(const RawDir& dir) {
   Result<scenes::Scene> scene = scenes::MakeBuiltinScene("torus-drop");
