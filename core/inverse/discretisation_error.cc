@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -38,45 +39,114 @@ Result<FitSetting> LoadFitSetting(const capture::Capture& capture, const JobConf
   return setting;
 }
 
-// d cost / d x at x* with the given simulation and time step; an error when the run diverges.
-Result<Eigen::VectorXd> GradientAt(const FitSetting& setting, const capture::Capture& capture,
-                                   const JobConfig& config,
-                                   const fem::SimulationOptions& simulation, int substeps,
-                                   const ParameterSpace& space,
-                                   const fem::PhysicalParameters& optimum) {
+// The finer level at x*: its objective, gradient in the optimiser's variables and cost.
+struct FinerLevel {
   std::unique_ptr<TrajectoryObjective> objective;
+  Eigen::VectorXd gradient;
+  double cost = 0.0;
+};
+
+// The finer level with the given simulation and time step, evaluated at x*; an error when the run
+// diverges.
+Result<FinerLevel> EvaluateFinerLevel(const FitSetting& setting, const capture::Capture& capture,
+                                      const JobConfig& config,
+                                      const fem::SimulationOptions& simulation, int substeps,
+                                      const ParameterSpace& space,
+                                      const fem::PhysicalParameters& optimum) {
+  FinerLevel out;
   try {
-    objective = std::make_unique<TrajectoryObjective>(setting.mesh, capture.fixed_region, optimum,
-                                                      simulation, CostOptionsFor(config.solver),
-                                                      setting.frames, capture.fps, substeps);
+    out.objective = std::make_unique<TrajectoryObjective>(
+        setting.mesh, capture.fixed_region, optimum, simulation, CostOptionsFor(config.solver),
+        setting.frames, capture.fps, substeps);
   } catch (const std::invalid_argument& e) {
     return Status::InvalidArgument(e.what());
   }
-  objective->SetFrameLoss(setting.frame_loss);
-  SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation, objective->Evaluate(optimum, true));
+  out.objective->SetFrameLoss(setting.frame_loss);
+  SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation, out.objective->Evaluate(optimum, true));
   if (evaluation.diverged) return Status::FailedPrecondition("the simulation diverged");
-  Eigen::VectorXd gradient(space.NumVariables());
+  out.cost = evaluation.cost;
+  out.gradient.resize(space.NumVariables());
   const std::vector<double> x = space.ToVariables(optimum);
-  space.ChainGradient(evaluation.gradient, x.data(), gradient.data());
-  return gradient;
+  space.ChainGradient(evaluation.gradient, x.data(), out.gradient.data());
+  return out;
 }
 
-// dx = -H^-1 (g_finer - g), through the analysis' pseudo-inverse: +inf for unbounded variables.
-Eigen::VectorXd NewtonShift(const IdentifiabilityReport& report, const Eigen::VectorXd& finer) {
-  const HessianCovariance inverse = CovarianceFromHessian(report.hessian, 1.0);
+// Scales shift->variables by the share of the Newton step the finer level's cost follows
+// (StepScaleAlong, from one forward run at x* + dx); unbounded variables do not move.
+Status FollowTheFinerCost(FinerLevel& finer, const ParameterSpace& space,
+                          const fem::PhysicalParameters& optimum, const Eigen::MatrixXd& hessian,
+                          DiscretisationShift* shift) {
+  Eigen::VectorXd step = shift->variables;
+  for (Eigen::Index i = 0; i < step.size(); ++i) {
+    if (!std::isfinite(step[i])) step[i] = 0.0;
+  }
+  if (step.isZero(0.0)) return Status::Ok();
+  const std::vector<double> x = space.ToVariables(optimum);
+  std::vector<double> stepped = x;
+  for (size_t i = 0; i < stepped.size(); ++i) stepped[i] += step[static_cast<Eigen::Index>(i)];
+  SOFTID_ASSIGN_OR_RETURN(
+      const ObjectiveEvaluation at_step,
+      finer.objective->Evaluate(space.ToParameters(stepped.data(), optimum), false));
+  if (at_step.diverged) return Status::FailedPrecondition("the simulation diverged at x* + dx");
+  shift->cost_at_optimum = finer.cost;
+  shift->cost_at_step = at_step.cost;
+  shift->step_scale = StepScaleAlong(finer.cost, at_step.cost, 0.5 * step.dot(hessian * step));
+  if (shift->step_scale == 0.0) {
+    return Status::FailedPrecondition(fmt::format(
+        "the finer level's cost rises along the Newton step ({:.4g} m^2 at the optimum, {:.4g} "
+        "at the step): its gradient does not lead to its optimum here, so no estimate",
+        finer.cost, at_step.cost));
+  }
+  for (Eigen::Index i = 0; i < shift->variables.size(); ++i) {
+    if (std::isfinite(shift->variables[i])) shift->variables[i] *= shift->step_scale;
+  }
+  return Status::Ok();
+}
+
+// dx = -H^-1 (g_finer - g) over the free variables, through the analysis' pseudo-inverse of
+// their block of H: +inf for unbounded variables, 0 for held ones.
+Eigen::VectorXd NewtonShift(const IdentifiabilityReport& report, const Eigen::VectorXd& finer,
+                            const std::vector<bool>& held) {
+  std::vector<Eigen::Index> free;
+  for (Eigen::Index i = 0; i < finer.size(); ++i) {
+    if (!held[static_cast<size_t>(i)]) free.push_back(i);
+  }
+  const Eigen::Index n = static_cast<Eigen::Index>(free.size());
+  if (n == 0) return Eigen::VectorXd::Zero(finer.size());
+  Eigen::MatrixXd block(n, n);
+  for (Eigen::Index a = 0; a < n; ++a) {
+    for (Eigen::Index b = 0; b < n; ++b) block(a, b) = report.hessian(free[a], free[b]);
+  }
+  const HessianCovariance inverse = CovarianceFromHessian(block, 1.0);
   const Eigen::VectorXd difference = finer - report.gradient;
-  Eigen::VectorXd shift = Eigen::VectorXd::Zero(difference.size());
-  for (Eigen::Index i = 0; i < shift.size(); ++i) {
-    if (!std::isfinite(inverse.covariance(i, i))) {
-      shift[i] = kInfinity;
+  Eigen::VectorXd shift = Eigen::VectorXd::Zero(finer.size());
+  for (Eigen::Index a = 0; a < n; ++a) {
+    double& entry = shift[free[a]];
+    if (!std::isfinite(inverse.covariance(a, a))) {
+      entry = kInfinity;
       continue;
     }
-    for (Eigen::Index j = 0; j < shift.size(); ++j) {
-      if (std::isfinite(inverse.covariance(i, j)))
-        shift[i] -= inverse.covariance(i, j) * difference[j];
+    for (Eigen::Index b = 0; b < n; ++b) {
+      if (std::isfinite(inverse.covariance(a, b)))
+        entry -= inverse.covariance(a, b) * difference[free[b]];
     }
   }
   return shift;
+}
+
+// Per variable, whether the fit held it after measuring it on its own frames (the launch,
+// measured in flight: flight_stage.h). A refit on a finer level would measure it again on those
+// frames of rigid motion, where the discretisation barely matters, and hold it: it does not move.
+std::vector<bool> HeldVariables(const ParameterSpace& space, const FitResult& fit) {
+  std::vector<bool> held(static_cast<size_t>(space.NumVariables()), false);
+  if (!fit.Best().flight) return held;
+  for (const std::string& name : fit.Best().flight->held) {
+    for (size_t i = 0; i < held.size(); ++i) {
+      const std::string& variable = space.variable_names()[i];
+      if (variable == name || variable.rfind(name + "[", 0) == 0) held[i] = true;
+    }
+  }
+  return held;
 }
 
 // J dx scaled by the level's error factor: the signed correction of each public number towards
@@ -125,6 +195,7 @@ struct ShiftEstimator {
   const ParameterSpace& space;
   const fem::PhysicalParameters& optimum;
   const IdentifiabilityReport& report;
+  const std::vector<bool>& held;
 
   // Fills shift's error factor and variables (or error) from a run with the finer simulation
   // options or substeps; shift->ratio is set.
@@ -133,13 +204,18 @@ struct ShiftEstimator {
     // Richardson: x_h - x_exact ~ (x_h - x_{h/r}) r^p / (r^p - 1).
     const double gain = std::pow(shift->ratio, kOrder);
     shift->error_factor = gain / (gain - 1.0);
-    Result<Eigen::VectorXd> gradient =
-        GradientAt(setting, capture, config, finer_simulation, finer_substeps, space, optimum);
-    if (!gradient.ok()) {
-      shift->error = std::string(gradient.status().message());
+    Result<FinerLevel> finer = EvaluateFinerLevel(setting, capture, config, finer_simulation,
+                                                  finer_substeps, space, optimum);
+    if (!finer.ok()) {
+      shift->error = std::string(finer.status().message());
       return;
     }
-    shift->variables = NewtonShift(report, *gradient);
+    shift->variables = NewtonShift(report, finer->gradient, held);
+    const Status followed = FollowTheFinerCost(*finer, space, optimum, report.hessian, shift);
+    if (!followed.ok()) {
+      shift->error = std::string(followed.message());
+      shift->variables.resize(0);
+    }
   }
 };
 
@@ -179,6 +255,12 @@ std::vector<ParameterDiscretisationError> ParameterErrors(const std::vector<std:
 
 }  // namespace
 
+double StepScaleAlong(double c0, double c1, double b) {
+  if (!(b > 0.0) || !std::isfinite(c0) || !std::isfinite(c1)) return 1.0;
+  const double a = c1 - c0 - b;
+  return std::clamp(-a / (2.0 * b), 0.0, 1.0);
+}
+
 Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& capture,
                                                         const JobConfig& config_in,
                                                         const FitResult& fit,
@@ -205,7 +287,8 @@ Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& 
                         : static_cast<int>(std::thread::hardware_concurrency());
   simulation.threads = std::max(1, cores / 2);
   DiscretisationError out;
-  const ShiftEstimator estimate{setting, capture, config, space, optimum, report};
+  const std::vector<bool> held = HeldVariables(space, fit);
+  const ShiftEstimator estimate{setting, capture, config, space, optimum, report, held};
 
   DiscretisationShift& grid = out.grid;
   const fem::SimulationOptions finer_grid = FinerGrid(config, simulation, &grid);
@@ -237,12 +320,18 @@ nlohmann::json ToJson(const DiscretisationError& error) {
                           {compared, shift.compared},
                           {"ratio", shift.ratio},
                           {"error_factor", shift.error_factor}};
+    if (std::isfinite(shift.step_scale)) {
+      out["step_scale"] = shift.step_scale;
+      out["cost_at_optimum"] = shift.cost_at_optimum;
+      out["cost_at_step"] = shift.cost_at_step;
+    }
     if (!shift.error.empty()) out["error"] = shift.error;
     return out;
   };
   return {{"method",
-           "one Newton step of the optimum onto a finer grid (h / 1.5) and time step (dt / 2); "
-           "error = shift r / (r - 1) (Richardson, first order)"},
+           "one Newton step of the optimum onto a finer grid (h / 1.5) and time step (dt / 2), "
+           "scaled to the minimum of the finer level's cost along it (step_scale); error = shift "
+           "r / (r - 1) (Richardson, first order)"},
           {"grid", shift_json(error.grid, "cells", "compared_cells")},
           {"time_step", shift_json(error.time_step, "substeps", "compared_substeps")},
           {"seconds", error.seconds}};

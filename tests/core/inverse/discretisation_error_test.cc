@@ -49,6 +49,15 @@ TEST(DiscretisationError, PredictsTheRefitOnTheFinerGridAndTimeStep) {
   ASSERT_TRUE(error.time_step.error.empty()) << error.time_step.error;
   EXPECT_EQ(error.grid.compared, 9);
   EXPECT_EQ(error.time_step.compared, 4);
+  // The bounce's cost is quadratic about the optimum on both finer levels: their costs follow the
+  // Newton step (almost) all the way, and fall along it.
+  for (const DiscretisationShift* shift : {&error.grid, &error.time_step}) {
+    std::printf("step scale %.3f, finer cost %.4g at x*, %.4g at x* + dx\n", shift->step_scale,
+                shift->cost_at_optimum, shift->cost_at_step);
+    EXPECT_GT(shift->step_scale, 0.7);
+    EXPECT_LE(shift->step_scale, 1.0);
+    EXPECT_LT(shift->cost_at_step, shift->cost_at_optimum);
+  }
 
   // The refits the estimate stands in for.
   const double x = std::log(fit->Best().final.youngs_modulus);
@@ -83,6 +92,21 @@ TEST(DiscretisationError, PredictsTheRefitOnTheFinerGridAndTimeStep) {
   EXPECT_NEAR(entry["relative_discretisation_error"].get<double>(), e.total[0] / modulus, 1e-12);
   EXPECT_EQ(json["discretisation"]["grid"]["compared_cells"], 9);
   EXPECT_DOUBLE_EQ(entry["discretisation_error"]["corrected"].get<double>(), e.corrected[0]);
+}
+
+// Along a step the cost is c(t) = c0 + a t + b t^2: its minimum t* = -a / (2 b) from c(0), c(1) and
+// b, kept within [0, 1].
+TEST(DiscretisationError, StepScaleIsTheMinimumAlongTheStep) {
+  const auto scale = [](double c0, double a, double b) {
+    return StepScaleAlong(c0, c0 + a + b, b);
+  };
+  EXPECT_NEAR(scale(5.0, -2.0, 1.0), 1.0, 1e-12);   // the Newton step itself: a = -2 b
+  EXPECT_NEAR(scale(5.0, -0.5, 1.0), 0.25, 1e-12);  // the cost turns up a quarter of the way
+  EXPECT_NEAR(scale(5.0, -0.02, 0.1), 0.1, 1e-12);
+  EXPECT_EQ(scale(5.0, 0.3, 1.0), 0.0);           // rises from the start: no move
+  EXPECT_EQ(scale(5.0, -4.0, 1.0), 1.0);          // never lengthened
+  EXPECT_EQ(StepScaleAlong(5.0, 4.0, 0.0), 1.0);  // no curvature to judge by
+  EXPECT_EQ(StepScaleAlong(5.0, std::nan(""), 1.0), 1.0);
 }
 
 }  // namespace
