@@ -122,6 +122,38 @@ Eigen::Vector3d RayDirection_C(const PinholeCamera& camera, const PixelRays* len
              : Eigen::Vector3d(lens_rays->at(col, row).x(), lens_rays->at(col, row).y(), 1.0);
 }
 
+// Casts one ray per listed pixel through `scene`, in streams of 256 (Embree's stream API traces
+// them as packets); set_ray(i, &hit) sets the i-th listed pixel's ray, its direction's z in the
+// camera's frame 1. The depth seen through each (the hit distance), 0 where the ray misses.
+template <typename SetRayOfPixel>
+std::vector<float> TraceListedPixels(RTCScene scene, size_t count, const SetRayOfPixel& set_ray) {
+  std::vector<float> depth(count, 0.0f);
+  RTCIntersectContext context;
+  rtcInitIntersectContext(&context);
+  constexpr size_t kStream = 256;
+  std::vector<RTCRayHit> hits(std::min(kStream, count));
+  for (size_t first = 0; first < count; first += kStream) {
+    const size_t n = std::min(kStream, count - first);
+    for (size_t i = 0; i < n; ++i) {
+      set_ray(first + i, &hits[i]);
+      hits[i].ray.id = static_cast<unsigned>(i);
+    }
+    rtcIntersect1M(scene, &context, hits.data(), static_cast<unsigned>(n), sizeof(RTCRayHit));
+    for (size_t i = 0; i < n; ++i) {
+      if (hits[i].hit.geomID != RTC_INVALID_GEOMETRY_ID) depth[first + i] = hits[i].ray.tfar;
+    }
+  }
+  return depth;
+}
+
+// Throws std::invalid_argument naming `who` when a listed pixel lies off a width x height image.
+void CheckPixelsInImage(const std::vector<int>& pixels, int width, int height, const char* who) {
+  const int count = width * height;
+  for (const int p : pixels) {
+    SOFTID_THROW_UNLESS(p >= 0 && p < count, fmt::format("{}: pixel off the image", who));
+  }
+}
+
 }  // namespace
 
 DepthRenderer::DepthRenderer() : impl_(std::make_unique<Impl>()) {
@@ -190,31 +222,15 @@ std::vector<float> DepthRenderer::RenderPixels(const geometry::TriangleMesh& mes
   SOFTID_THROW_UNLESS(lens_rays.width == camera.width && lens_rays.height == camera.height &&
                           lens_rays.xy.size() == static_cast<size_t>(camera.width) * camera.height,
                       "DepthRenderer::RenderPixels: the pixel rays must have the camera's size");
-  const int count = camera.width * camera.height;
-  for (const int p : pixels) {
-    SOFTID_THROW_UNLESS(p >= 0 && p < count, "DepthRenderer::RenderPixels: pixel off the image");
-  }
-  std::vector<float> depth(pixels.size(), 0.0f);
-  if (mesh_W.vertices.empty() || mesh_W.triangles.empty() || pixels.empty()) return depth;
+  CheckPixelsInImage(pixels, camera.width, camera.height, "DepthRenderer::RenderPixels");
+  if (mesh_W.vertices.empty() || mesh_W.triangles.empty() || pixels.empty())
+    return std::vector<float>(pixels.size(), 0.0f);
   SceneHandle scene{rtcNewScene(impl_->device)};
   BuildScene(impl_->device, impl_->backface_culling, mesh_W, camera, scene.scene);
-  RTCIntersectContext context;
-  rtcInitIntersectContext(&context);
-  constexpr size_t kStream = 256;
-  std::vector<RTCRayHit> rays(std::min(kStream, pixels.size()));
-  for (size_t first = 0; first < pixels.size(); first += kStream) {
-    const size_t n = std::min(kStream, pixels.size() - first);
-    for (size_t i = 0; i < n; ++i) {
-      const int p = pixels[first + i];
-      SetRay(RayDirection_C(camera, &lens_rays, p % camera.width, p / camera.width),
-             static_cast<unsigned>(i), &rays[i]);
-    }
-    rtcIntersect1M(scene.scene, &context, rays.data(), static_cast<unsigned>(n), sizeof(RTCRayHit));
-    for (size_t i = 0; i < n; ++i) {
-      if (rays[i].hit.geomID != RTC_INVALID_GEOMETRY_ID) depth[first + i] = rays[i].ray.tfar;
-    }
-  }
-  return depth;
+  return TraceListedPixels(scene.scene, pixels.size(), [&](size_t i, RTCRayHit* hit) {
+    const int p = pixels[i];
+    SetRay(RayDirection_C(camera, &lens_rays, p % camera.width, p / camera.width), 0, hit);
+  });
 }
 
 struct RigidMeshRenderer::Impl {
@@ -257,39 +273,20 @@ std::vector<float> RigidMeshRenderer::RenderPixels(const Eigen::Isometry3d& X_CS
                                                    const PixelRays& rays,
                                                    const std::vector<int>& pixels) const {
   SOFTID_THROW_UNLESS(impl_ != nullptr, "RigidMeshRenderer::RenderPixels on a moved-from renderer");
-  const int count = rays.width * rays.height;
-  for (const int p : pixels) {
-    SOFTID_THROW_UNLESS(p >= 0 && p < count,
-                        "RigidMeshRenderer::RenderPixels: pixel off the image");
-  }
-  std::vector<float> depth(pixels.size(), 0.0f);
-  if (pixels.empty()) return depth;
-  // Rays from the camera's centre, in the mesh's frame: origin X_SC * 0, direction R_SC (x, y, 1).
+  CheckPixelsInImage(pixels, rays.width, rays.height, "RigidMeshRenderer::RenderPixels");
+  // Rays from the camera's centre, in the mesh's frame: origin X_SC * 0, direction R_SC (x, y, 1);
+  // t in units of the direction, whose z in the camera's frame is 1, is the depth.
   const Eigen::Isometry3d X_SC = X_CS.inverse();
-  const Eigen::Vector3d origin_S = X_SC.translation();
-  RTCIntersectContext context;
-  rtcInitIntersectContext(&context);
-  constexpr size_t kStream = 256;
-  std::vector<RTCRayHit> hits(std::min(kStream, pixels.size()));
-  for (size_t first = 0; first < pixels.size(); first += kStream) {
-    const size_t n = std::min(kStream, pixels.size() - first);
-    for (size_t i = 0; i < n; ++i) {
-      const Eigen::Vector2d& xy = rays.xy[pixels[first + i]];
-      const Eigen::Vector3d dir_S = X_SC.linear() * Eigen::Vector3d(xy.x(), xy.y(), 1.0);
-      SetRay(dir_S, static_cast<unsigned>(i), &hits[i]);
-      hits[i].ray.org_x = static_cast<float>(origin_S.x());
-      hits[i].ray.org_y = static_cast<float>(origin_S.y());
-      hits[i].ray.org_z = static_cast<float>(origin_S.z());
-      hits[i].ray.dir_z = static_cast<float>(dir_S.z());
-    }
-    rtcIntersect1M(impl_->scene.scene, &context, hits.data(), static_cast<unsigned>(n),
-                   sizeof(RTCRayHit));
-    for (size_t i = 0; i < n; ++i) {
-      // t is in units of the direction, whose z in the camera's frame is 1: the depth.
-      if (hits[i].hit.geomID != RTC_INVALID_GEOMETRY_ID) depth[first + i] = hits[i].ray.tfar;
-    }
-  }
-  return depth;
+  const Eigen::Vector3f origin_S = X_SC.translation().cast<float>();
+  return TraceListedPixels(impl_->scene.scene, pixels.size(), [&](size_t i, RTCRayHit* hit) {
+    const Eigen::Vector2d& xy = rays.xy[pixels[i]];
+    const Eigen::Vector3d dir_S = X_SC.linear() * Eigen::Vector3d(xy.x(), xy.y(), 1.0);
+    SetRay(dir_S, 0, hit);
+    hit->ray.org_x = origin_S.x();
+    hit->ray.org_y = origin_S.y();
+    hit->ray.org_z = origin_S.z();
+    hit->ray.dir_z = static_cast<float>(dir_S.z());
+  });
 }
 
 }  // namespace softid::capture
