@@ -138,6 +138,7 @@ GridSelection ReadGridSelection(const Json& j) {
     trial.worst_frame = t.at("worst_frame").get<int>();
     // Checkpoints written before this key existed still resume.
     trial.frames_within_tolerance = t.value("frames_within_tolerance", 0);
+    trial.per_frame_m = t.value("per_frame_m", std::vector<double>{});
     trial.diverged = t.at("diverged").get<bool>();
     trial.seconds = t.at("seconds").get<double>();
     selection.trials.push_back(trial);
@@ -161,6 +162,7 @@ SubstepSelection ReadSubstepSelection(const Json& j) {
     trial.worst_frame = t.at("worst_frame").get<int>();
     trial.frames_within_tolerance = t.value("frames_within_tolerance", 0);
     trial.frames_converging = t.value("frames_converging", trial.frames_within_tolerance);
+    trial.per_frame_m = t.value("per_frame_m", std::vector<double>{});
     trial.diverged = t.at("diverged").get<bool>();
     selection.trials.push_back(trial);
   }

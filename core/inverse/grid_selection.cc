@@ -55,6 +55,7 @@ GridTrial CompareGrids(int cells, int finer_cells, const SurfaceRun& coarse, con
     trial.difference_m = difference.difference_m;
     trial.worst_frame = difference.worst_frame;
     trial.frames_within_tolerance = difference.LeadingFramesWithin(tolerance_m);
+    trial.per_frame_m = difference.per_frame_m;
   }
   return trial;
 }
@@ -196,6 +197,7 @@ nlohmann::json ToJson(const GridSelection& selection) {
                       {"difference_m", t.difference_m},
                       {"worst_frame", t.worst_frame},
                       {"frames_within_tolerance", t.frames_within_tolerance},
+                      {"per_frame_m", t.per_frame_m},
                       {"diverged", t.diverged},
                       {"seconds", t.seconds}});
   }

@@ -63,6 +63,9 @@ struct GridTrial {
   int worst_frame = 0;
   // Leading frames whose difference is within the tolerance (every frame: the trial passed).
   int frames_within_tolerance = 0;
+  // Per frame 0..last: the RMS distance over the rest mesh's vertices [m] (empty: diverged). Where
+  // the grids part says which frames the grid's error reaches, beyond the one worst frame.
+  std::vector<double> per_frame_m;
   bool diverged = false;  // either run failed
   double seconds = 0.0;   // both runs
 };

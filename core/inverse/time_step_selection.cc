@@ -87,6 +87,7 @@ SubstepTrial CompareSubsteps(int substeps, const SurfaceTrajectory& coarse,
       previous_per_frame_m->empty()
           ? trial.frames_within_tolerance
           : LeadingFramesConverging(difference.per_frame_m, *previous_per_frame_m, tolerance_m);
+  trial.per_frame_m = difference.per_frame_m;
   *previous_per_frame_m = std::move(difference.per_frame_m);
   return trial;
 }
@@ -245,6 +246,7 @@ nlohmann::json ToJson(const SubstepSelection& selection) {
                       {"worst_frame", t.worst_frame},
                       {"frames_within_tolerance", t.frames_within_tolerance},
                       {"frames_converging", t.frames_converging},
+                      {"per_frame_m", t.per_frame_m},
                       {"diverged", t.diverged}});
   }
   return {{"substeps", selection.substeps},

@@ -62,7 +62,8 @@ struct SubstepTrial {
   // no affordable step predicts it (contacts that converge too slowly, or later chaos). The
   // first trial: frames_within_tolerance.
   int frames_converging = 0;
-  bool diverged = false;  // either run failed
+  std::vector<double> per_frame_m;  // per frame 0..last: the RMS surface distance [m]
+  bool diverged = false;            // either run failed
 };
 
 struct SubstepSelection {
