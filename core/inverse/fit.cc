@@ -13,6 +13,7 @@
 #include "core/capture/capture.h"
 #include "core/common/json_fields.h"
 #include "core/geometry/grid_alignment.h"
+#include "core/inverse/discretisation_launch.h"
 #include "core/inverse/fit_checkpoint.h"
 #include "core/inverse/flight_stage.h"
 #include "core/inverse/horizon_continuation.h"
@@ -620,6 +621,19 @@ nlohmann::json CostJson(double initial, double final) {
 
 namespace {
 
+// What a fit of a capture under a config has before it chooses its discretisation and runs its
+// starts.
+struct FitSetup {
+  geometry::TriangleMesh mesh;
+  std::shared_ptr<const std::vector<ObservedFrame>> frames;
+  fem::PhysicalParameters base;
+  std::optional<ParameterSpace> space;
+  std::vector<fem::PhysicalParameters> starts;
+  int cores = 1;    // the fit's share of the machine
+  int threads = 1;  // starts run at once
+  fem::SimulationOptions simulation;
+};
+
 // The nominal frame (a multiple of 1 / fps) at or after the last observed frame's time: how far
 // the grid and time-step choices simulate (the frame index itself when frames are evenly spaced).
 int LastNominalFrame(const std::vector<ObservedFrame>& frames, double fps) {
@@ -689,14 +703,20 @@ void TakeAtLeastTheGridChecksStep(SubstepSelection* selection) {
   selection->substeps = floor;
 }
 
-// The grid and time step of a fresh fit: as configured, or chosen (grid first) when "auto".
-Status ChooseDiscretisation(const capture::Capture& capture, const geometry::TriangleMesh& mesh,
-                            const JobConfig& config, const std::vector<ObservedFrame>& frames,
-                            const std::atomic<bool>* cancel, fem::SimulationOptions* simulation,
-                            FitResult* result) {
+// The grid and time step of a fresh fit: as configured, or chosen (grid first) when "auto", at
+// the central start with its launch measured in flight (discretisation_launch.h).
+Status ChooseDiscretisation(const capture::Capture& capture, const FitSetup& setup,
+                            const JobConfig& config, const std::atomic<bool>* cancel,
+                            fem::SimulationOptions* simulation, FitResult* result) {
   const auto begin = Clock::now();
-  const fem::PhysicalParameters central = CentralStart(config, result->base);
-  const int last_frame = LastNominalFrame(frames, capture.fps);
+  const geometry::TriangleMesh& mesh = setup.mesh;
+  fem::PhysicalParameters central = CentralStart(config, result->base);
+  SOFTID_ASSIGN_OR_RETURN(
+      result->discretisation_launch,
+      MeasureLaunchForDiscretisation(mesh, capture.fixed_region, central, *simulation, config,
+                                     setup.space->names(), setup.frames, capture.fps, cancel));
+  if (result->discretisation_launch) central = result->discretisation_launch->parameters;
+  const int last_frame = LastNominalFrame(*setup.frames, capture.fps);
   SOFTID_RETURN_IF_ERROR(
       ChooseGrid(capture, mesh, config, central, last_frame, cancel, simulation, result));
   result->substeps = config.solver.substeps;
@@ -837,19 +857,6 @@ Result<fem::PhysicalParameters> BaseParameters(const capture::Capture& capture,
 
 namespace {
 
-// What a fit of a capture under a config has before it chooses its discretisation and runs its
-// starts.
-struct FitSetup {
-  geometry::TriangleMesh mesh;
-  std::shared_ptr<const std::vector<ObservedFrame>> frames;
-  fem::PhysicalParameters base;
-  std::optional<ParameterSpace> space;
-  std::vector<fem::PhysicalParameters> starts;
-  int cores = 1;    // the fit's share of the machine
-  int threads = 1;  // starts run at once
-  fem::SimulationOptions simulation;
-};
-
 Result<FitSetup> SetUpFit(const capture::Capture& capture, const JobConfig& config) {
   SOFTID_RETURN_IF_ERROR(config.Validate());
   FitSetup setup;
@@ -880,8 +887,7 @@ Status DiscretiseFit(const capture::Capture& capture, const JobConfig& config,
     RecordGridAxes(capture, setup->mesh, config, setup->simulation, result);
     return TakeDiscretisation(*options.resume_from, config, num_starts, &setup->simulation, result);
   }
-  return ChooseDiscretisation(capture, setup->mesh, config, *setup->frames, options.cancel,
-                              &setup->simulation, result);
+  return ChooseDiscretisation(capture, *setup, config, options.cancel, &setup->simulation, result);
 }
 
 // The frame loss of the config (frame_loss.h), scaled by the depth noise of frame 0 (the depth
@@ -1038,8 +1044,8 @@ Result<FitCheckpoint> PrepareFit(const capture::Capture& capture, const JobConfi
   SOFTID_ASSIGN_OR_RETURN(FitSetup setup, SetUpFit(capture, config));
   FitResult chosen;
   chosen.base = setup.base;
-  SOFTID_RETURN_IF_ERROR(ChooseDiscretisation(capture, setup.mesh, config, *setup.frames, cancel,
-                                              &setup.simulation, &chosen));
+  SOFTID_RETURN_IF_ERROR(
+      ChooseDiscretisation(capture, setup, config, cancel, &setup.simulation, &chosen));
   return CheckpointOf(chosen, static_cast<int>(setup.starts.size()));
 }
 
@@ -1050,8 +1056,8 @@ Result<TimeStepCheck> CheckTimeStep(const capture::Capture& capture, const JobCo
   automatic.solver.substeps = kAutoSubsteps;
   FitResult chosen;
   chosen.base = setup.base;
-  SOFTID_RETURN_IF_ERROR(ChooseDiscretisation(capture, setup.mesh, automatic, *setup.frames, cancel,
-                                              &setup.simulation, &chosen));
+  SOFTID_RETURN_IF_ERROR(
+      ChooseDiscretisation(capture, setup, automatic, cancel, &setup.simulation, &chosen));
   TimeStepCheck out;
   out.selection = std::move(*chosen.substep_selection);
   out.predictable_last_frame =
@@ -1225,6 +1231,12 @@ nlohmann::json ToJson(const FitResult& result) {
   if (result.substep_selection) out["time_step"]["selection"] = ToJson(*result.substep_selection);
   if (result.predictable_last_frame >= 0) {
     out["time_step"]["predictable_last_frame"] = result.predictable_last_frame;
+  }
+  if (result.discretisation_launch) {
+    const FlightStageResult& flight = *result.discretisation_launch;
+    out["discretisation_launch"] = ToJson(flight);
+    for (const std::string& name : flight.held)
+      out["discretisation_launch"][name] = ParameterValueJson(flight.parameters, name);
   }
   out["timing"] = TimingJson(result);
   return out;

@@ -157,7 +157,10 @@ struct FitResult {
   // config gave cell_size) and the cell size h [m].
   int cells = 0;
   double cell_size_m = 0.0;
-  std::optional<GridSelection> grid_selection;                                    // when chosen
+  std::optional<GridSelection> grid_selection;  // when chosen
+  // The launch measured in flight that "auto" chose the grid and time step at
+  // (discretisation_launch.h); absent when they were chosen at the starting launch or given.
+  std::optional<FlightStageResult> discretisation_launch;
   fem::ElementFormulation element = fem::ElementFormulation::kIncompatibleModes;  // the config's
   // The config's grid orientation, and the grid's axes it gave (fem::ChooseGridAxes).
   fem::GridOrientation grid_orientation = fem::GridOrientation::kWorld;
