@@ -44,6 +44,43 @@ Status CheckNotCancelled(const IngestOptions& options) {
   return Status::Ok();
 }
 
+// Completes recording frame k's object mask with the posed mesh (mask_completion.h) and records
+// what it added (-1 where no pose held) and the mask's new size.
+void CompleteMask(const DepthImage& image, int k, MaskCompleter* completer, CameraIngest* report) {
+  std::vector<int>& mask = report->object_masks[k];
+  const FrameCompletion done = mask.empty() ? FrameCompletion{} : completer->Complete(image, &mask);
+  report->completed_pixels.push_back(done.posed ? done.pixels_added : -1);
+  report->object_pixels[k] = static_cast<int>(mask.size());
+}
+
+// Writes the object's pixels of a recording frame, drawn into the ideal pinhole image, as each
+// capture frame that shows it.
+Status WriteFrameOfMask(const DepthImage& image, const std::vector<int>& mask,
+                        const std::vector<int>& capture_frames, int c, const CameraView& view,
+                        const capture::PinholeCamera& camera, capture::CaptureWriter* writer) {
+  if (capture_frames.empty()) return Status::Ok();
+  std::vector<Eigen::Vector3d> points_C;
+  points_C.reserve(mask.size());
+  for (const int p : mask) {
+    const Eigen::Vector2d& xy = view.rays.xy[p];
+    points_C.push_back(image.depth[p] * Eigen::Vector3d(xy.x(), xy.y(), 1.0));
+  }
+  const DepthImage pinhole = SplatToPinhole(points_C, camera);
+  for (const int j : capture_frames) SOFTID_RETURN_IF_ERROR(writer->WriteFrame(c, j, pinhole));
+  return Status::Ok();
+}
+
+// The capture frames camera c did not record (a dropped frame) are written empty.
+Status WriteUnseenFrames(const Timeline& timeline, int c, const capture::PinholeCamera& camera,
+                         capture::CaptureWriter* writer) {
+  const DepthImage empty = DepthImage::Zeros(camera.width, camera.height);
+  for (size_t i = 0; i < timeline.frames.size(); ++i) {
+    if (timeline.frames[i].frame_of[c] < 0)
+      SOFTID_RETURN_IF_ERROR(writer->WriteFrame(c, static_cast<int>(i), empty));
+  }
+  return Status::Ok();
+}
+
 }  // namespace
 
 Status WriteCameraFrames(const recording::Recording& rec, int c,
@@ -74,40 +111,19 @@ Status WriteCameraFrames(const recording::Recording& rec, int c,
     });
     for (int i = 0; i < count; ++i) {
       SOFTID_RETURN_IF_ERROR(images[i].status());
-      std::vector<int>& mask = report->object_masks[first + i];
-      if (!completer) continue;
-      const FrameCompletion done =
-          mask.empty() ? FrameCompletion{} : completer->Complete(*images[i], &mask);
-      report->completed_pixels.push_back(done.posed ? done.pixels_added : -1);
-      report->object_pixels[first + i] = static_cast<int>(mask.size());
+      if (completer) CompleteMask(*images[i], first + i, &*completer, report);
     }
     ForEachIndex(count, workers, [&](size_t i) {
       const int k = first + static_cast<int>(i);
-      written[i] = Status::Ok();
-      if (capture_frames[k].empty()) return;
-      std::vector<Eigen::Vector3d> points_C;
-      points_C.reserve(report->object_masks[k].size());
-      for (const int p : report->object_masks[k]) {
-        const Eigen::Vector2d& xy = view.rays.xy[p];
-        points_C.push_back(images[i]->depth[p] * Eigen::Vector3d(xy.x(), xy.y(), 1.0));
-      }
-      const DepthImage image = SplatToPinhole(points_C, camera.camera);
-      for (const int j : capture_frames[k]) {
-        written[i] = writer->WriteFrame(c, j, image);
-        if (!written[i].ok()) return;
-      }
+      written[i] = WriteFrameOfMask(*images[i], report->object_masks[k], capture_frames[k], c, view,
+                                    camera.camera, writer);
     });
     for (int i = 0; i < count; ++i) SOFTID_RETURN_IF_ERROR(written[i]);
     for (int i = 0; i < count; ++i) {
       if (progress) progress("masks", first + i + 1, n);
     }
   }
-  const DepthImage empty = DepthImage::Zeros(camera.camera.width, camera.camera.height);
-  for (size_t i = 0; i < timeline.frames.size(); ++i) {
-    if (timeline.frames[i].frame_of[c] < 0)
-      SOFTID_RETURN_IF_ERROR(writer->WriteFrame(c, static_cast<int>(i), empty));
-  }
-  return Status::Ok();
+  return WriteUnseenFrames(timeline, c, camera.camera, writer);
 }
 
 }  // namespace softid::ingest
