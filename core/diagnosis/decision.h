@@ -88,6 +88,10 @@ struct CandidateTest {
   bool nuisance = false;
   double cost_before = 0.0, cost_after = 0.0;  // fitted frames [m^2]
   double floor_cost = 0.0;                     // the cost of pure noise, sigma^2 / 2 [m^2]
+  // The same two costs less the compared time step's own component (time_step_error.h), -1 when
+  // it was not estimated [m^2]: reported beside the raw ones, which gate c judges (see
+  // doc/diagnosis.md, "Why 80 % of the excess").
+  double step_free_cost_before = -1.0, step_free_cost_after = -1.0;
   double excess_explained = 0.0;  // (cost_before - cost_after) / (cost_before - floor_cost) [-]
   double heldout_before = 0.0, heldout_after = 0.0;  // held-out frames [m^2]
   double n_eff = 0.0, tau_pixels = 1.0, tau_frames = 1.0;

@@ -424,6 +424,20 @@ struct DiagnosisRun {
     if (!report.time_step_error) return map;
     return WithoutTimeStepComponent(map, *report.time_step_error, share);
   }
+  // The cost of `map` less the compared step's component: the mean of its fitted frames' costs,
+  // as the objective's [m^2]; -1 when that component was not estimated.
+  double StepFreeCost(const ResidualMap& map) const {
+    if (!report.time_step_error) return -1.0;
+    const ResidualMap less = LessStepError(map);
+    double sum = 0.0;
+    int fitted = 0;
+    for (const FrameResiduals& frame : less.frames) {
+      if (frame.heldout) continue;
+      sum += frame.cost;
+      ++fitted;
+    }
+    return fitted > 0 ? sum / fitted : -1.0;
+  }
 
   // 3. Screen every candidate around the base fit (its parameters profiled out).
   Status Screen() {
@@ -571,6 +585,7 @@ struct DiagnosisRun {
     }
     tested->fit = inverse::ToJson(*fit);
     tested->test.cost_after = r1->cost;
+    tested->test.step_free_cost_after = StepFreeCost(r1->map);
     tested->test.heldout_after = r1->heldout;
     const EffectiveSampleSize ess = ComputeEffectiveSampleSize(FittedResiduals(r1->map));
     tested->test.n_eff = ess.n_eff;
@@ -637,6 +652,7 @@ struct DiagnosisRun {
       if (lower) {
         tested->before_parameters = null_fit->Best().final;
         tested->test.cost_before = rn->cost;
+        tested->test.step_free_cost_before = StepFreeCost(rn->map);
         tested->test.heldout_before = rn->heldout;
         tested->test.lr = LikelihoodRatioStatistic(rn->cost, r1.cost, ess.n_eff);
         ApplyDecisionRule(rule, candidate, &tested->test);
@@ -725,6 +741,7 @@ struct DiagnosisRun {
       tested.test.extension = plan.candidate->extension;
       tested.before_parameters = p0;
       tested.test.cost_before = r0.cost;
+      tested.test.step_free_cost_before = StepFreeCost(r0.map);
       tested.test.floor_cost = 0.5 * sigma * sigma;
       tested.test.heldout_before = r0.heldout;
       tested.starts = nlohmann::json::array();
@@ -789,6 +806,7 @@ struct DiagnosisRun {
       tested.test.given = nuisance_candidate.extension;
       tested.before_parameters = nuisance.parameters;
       tested.test.cost_before = nuisance.test.cost_after;
+      tested.test.step_free_cost_before = nuisance.test.step_free_cost_after;
       tested.test.floor_cost = 0.5 * sigma * sigma;
       tested.test.heldout_before = nuisance.test.heldout_after;
       tested.test.physics_cost = physics.test.cost_after;

@@ -48,6 +48,8 @@ nlohmann::json ToJson(const CandidateTest& t) {
           {"lr_passed", t.lr_passed},
           {"heldout_passed", t.heldout_passed},
           {"returned_to_noise", t.returned_to_noise},
+          {"step_free_cost_before", t.step_free_cost_before},
+          {"step_free_cost_after", t.step_free_cost_after},
           {"excess_explained", t.excess_explained},
           {"misfit_passed", t.misfit_passed},
           {"still_flagged", t.still_flagged},

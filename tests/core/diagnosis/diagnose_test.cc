@@ -86,6 +86,13 @@ TEST(Diagnose, FindsConcealedFrictionOnARamp) {
   const TestedCandidate& w = report->tested[report->winner];
   EXPECT_NEAR(w.values["friction_coefficient"].get<double>(), 0.3, 0.1);
   EXPECT_LT(w.test.heldout_after, 0.7 * w.test.heldout_before);
+  // The costs less the compared step's own component are reported beside the raw ones: a
+  // projection only lowers a frame's cost, and the step-free cost is the objective's mean of them.
+  ASSERT_TRUE(report->time_step_error.has_value());
+  EXPECT_GT(w.test.step_free_cost_before, 0.0);
+  EXPECT_LE(w.test.step_free_cost_before, w.test.cost_before * (1.0 + 1e-9));
+  EXPECT_GT(w.test.step_free_cost_after, 0.0);
+  EXPECT_LE(w.test.step_free_cost_after, w.test.cost_after * (1.0 + 1e-9));
   // Screening keeps further friction starts, in case the refit cannot start from its first.
   for (const ScreenedCandidate& s : report->screening) {
     if (s.extension != Extension::kFriction) continue;
