@@ -41,12 +41,9 @@ Result<std::optional<FlightStageResult>> MeasureLaunchForDiscretisation(
     return Status::InvalidArgument(e.what());
   }
   objective->SetCancelFlag(cancel);
-  // The cost's scale as a start's (fit.cc, RunStart): the truncation distance squared.
-  const double phi_max =
-      config.solver.cost.truncation_cells * objective->simulator().hex_mesh().CellSize();
-  SOFTID_ASSIGN_OR_RETURN(
-      FlightStageResult flight,
-      MeasureLaunchInFlight(*objective, fitted, start, phi_max * phi_max, cancel));
+  const double scale = CostScaleM2(config.solver, objective->simulator().hex_mesh().CellSize());
+  SOFTID_ASSIGN_OR_RETURN(FlightStageResult flight,
+                          MeasureLaunchInFlight(*objective, fitted, start, scale, cancel));
   if (flight.held.empty()) {
     spdlog::info("grid and time step: chosen at the starting launch ({})", flight.skipped);
     return std::optional<FlightStageResult>();

@@ -558,9 +558,7 @@ void RunStart(int index, const fem::PhysicalParameters& start, TrajectoryObjecti
   const auto begin = Clock::now();
   result->index = index;
   result->initial = space.ToParameters(space.ToVariables(start).data(), base);
-  const double h = objective.simulator().hex_mesh().CellSize();
-  const double phi_max = config.solver.cost.truncation_cells * h;
-  const double scale = phi_max * phi_max;
+  const double scale = CostScaleM2(config.solver, objective.simulator().hex_mesh().CellSize());
   const StartSpace start_space =
       MeasureLaunch(objective, space, base, config, options, scale, result);
   const ParameterSpace& run_space = start_space.held ? *start_space.held : space;

@@ -20,6 +20,11 @@ fem::SimulationOptions SimulationOptionsFor(const SolverOptions& solver) {
   return simulation;
 }
 
+double CostScaleM2(const SolverOptions& solver, double cell_size_m) {
+  const double phi_max = solver.cost.truncation_cells * cell_size_m;
+  return phi_max * phi_max;
+}
+
 cost::SurfaceCostOptions CostOptionsFor(const SolverOptions& solver) {
   cost::SurfaceCostOptions options;
   options.band_cells = solver.cost.band_cells;

@@ -24,6 +24,10 @@ fem::SimulationOptions SimulationOptionsFor(const SolverOptions& solver);
 // solver.cost as the cost's options.
 cost::SurfaceCostOptions CostOptionsFor(const SolverOptions& solver);
 
+// The scale a fit's optimiser sees its cost in: phi_max^2, the cost's truncation distance
+// (solver.cost.truncation_cells cells of size cell_size_m) squared [m^2].
+double CostScaleM2(const SolverOptions& solver, double cell_size_m);
+
 // The capture frames config.frames selects, with config.heldout_every's frames marked held out,
 // shared read-only by objectives (the fit's starts, the analyses after it). Errors as
 // LoadObservedFrames.
