@@ -9,6 +9,8 @@ packages=(
   build-essential cmake ninja-build pkg-config git ca-certificates
   # numerics: Eigen, CHOLMOD (SuiteSparse) with OpenBLAS, Ceres Solver
   libeigen3-dev libsuitesparse-dev libopenblas0-pthread libceres-dev
+  # modal analysis (the model's eigenfrequencies): Spectra, header-only on Eigen
+  libspectra-dev
   # geometry: Embree (BVH ray casting, closest-point queries), assimp (OBJ/PLY/STL input)
   libembree-dev libassimp-dev
   # images: 16-bit PNG depth frames and plots; lens distortion (calib3d)

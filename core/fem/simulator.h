@@ -131,6 +131,11 @@ class Simulator {
   // Newton solve of the static equilibrium at the current state's u (v, a set to zero). Needs a
   // clamped region or ground contact to be well posed.
   StepSummary SolveStatic();
+  // The elastic stiffness matrix at rest, u = 0 [N/m]: the elements' K with the current
+  // parameters (stiffness field included), without inertia, damping or surface forces; a fixed
+  // node's rows and columns hold the identity. For modal analysis (elastic_modes.h). Overwrites
+  // the assembly's work storage: call it before stepping or Reset() after.
+  Eigen::SparseMatrix<double> RestStiffnessMatrix();
 
   // The step equations r(u_next) = 0 that Step() solves, from the current state to a candidate
   // end-of-step displacement u_next (v and a follow from u_next by Newmark), and their exact

@@ -99,6 +99,17 @@ void Simulator::AssembleSurfaceForces(const AssemblyTerms& terms, const Eigen::V
   run_points(shared_points_);
 }
 
+Eigen::SparseMatrix<double> Simulator::RestStiffnessMatrix() {
+  const AssemblyTerms terms = MakeAssemblyTerms(Mode::kStatic, false, false);
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(state_.u.size());
+  newton_tangent_ = false;  // the exact element matrices (at rest the geometric term is zero)
+  BeginAssembly(terms);
+  AssembleElements(terms, zero, zero);
+  EliminateFixedNodes(terms);
+  newton_tangent_ = true;
+  return assembler_.matrix();
+}
+
 void Simulator::EliminateFixedNodes(const AssemblyTerms& terms) {
   for (int i = 0; i < mesh_.NumNodes(); ++i) {
     if (!fixed_[i]) continue;

@@ -16,6 +16,7 @@ inline constexpr int kExitInvalidInput = 2;
 
 Command RegisterSynth(CLI::App* app);
 Command RegisterSimulate(CLI::App* app);
+Command RegisterModes(CLI::App* app);
 Command RegisterBench(CLI::App* app);
 Command RegisterIngest(CLI::App* app);
 Command RegisterFit(CLI::App* app);

@@ -30,6 +30,8 @@ int main(int argc, char** argv) {
       softid::lab::RegisterSynth);
   add("simulate", "simulate a scene and write the deformed surface per frame (PLY)",
       softid::lab::RegisterSimulate);
+  add("modes", "the body's lowest elastic eigenfrequencies as softid discretises it",
+      softid::lab::RegisterModes);
   add("bench", "time simulation steps at several grid sizes", softid::lab::RegisterBench);
   add("ingest",
       "turn a raw recording into a capture (writes capture.json, ingest.json, ingest.png)",
