@@ -23,7 +23,7 @@ refuses() {
   grep -qF -- "$expected" <<<"$out" || fail "softid-lab $*: no '$expected' in: $out"
 }
 
-for command in synth simulate bench ingest fit diagnose prove-diagnosis prove-ingest reproduce; do
+for command in synth simulate modes bench ingest fit diagnose prove-diagnosis prove-ingest reproduce; do
   help=$("$lab" "$command" --help) || fail "$command --help exited non-zero"
   grep -q "softid-lab $command" <<<"$help" || fail "$command --help shows no example"
 done
@@ -31,6 +31,19 @@ done
 refuses "no-such-scene" synth --scene no-such-scene --out "$work/x"
 refuses "$work/missing" fit "$work/missing" -o "$work/r.json"
 refuses "--cameras" synth --cameras zero --out "$work/x"
+refuses "--modes" modes --scene bar-hanging --modes 0
+refuses "--grid-orientation" modes --scene bar-hanging --grid-orientation sideways
+
+# The clamped bar's lowest modes: no rigid ones, ascending, and E fitted to a reference frequency.
+"$lab" modes --scene bar-hanging --cells 8 --modes 3 --reference-hz 1 -o "$work/modes.json" \
+  >"$work/modes.log" 2>&1 || fail "modes: $(tail -5 "$work/modes.log")"
+python3 - "$work/modes.json" <<'PY' || fail "modes.json"
+import json, sys
+m = json.load(open(sys.argv[1]))
+f = m["frequencies_hz"]
+assert m["rigid_modes"] == 0 and len(f) == 3 and 0 < f[0] <= f[1] <= f[2], m
+assert abs(m["expected_fitted_youngs_modulus"] - m["youngs_modulus"] / f[0] ** 2) < 1e-9 * m["youngs_modulus"], m
+PY
 
 "$lab" synth --scene torus-drop --duration 0.2 --cameras 1 --width 40 --height 40 --cells 8 \
   --substeps 2 --out "$work/capture" >/dev/null 2>&1 || fail "synth"
