@@ -13,6 +13,8 @@ namespace softid::geometry {
 namespace {
 
 constexpr long long kMaxNodes = 1LL << 27;
+// Extents within this fraction of a cell above a whole number of cells count as that number [-].
+constexpr double kWholeCellTolerance = 1e-3;
 constexpr int kNodesPerTask = 512;
 constexpr double kCoarseDecisionMargin = 0.1;
 
@@ -39,9 +41,13 @@ Status LayOutGrid(const Eigen::AlignedBox3d& bounds, const Eigen::Vector3d& exte
                   const SignedDistanceOptions& options, RegularGrid* grid) {
   long long num_nodes = 1;
   for (int a = 0; a < 3; ++a) {
-    // A tolerance keeps exact multiples of h (extent = 20 h) from gaining a cell by rounding.
+    // A tolerance keeps whole multiples of h (extent = 9 h) from gaining a cell by rounding, which
+    // would put both faces mid-cell: mesh files hold single-precision coordinates (assimp reads
+    // floats), so a box 0.06 m deep at h = 0.1 m / 15 measures 9.0000004 h. A body that overhangs
+    // a node plane by less than kWholeCellTolerance h loses that sliver, far less than the cut
+    // cells min_cell_volume_fraction drops.
     const double aligned_padding = std::isnan(options.node_plane[a]) ? 0.0 : 2.0;
-    const double cells = std::max(0.0, std::ceil(extent[a] / h - 1e-9)) +
+    const double cells = std::max(0.0, std::ceil(extent[a] / h - kWholeCellTolerance)) +
                          2.0 * options.padding_cells + aligned_padding;
     if (cells + 1 > static_cast<double>(kMaxNodes)) {
       num_nodes = kMaxNodes + 1;

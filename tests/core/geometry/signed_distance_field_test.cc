@@ -87,6 +87,30 @@ TEST(SignedDistanceField, GridLayout) {
   EXPECT_EQ(coarse->grid.num_cells, Eigen::Vector3i(16, 11, 9));
 }
 
+// A box read from a file in single precision measures a whole number of cells only to ~1e-7:
+// 0.1 x 0.06 x 0.04 m at 15 cells is 9.0000004 cells deep. It must not gain a cell there, which
+// would put both faces in the middle of cells (a cut-cell layer on each, 4 % stiffer modes on a
+// thrown block): every face lies on a node plane, and every cell is whole or empty (0.987 at the
+// box's edges and corners, where the distance is not trilinear).
+TEST(SignedDistanceField, SinglePrecisionBoxFacesLieOnNodePlanes) {
+  // Depth and height off by single precision's relative rounding (6e-8), as in a mesh file.
+  const TriangleMesh box =
+      MakeBox(Eigen::Vector3d(0.1, 0.06 * (1 + 6e-8), 0.04 * (1 + 6e-8)), 0.01);
+  SignedDistanceOptions options = Cells(15);
+  options.padding_cells = 3;
+  const auto field = ComputeSignedDistanceField(box, options);
+  ASSERT_TRUE(field.ok()) << field.status().ToString();
+  EXPECT_EQ(field->grid.num_cells, Eigen::Vector3i(21, 15, 12));  // 15, 9 and 6 cells + 6
+  const double h = field->grid.cell_size;
+  for (int cell = 0; cell < field->grid.NumCells(); ++cell) {
+    const std::array<int, 8> nodes = field->grid.CellNodes(cell);
+    std::array<double, 8> phi;
+    for (int c = 0; c < 8; ++c) phi[c] = field->phi[nodes[c]];
+    const double fraction = ComputeCutCellWeights(phi, h).volume / (h * h * h);
+    EXPECT_TRUE(fraction < 1e-3 || fraction > 0.98) << "cell " << cell << ": " << fraction;
+  }
+}
+
 // A node plane can be asked for per axis: the grid moves by less than a cell, keeps its padding,
 // and an axis left NaN stays centred.
 TEST(SignedDistanceField, GridPutsNodesOnRequestedPlanes) {
