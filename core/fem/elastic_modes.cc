@@ -1,9 +1,9 @@
 #include "core/fem/elastic_modes.h"
 
-#include <Eigen/CholmodSupport>
 #include <Spectra/MatOp/SparseSymMatProd.h>
 #include <Spectra/SymGEigsShiftSolver.h>
 
+#include <Eigen/CholmodSupport>
 #include <algorithm>
 #include <cmath>
 #include <stdexcept>
@@ -111,8 +111,8 @@ Result<ElasticModes> ComputeElasticModes(Simulator& simulator, const ElasticMode
   ShiftedCholeskySolve op(system.stiffness, system.mass);
   MassProduct mass_product(system.mass);
   const int subspace = std::min(n, std::max(2 * wanted + 1, 30));
-  Spectra::SymGEigsShiftSolver<ShiftedCholeskySolve, MassProduct, Spectra::GEigsMode::ShiftInvert> solver(
-      op, mass_product, wanted, subspace, shift);
+  Spectra::SymGEigsShiftSolver<ShiftedCholeskySolve, MassProduct, Spectra::GEigsMode::ShiftInvert>
+      solver(op, mass_product, wanted, subspace, shift);
   try {
     solver.init();
     solver.compute(Spectra::SortRule::LargestMagn, 1000, 1e-10);
