@@ -320,16 +320,18 @@ TEST(Diagnose, ControlWithoutEffectGivesNone) {
 }
 
 // The same control diagnosed from a base fit stopped far from its optimum (one iteration from
-// E at 3 % of the truth): every extension refit lowers the cost, because with the base
+// E at 2 % of the truth): every extension refit lowers the cost, because with the base
 // parameters free it also finishes the base fit. The null refitted from such a refit's values
 // (extension at its null) is as good, so no physics is reported; nothing explains the first
 // base's misfit, so the diagnosis restarts from that better base and finds nothing missing.
+// (From 3 %, since the box's grid lost its float-made half-cell layer, the stiffness split
+// refits to a ratio of 0.93 and is rejected as uniform before its null is refitted.)
 TEST(Diagnose, AnExtensionThatOnlyFinishesAPoorBaseFitIsNotPhysics) {
   RampCapture ramp(0.0);
   inverse::JobConfig config = ramp.BaseConfig();
   config.heldout_every = 4;  // the given base fit must hold out what the diagnosis holds out
   inverse::JobConfig poor = config;
-  poor.initial["youngs_modulus"].value = 0.03 * ramp.truth.youngs_modulus;
+  poor.initial["youngs_modulus"].value = 0.02 * ramp.truth.youngs_modulus;
   poor.solver.max_iterations = 1;
   poor.solver.continuation = false;
   Result<inverse::FitResult> base = inverse::Fit(ramp.capture, poor);
