@@ -34,6 +34,9 @@ Status SimulationOptions::Validate() const {
   if (!(min_force_volume_fraction >= 0.0 && min_force_volume_fraction <= 1.0)) {
     return Invalid("min_force_volume_fraction", min_force_volume_fraction, "must lie in [0, 1]");
   }
+  if (!(max_force_clamp_cells >= 0.0)) {
+    return Invalid("max_force_clamp_cells", max_force_clamp_cells, "must be non-negative");
+  }
   if (!(time_step > 0.0) || !std::isfinite(time_step)) {
     return Invalid("time_step", time_step, "must be positive and finite");
   }

@@ -187,8 +187,9 @@ void Simulator::EmbedSurface(const geometry::TriangleMesh& rest_mesh) {
   surface_ =
       geometry::SubdivideToEdgeLength(rest_mesh, options_.surface_edge_fraction * mesh_.CellSize());
   embedding_ = EmbedPoints(mesh_, surface_.vertices);
-  force_embedding_ = EmbedPoints(mesh_, surface_.vertices, /*clamp_to_element=*/true,
-                                 options_.min_force_volume_fraction);
+  force_embedding_ =
+      EmbedPoints(mesh_, surface_.vertices, /*clamp_to_element=*/true,
+                  options_.min_force_volume_fraction, options_.max_force_clamp_cells);
   surface_areas_ = geometry::VertexAreas(surface_);
 }
 

@@ -10,6 +10,11 @@ namespace softid::fem {
 
 namespace {
 
+// A point exactly max_clamp_cells from the fuller element (a box whose faces sit mid-cell) is
+// clamped in every frame: a turned copy of the body measures it a few 1e-13 cells off, and a
+// mesh read in single precision 1e-7 of its size off.
+constexpr double kClampTieCells = 1e-3;
+
 // Elements allowed to carry points: those filled to min_volume_fraction; all of them when none
 // is full enough.
 std::vector<char> EligibleElements(const HexMesh& mesh, double min_volume_fraction) {
@@ -66,7 +71,8 @@ int NearestEligibleElement(const HexMesh& mesh, const std::vector<char>& eligibl
 }  // namespace
 
 SurfaceEmbedding EmbedPoints(const HexMesh& mesh, const std::vector<Eigen::Vector3d>& points,
-                             bool clamp_to_element, double min_volume_fraction) {
+                             bool clamp_to_element, double min_volume_fraction,
+                             double max_clamp_cells) {
   SurfaceEmbedding embedding;
   const auto& grid = mesh.grid;
   const double h = grid.cell_size;
@@ -83,8 +89,15 @@ SurfaceEmbedding EmbedPoints(const HexMesh& mesh, const std::vector<Eigen::Vecto
       SOFTID_THROW_UNLESS(element >= 0, "surface point " + std::to_string(p) +
                                             " has no simulated element anywhere in the grid");
     }
-    const Eigen::Vector3i c = grid.CellCoords(mesh.element_cell[element]);
+    Eigen::Vector3i c = grid.CellCoords(mesh.element_cell[element]);
     local = (points[p] - grid.origin) / h - c.cast<double>();
+    const int own = cell >= 0 ? mesh.grid_cell_to_element[cell] : -1;
+    if (clamp_to_element && own >= 0 && own != element &&
+        (local.cwiseMax(0.0).cwiseMin(1.0) - local).norm() > max_clamp_cells + kClampTieCells) {
+      element = own;
+      c = grid.CellCoords(mesh.element_cell[element]);
+      local = (points[p] - grid.origin) / h - c.cast<double>();
+    }
     if (clamp_to_element) {
       local = local.cwiseMax(0.0).cwiseMin(1.0);
       embedding.rest_positions[p] = grid.origin + h * (c.cast<double>() + local);

@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <array>
+#include <limits>
 #include <vector>
 
 #include "core/fem/hex_mesh.h"
@@ -34,8 +35,13 @@ struct SurfaceEmbedding {
 //   the grid resolves then pushes on the body where the body is, not on a sliver element that it
 //   would crush (a nearly massless node with negative stress stiffness) or through an
 //   extrapolated lever. Rendering uses the unclamped embedding.
+// @param max_clamp_cells a point whose own cell holds an element too thin to carry it is clamped
+//   into the nearest eligible element only when that moves it by at most this many cells; farther,
+//   its own element carries it (a box's corner cell, thin by its trilinear distance, would
+//   otherwise lose its corner to the neighbour).
 // @throws std::invalid_argument when the mesh has no element at all.
 SurfaceEmbedding EmbedPoints(const HexMesh& mesh, const std::vector<Eigen::Vector3d>& points,
-                             bool clamp_to_element = false, double min_volume_fraction = 0.0);
+                             bool clamp_to_element = false, double min_volume_fraction = 0.0,
+                             double max_clamp_cells = std::numeric_limits<double>::infinity());
 
 }  // namespace softid::fem
