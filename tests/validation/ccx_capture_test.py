@@ -7,7 +7,11 @@ The CI check of the independent validation set (tools/validation): generates its
 - softid loads the capture and fits it (one iteration of `softid-lab fit`);
 - every depth frame shows the object at plausible depths, and nothing else;
 - the block's centre of mass in ccx's output falls as 0.5 g t^2 until it touches the floor;
-- truth.json holds the public parameter names and the reference's effective stiffness.
+- truth.json holds the public parameter names and the reference's effective stiffness;
+- the reference motion check (check_reference_motion.py) against the mesh refined x2, over
+  frames 0..CHECK_LAST_FRAME only (the whole refined motion would double the test's time): no
+  distance at rest or in free fall, where both meshes fall alike, and a last converged frame that
+  agrees with the per-frame distances and the tolerance; a second run reuses the refined motion.
 
 Exit code 77 (CTest: skipped) when ccx, numpy or png (python3-png) is missing.
 """
@@ -21,6 +25,10 @@ import tempfile
 import time
 
 SKIP = 77
+# Frames 0-6 of tiny-drop: free fall to frame 4, the landing (t = 0.078 s) just before frame 5.
+# Their x2 motion costs 7 s of CPU (all 15 frames: 18 s, more than the rest of this test).
+CHECK_LAST_FRAME = 6
+FREE_FALL_DISTANCE_M = 5e-5  # two meshes of the same rigid box falling under gravity alike
 FIT_CONFIG = {"max_iterations": 1, "cells": 8, "substeps": 2, "starts": 1,
               "frames": {"first": 0, "last": 5},
               "fixed": {"poisson_ratio": 0.35, "ground": {"normal": [0, 0, 1], "offset": 0}}}
@@ -99,19 +107,28 @@ def check_frames(capture):
     print(f"{len(camera['frames'])} frames with object pixels at plausible depths")
 
 
+def coarse_positions(out):
+    import numpy as np
+    return np.load(os.path.join(out, "work", "tiny-drop", "motion-x1", "positions_sim.npy"))
+
+
+def airborne_frames(positions):
+    """Frames after 0 before contact: the lowest node still above the floor by more than 1 mm."""
+    return [k for k in range(1, len(positions)) if positions[k, :, 2].min() > 1e-3
+            and all(positions[j, :, 2].min() > 1e-3 for j in range(k))]
+
+
 def check_free_fall(source_dir, out):
     import numpy as np
     sys.path.insert(0, os.path.join(source_dir, "tools", "validation"))
     from softid_validation import cases, ccx_deck
     case = cases.CASES["tiny-drop"]()
     model = ccx_deck.build_model(case, case.divisions)
-    positions = np.load(os.path.join(out, "work", "tiny-drop", "motion-x1", "positions_sim.npy"))
+    positions = coarse_positions(out)
     masses = ccx_deck.node_masses(case, model)
     com_z = positions[:, :, 2] @ masses / masses.sum()
     times = np.arange(len(positions)) / case.fps
-    # Frames before contact: the lowest node still above the floor by more than 1 mm.
-    airborne = [k for k in range(1, len(positions)) if positions[k, :, 2].min() > 1e-3
-                and all(positions[j, :, 2].min() > 1e-3 for j in range(k))]
+    airborne = airborne_frames(positions)
     check(len(airborne) >= 3, f"only {len(airborne)} frames before contact")
     for k in airborne:
         fallen = com_z[0] - com_z[k]
@@ -137,6 +154,55 @@ def check_truth(capture):
           f"(nominal {truth['parameters']['youngs_modulus']:.0f} Pa)")
 
 
+def run_motion_check(source_dir, out):
+    tool = os.path.join(source_dir, "tools", "validation", "check_reference_motion.py")
+    start = time.monotonic()
+    result = subprocess.run([sys.executable, tool, "--out", out, "--cases", "tiny-drop",
+                             "--resolution", "coarse", "--last-frame", str(CHECK_LAST_FRAME)],
+                            capture_output=True, text=True, check=False)
+    seconds = time.monotonic() - start
+    check(result.returncode == 0,
+          f"check_reference_motion exit {result.returncode}:\n{result.stdout}\n{result.stderr}")
+    with open(os.path.join(out, "tiny-drop-coarse", "truth.json")) as f:
+        return json.load(f), result.stdout, seconds
+
+
+def check_reference_motion(source_dir, out):
+    truth, _, seconds = run_motion_check(source_dir, out)
+    record = truth["reference"].get("motion_check")
+    check(record is not None, "truth.json has no reference.motion_check")
+    for key in ("refined_factor", "tolerance_m", "mean_surface_distance_m",
+                "max_surface_distance_m", "converged_last_frame", "checked_last_frame"):
+        check(key in record, f"motion_check lacks {key}")
+    check(record["refined_factor"] == 2, f"refined_factor {record['refined_factor']}")
+    check(record["tolerance_m"] == 5e-4, f"default tolerance {record['tolerance_m']} m")
+    mean, peak = record["mean_surface_distance_m"], record["max_surface_distance_m"]
+    check(record["checked_last_frame"] == CHECK_LAST_FRAME
+          and len(mean) == len(peak) == CHECK_LAST_FRAME + 1,
+          f"{len(mean)} mean and {len(peak)} max distances, checked to frame "
+          f"{record['checked_last_frame']}, for frames 0-{CHECK_LAST_FRAME}")
+    check(all(0 <= m <= p for m, p in zip(mean, peak)), f"mean {mean} above max {peak}")
+    check(peak[0] < 1e-9, f"frame 0 (rest on both meshes): max distance {peak[0]} m")
+    airborne = [k for k in airborne_frames(coarse_positions(out)) if k <= CHECK_LAST_FRAME]
+    check(len(airborne) >= 3, f"only {len(airborne)} checked frames before contact")
+    falling = [peak[k] for k in airborne]
+    check(max(falling) < FREE_FALL_DISTANCE_M,
+          f"free fall (frames {airborne}): max distances {falling} m between the meshes")
+    last, tolerance = record["converged_last_frame"], record["tolerance_m"]
+    check(all(m <= tolerance for m in mean[:last + 1]),
+          f"converged_last_frame {last}, but mean distances {mean[:last + 1]} exceed {tolerance}")
+    check(last == CHECK_LAST_FRAME or mean[last + 1] > tolerance,
+          f"converged_last_frame {last}, but frame {last + 1} is within tolerance: {mean}")
+    check(last >= airborne[-1], f"converged_last_frame {last} before the end of free fall")
+    print(f"reference motion check x1 vs x2 in {seconds:.1f} s: converged to frame {last} of "
+          f"0-{CHECK_LAST_FRAME}; mean surface distance [mm] "
+          + " ".join(f"{m * 1e3:.3f}" for m in mean))
+    again, log, seconds = run_motion_check(source_dir, out)
+    check("reusing the x2 motion" in log, f"the second check ran ccx again:\n{log}")
+    check(again["reference"]["motion_check"] == record, "the second check's record differs")
+    print(f"a second check reuses the x2 motion ({seconds:.1f} s)")
+
+
 def main():
     if len(sys.argv) != 3:
         print(__doc__.split("\n\n")[0], file=sys.stderr)
@@ -151,6 +217,7 @@ def main():
         check_truth(capture)
         check_frames(capture)
         check_free_fall(source_dir, out)
+        check_reference_motion(source_dir, out)
         check_fit(softid_lab, capture, scratch)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)

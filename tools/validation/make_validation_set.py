@@ -2,11 +2,14 @@
 """Generates softid's independent validation set with CalculiX.
 
     tools/validation/make_validation_set.py --out DIR [--cases a,b,...] [--resolution coarse|fine|both]
+        [--check-motion [--tolerance-mm 0.5]]
 
 For each case: CalculiX eigenfrequencies at three meshes (the reference's own discretisation
 error, as an effective Young's modulus), the motion at the chosen resolution(s) with ccx, and an
 ordinary capture folder DIR/<case>-<resolution>/ (capture.json, object.obj, cam0/*.png,
-truth.json). ccx's own files stay in DIR/work/<case>/. See tools/validation/README.md.
+truth.json). ccx's own files stay in DIR/work/<case>/. With --check-motion, each capture's motion
+is then compared frame by frame with a mesh refined x2 (check_reference_motion.py; truth.json's
+reference.motion_check). See tools/validation/README.md.
 
 Needs: ccx (Debian calculix-ccx), numpy (python3-numpy), png (python3-png). Run with the Debian
 interpreter /usr/bin/python3. ccx runs single-threaded, one run at a time.
@@ -20,7 +23,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from softid_validation import cases, ccx_deck, ccx_run, generate, render  # noqa: E402
+from softid_validation import cases, ccx_deck, ccx_run, generate, motion_check, render  # noqa: E402
 
 
 def parse_args(argv):
@@ -32,6 +35,14 @@ def parse_args(argv):
     parser.add_argument("--seed", type=int, default=1, help="seed of the sensor noise")
     parser.add_argument("--noiseless", action="store_true",
                         help="exact depth (still quantised), no dropouts: for debugging")
+    parser.add_argument("--check-motion", action="store_true",
+                        help="after each capture, check its motion against a mesh refined x2 "
+                             "(check_reference_motion.py): the frames on which the reference "
+                             "is converged, in truth.json")
+    parser.add_argument("--tolerance-mm", type=float,
+                        default=motion_check.DEFAULT_TOLERANCE_M * 1e3,
+                        help="with --check-motion: largest mean surface distance [mm] of a "
+                             "converged frame (default %(default)s, about the depth noise)")
     return parser.parse_args(argv)
 
 
@@ -57,12 +68,20 @@ def main(argv=None):
     started = time.monotonic()
     for name in names:
         summary = generate.generate_case(cases.CASES[name](), resolutions, args.out, settings,
-                                         noise, args.seed, log=lambda m: print(m, flush=True))
+                                         noise, args.seed, log=log)
         summaries.append(summary)
         print(_summary_line(summary), flush=True)
+        if args.check_motion:
+            for resolution in resolutions:  # coarse first: it reuses the fine capture's x2 motion
+                motion_check.check_capture(cases.CASES[name](), resolution, args.out, settings,
+                                           args.tolerance_mm * 1e-3, log=log)
     _merge_summary(os.path.join(args.out, "summary.json"), summaries)
     print(f"done in {time.monotonic() - started:.0f} s", flush=True)
     return 0
+
+
+def log(message):
+    print(message, flush=True)
 
 
 def _merge_summary(path, summaries):

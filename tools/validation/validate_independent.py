@@ -3,7 +3,7 @@
 
     tools/validation/validate_independent.py --lab build/core/lab/softid-lab --out DIR
         [--cases a,b] [--resolution coarse|fine] [--starts N] [--max-iterations N]
-        [--frame-loss squared|cauchy]
+        [--frame-loss squared|cauchy] [--reference-frames]
 
 For each case: generates the capture unless DIR/<case>-<resolution>/ exists (make_validation_set.py),
 fits it with the settings a user with a known rig would use (gravity, floor, Poisson ratio and no
@@ -17,6 +17,8 @@ modulus to compare with: its row names the materials' moduli instead (the diagno
 With --diagnose the fit leaves friction out and the diagnosis follows it ("diagnose": true): a second
 table says what it named against what the case conceals (friction, two materials, else none) and
 its time; the modulus columns are then the base fit's, which misfits where friction is concealed.
+With --reference-frames the fit covers only the frames on which the reference motion itself is
+converged in the mesh (truth.json's reference.motion_check, check_reference_motion.py).
 Writes DIR/validation.json and prints Markdown tables. Use the Debian interpreter /usr/bin/python3.
 """
 
@@ -54,6 +56,10 @@ def parse_args(argv):
                         help="leave friction out of the fit and diagnose after it (\"diagnose\": "
                              "true): the diagnosis should name friction and two materials, "
                              "and nothing elsewhere")
+    parser.add_argument("--reference-frames", action="store_true",
+                        help="fit only frames 0..reference.motion_check.converged_last_frame of "
+                             "truth.json (check_reference_motion.py): the frames on which the "
+                             "reference motion is converged in its mesh; all frames without it")
     return parser.parse_args(argv)
 
 
@@ -64,6 +70,18 @@ def expected_decision(truth):
     if truth["parameters"]["friction_coefficient"] > 0:
         return "friction"
     return "none"
+
+
+def reference_last_frame(truth):
+    """The last frame on which the reference motion is converged in the mesh, or None unchecked."""
+    check = truth["reference"].get("motion_check")
+    if check is None:
+        return None
+    last = check["converged_last_frame"]
+    if last < 1:  # -1 would mean "every frame" to the job; 0 leaves nothing to fit
+        raise ValueError(f"{truth['scene']}: the reference motion is converged up to frame {last} "
+                         "only; nothing to fit")
+    return last
 
 
 def job_config(truth, args):
@@ -83,11 +101,15 @@ def job_config(truth, args):
     if "friction_coefficient" in fit:
         initial["friction_coefficient"] = 0.1
     cells = args.cells if args.cells == "auto" else int(args.cells)
-    return {"fit": fit, "fixed": fixed, "initial": initial, "starts": args.starts,
-            "max_iterations": args.max_iterations, "cells": cells, "uncertainty": True,
-            "element": args.element, "grid_orientation": args.grid_orientation,
-            "diagnose": args.diagnose,
-            "cost": {"frame_loss": args.frame_loss}}
+    config = {"fit": fit, "fixed": fixed, "initial": initial, "starts": args.starts,
+              "max_iterations": args.max_iterations, "cells": cells, "uncertainty": True,
+              "element": args.element, "grid_orientation": args.grid_orientation,
+              "diagnose": args.diagnose,
+              "cost": {"frame_loss": args.frame_loss}}
+    last = reference_last_frame(truth) if args.reference_frames else None
+    if last is not None:
+        config["frames"] = {"first": 0, "last": last}
+    return config
 
 
 def ensure_capture(case, resolution, out):
@@ -118,6 +140,15 @@ def run_case(case, args):
     with open(os.path.join(folder, "truth.json")) as f:
         truth = json.load(f)
     config = job_config(truth, args)
+    reference_last = config.get("frames", {}).get("last")
+    if args.reference_frames and reference_last is None:
+        print(f"{case}: --reference-frames: {folder}/truth.json has no reference.motion_check "
+              f"(check_reference_motion.py --out {args.out} --cases {case} --resolution "
+              f"{args.resolution}); fitting ALL frames, including any the reference has not "
+              "converged on", flush=True)
+    elif reference_last is not None:
+        print(f"{case}: --reference-frames: fitting frames 0-{reference_last}, on which the "
+              "reference motion is converged", flush=True)
     work = os.path.join(args.out, "fits", f"{case}-{args.resolution}")
     os.makedirs(work, exist_ok=True)
     with open(os.path.join(work, "job.json"), "w") as f:
@@ -159,6 +190,10 @@ def run_case(case, args):
            "step_agrees_frames": agreeing_frames(result["time_step"]),
            # The frames compared: all, or those before the motion turned chaotic.
            "fitted_last_frame": result["time_step"].get("predictable_last_frame"),
+           # --reference-frames: the job's last frame (the reference's converged frames), or
+           # "unchecked" when truth.json has no motion check; None without the flag.
+           "reference_last_frame": (reference_last if reference_last is not None else "unchecked")
+                                   if args.reference_frames else None,
            "seconds": round(seconds, 1), "config": config}
     if "friction_coefficient" in result["parameters"]:
         row["fitted_friction"] = result["parameters"]["friction_coefficient"]["value"]
@@ -199,8 +234,14 @@ def dash(x):
 
 
 def fitted_frames(row):
-    last = row.get("fitted_last_frame")
-    return "all" if last is None else f"0-{last}"
+    """"all", or "0-L" when softid left out the frames it cannot predict; with --reference-frames
+    also the limit set by the reference's own convergence (its frames 0-N are the job's)."""
+    last, reference = row.get("fitted_last_frame"), row.get("reference_last_frame")
+    if reference is None:
+        return "all" if last is None else f"0-{last}"
+    if reference == "unchecked":
+        return ("all" if last is None else f"0-{last}") + " (reference unchecked)"
+    return f"0-{reference if last is None else min(last, reference)} (reference converged 0-{reference})"
 
 
 def print_table(rows):

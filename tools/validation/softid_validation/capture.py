@@ -117,10 +117,20 @@ def write_capture(folder, case, model, positions_sim, cameras, noise, rng, truth
     truth = {"format": "softid-truth/1", "scene": case.name, "description": case.description,
              "parameters": truth_parameters(case, model, truth_extra["settings"])}
     truth.update({k: v for k, v in truth_extra.items() if k != "settings"})
-    with open(os.path.join(folder, "truth.json"), "w") as f:
-        json.dump(truth, f, indent=1, default=_json_default)
+    write_truth(folder, truth)
     return {"frames": len(positions_sim), "object_pixels_mean": float(np.mean(object_pixels)),
             "object_pixels_min": int(np.min(object_pixels))}
+
+
+def write_truth(folder, truth):
+    """Writes FOLDER/truth.json; also used to add records to it later (check_reference_motion.py)."""
+    with open(os.path.join(folder, "truth.json"), "w") as f:
+        json.dump(truth, f, indent=1, default=_json_default)
+
+
+def read_truth(folder):
+    with open(os.path.join(folder, "truth.json")) as f:
+        return json.load(f)
 
 
 def _json_default(value):
