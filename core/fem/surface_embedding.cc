@@ -1,6 +1,7 @@
 #include "core/fem/surface_embedding.h"
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <string>
 
@@ -91,8 +92,8 @@ SurfaceEmbedding EmbedPoints(const HexMesh& mesh, const std::vector<Eigen::Vecto
     }
     Eigen::Vector3i c = grid.CellCoords(mesh.element_cell[element]);
     local = (points[p] - grid.origin) / h - c.cast<double>();
-    const int own = cell >= 0 ? mesh.grid_cell_to_element[cell] : -1;
-    if (clamp_to_element && own >= 0 && own != element &&
+    const int own = mesh.grid_cell_to_element[cell];
+    if (clamp_to_element && own >= 0 && own != element && std::isfinite(max_clamp_cells) &&
         (local.cwiseMax(0.0).cwiseMin(1.0) - local).norm() > max_clamp_cells + kClampTieCells) {
       element = own;
       c = grid.CellCoords(mesh.element_cell[element]);
