@@ -33,7 +33,10 @@ HexMesh BuildHexMesh(const geometry::SignedDistanceField& sdf, double min_volume
       any_inside |= corner_phi[c] < 0.0;
     }
     if (!any_inside) continue;
-    const geometry::CutCellWeights weights = geometry::ComputeCutCellWeights(corner_phi, h);
+    const std::span<const double> lattice = sdf.CellLattice(cell);
+    const geometry::CutCellWeights weights =
+        lattice.empty() ? geometry::ComputeCutCellWeights(corner_phi, h)
+                        : geometry::ComputeCutCellWeights(lattice, sdf.cut_cell_samples, h);
     if (weights.volume <= min_volume) continue;
     std::array<int, 8> fe_nodes;
     for (int c = 0; c < 8; ++c) {

@@ -34,6 +34,10 @@ Status SimulationOptions::Validate() const {
   if (!(min_force_volume_fraction >= 0.0 && min_force_volume_fraction <= 1.0)) {
     return Invalid("min_force_volume_fraction", min_force_volume_fraction, "must lie in [0, 1]");
   }
+  if (cut_cell_samples != 1 && cut_cell_samples != 2 && cut_cell_samples != 4 &&
+      cut_cell_samples != 8) {
+    return Invalid("cut_cell_samples", cut_cell_samples, "must be 1, 2, 4 or 8");
+  }
   if (!(max_force_clamp_cells >= 0.0)) {
     return Invalid("max_force_clamp_cells", max_force_clamp_cells, "must be non-negative");
   }

@@ -170,6 +170,7 @@ void Simulator::BuildGrid(const geometry::TriangleMesh& rest_mesh,
   sdf_options.cells_along_longest_side = options_.cells_along_longest_side;
   sdf_options.cell_size = options_.cell_size;
   sdf_options.padding_cells = options_.padding_cells;
+  sdf_options.cut_cell_samples = options_.cut_cell_samples;
   if (fixed_region) sdf_options.node_plane = ClampFacePlanes(*fixed_region, rest_mesh.Bounds());
   Result<geometry::SignedDistanceField> sdf =
       geometry::ComputeSignedDistanceField(rest_mesh, sdf_options);

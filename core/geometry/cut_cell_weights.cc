@@ -286,4 +286,49 @@ CutCellWeights ComputeCutCellWeights(const std::array<double, 8>& corner_phi, do
   return w;
 }
 
+CutCellWeights ComputeCutCellWeights(std::span<const double> lattice_phi, int samples_per_side,
+                                     double cell_size) {
+  const int n = samples_per_side;
+  SOFTID_THROW_UNLESS(
+      n == 1 || n == 2 || n == 4 || n == 8,
+      "ComputeCutCellWeights: samples_per_side = " + std::to_string(n) + ": must be 1, 2, 4 or 8");
+  const int side = n + 1;
+  SOFTID_THROW_UNLESS(static_cast<int>(lattice_phi.size()) == side * side * side,
+                      "ComputeCutCellWeights: lattice of " + std::to_string(lattice_phi.size()) +
+                          " values: must hold (samples_per_side + 1)^3");
+  auto at = [&](int i, int j, int k) { return lattice_phi[i + side * (j + side * k)]; };
+  if (n == 1) {
+    std::array<double, 8> corners;
+    for (int c = 0; c < 8; ++c) corners[c] = at(c & 1, (c >> 1) & 1, (c >> 2) & 1);
+    return ComputeCutCellWeights(corners, cell_size);
+  }
+  SOFTID_THROW_UNLESS(
+      cell_size > 0.0 && std::isfinite(cell_size),
+      "ComputeCutCellWeights: cell_size = " + std::to_string(cell_size) + ": must be positive");
+  const int depth = std::countr_zero(static_cast<unsigned>(n));
+  const double s = 1.0 / n;
+  std::array<double, 8> unit_node{};
+  std::array<double, 8> unit_octant{};
+  for (int k = 0; k < n; ++k) {
+    for (int j = 0; j < n; ++j) {
+      for (int i = 0; i < n; ++i) {
+        double phi[8];
+        for (int c = 0; c < 8; ++c)
+          phi[c] = at(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
+        const double lo[3] = {i * s, j * s, k * s};
+        const int octant = (2 * i >= n) + 2 * (2 * j >= n) + 4 * (2 * k >= n);
+        Integrate(phi, lo, s, depth, &unit_octant[octant], &unit_node);
+      }
+    }
+  }
+  const double h3 = cell_size * cell_size * cell_size;
+  CutCellWeights w;
+  for (int c = 0; c < 8; ++c) {
+    w.node_volume[c] = unit_node[c] * h3;
+    w.octant_volume[c] = unit_octant[c] * h3;
+    w.volume += unit_octant[c] * h3;
+  }
+  return w;
+}
+
 }  // namespace softid::geometry

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <array>
+#include <span>
 
 namespace softid::geometry {
 
@@ -32,5 +33,14 @@ inline constexpr int kCutCellMaxDepth = 3;
 // between {trilinear phi < 0} and the sampled surface itself), ~1e-4 h^3 on a strongly curved
 // cell. No heap allocation; about 35 us per cut cell.
 CutCellWeights ComputeCutCellWeights(const std::array<double, 8>& corner_phi, double cell_size);
+
+// The same for a cell whose phi is known on a finer lattice: `lattice_phi` holds (n + 1)^3 values
+// at h (i, j, k) / n, index i + (n + 1) (j + (n + 1) k), n = samples_per_side in {1, 2, 4, 8}.
+// Each sub-cube is integrated as above with phi trilinear between its own corners, so a sharp
+// feature of the sampled body (a box's edge or corner) is rounded at h / n, not h: a box corner
+// filling 0.55 of a cell fills 0.2 of it by the corners' trilinear phi. n = 1 is the corner
+// version. std::invalid_argument for another n, a lattice of the wrong size or a bad cell_size.
+CutCellWeights ComputeCutCellWeights(std::span<const double> lattice_phi, int samples_per_side,
+                                     double cell_size);
 
 }  // namespace softid::geometry

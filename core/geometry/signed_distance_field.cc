@@ -73,6 +73,16 @@ Status LayOutGrid(const Eigen::AlignedBox3d& bounds, const Eigen::Vector3d& exte
   return Status::Ok();
 }
 
+// The distance to the mesh, negative where the winding number says inside.
+double SignedDistanceAt(const MeshDistance& distance, const WindingNumber& winding,
+                        const Eigen::Vector3d& p) {
+  const double d = distance.Distance(p);
+  // The coarse winding number (error < 1e-2) decides unless it is near 1/2.
+  double w = std::abs(winding.Evaluate(p, WindingNumber::kCoarseFarFactor));
+  if (std::abs(w - 0.5) < kCoarseDecisionMargin) w = std::abs(winding(p));
+  return w >= 0.5 ? -d : d;
+}
+
 // field->phi at every grid node: the distance, negative where the winding number says inside.
 // Nodes are handed out in tasks of kNodesPerTask to num_threads threads (0 = hardware
 // concurrency), the calling thread included.
@@ -87,12 +97,7 @@ void FillSignedDistances(const MeshDistance& distance, const WindingNumber& wind
       if (begin >= n) return;
       const int end = std::min(n, begin + kNodesPerTask);
       for (int node = begin; node < end; ++node) {
-        const Eigen::Vector3d p = field->grid.NodePosition(node);
-        const double d = distance.Distance(p);
-        // The coarse winding number (error < 1e-2) decides unless it is near 1/2.
-        double w = std::abs(winding.Evaluate(p, WindingNumber::kCoarseFarFactor));
-        if (std::abs(w - 0.5) < kCoarseDecisionMargin) w = std::abs(winding(p));
-        field->phi[node] = w >= 0.5 ? -d : d;
+        field->phi[node] = SignedDistanceAt(distance, winding, field->grid.NodePosition(node));
       }
     }
   };
@@ -101,6 +106,55 @@ void FillSignedDistances(const MeshDistance& distance, const WindingNumber& wind
   threads = std::clamp(threads, 1, std::max(1, n / kNodesPerTask));
   std::vector<std::thread> workers;
   workers.reserve(threads - 1);
+  for (int t = 1; t < threads; ++t) workers.emplace_back(work);
+  work();
+  for (std::thread& worker : workers) worker.join();
+}
+
+// The cells whose corners differ in sign: each gets a lattice of n + 1 samples per edge, its
+// corners copied from phi (so that both descriptions agree where they meet) and the rest measured
+// like the nodes. Cells are handed out one at a time to num_threads threads.
+void FillCutCellLattices(const MeshDistance& distance, const WindingNumber& winding, int n,
+                         int num_threads, SignedDistanceField* field) {
+  const RegularGrid& grid = field->grid;
+  field->cut_cell_samples = n;
+  field->cut_cell_lattice.assign(grid.NumCells(), -1);
+  std::vector<int> cut_cells;
+  for (int cell = 0; cell < grid.NumCells(); ++cell) {
+    int negative = 0;
+    for (int node : grid.CellNodes(cell)) negative += field->phi[node] < 0.0;
+    if (negative == 0 || negative == 8) continue;
+    field->cut_cell_lattice[cell] = static_cast<int>(cut_cells.size());
+    cut_cells.push_back(cell);
+  }
+  const int side = n + 1;
+  const int lattice_size = side * side * side;
+  field->cut_cell_phi.assign(cut_cells.size() * lattice_size, 0.0);
+  std::atomic<int> next{0};
+  auto work = [&]() {
+    for (int t = next.fetch_add(1); t < static_cast<int>(cut_cells.size()); t = next.fetch_add(1)) {
+      const std::array<int, 8> nodes = grid.CellNodes(cut_cells[t]);
+      const Eigen::Vector3d origin = grid.NodePosition(nodes[0]);
+      double* lattice = field->cut_cell_phi.data() + static_cast<size_t>(t) * lattice_size;
+      for (int k = 0; k <= n; ++k) {
+        for (int j = 0; j <= n; ++j) {
+          for (int i = 0; i <= n; ++i) {
+            double& value = lattice[i + side * (j + side * k)];
+            if ((i == 0 || i == n) && (j == 0 || j == n) && (k == 0 || k == n)) {
+              value = field->phi[nodes[(i == n) + 2 * (j == n) + 4 * (k == n)]];
+              continue;
+            }
+            const Eigen::Vector3d p = origin + grid.cell_size / n * Eigen::Vector3d(i, j, k);
+            value = SignedDistanceAt(distance, winding, p);
+          }
+        }
+      }
+    }
+  };
+  const int threads = std::clamp(
+      num_threads > 0 ? num_threads : static_cast<int>(std::thread::hardware_concurrency()), 1,
+      std::max(1, static_cast<int>(cut_cells.size()) / 16));
+  std::vector<std::thread> workers;
   for (int t = 1; t < threads; ++t) workers.emplace_back(work);
   work();
   for (std::thread& worker : workers) worker.join();
@@ -125,6 +179,11 @@ Status SignedDistanceOptions::Validate() const {
     return Status::InvalidArgument(Field("num_threads") + " = " + std::to_string(num_threads) +
                                    ": must be >= 0 (0 = hardware concurrency)");
   }
+  if (cut_cell_samples != 1 && cut_cell_samples != 2 && cut_cell_samples != 4 &&
+      cut_cell_samples != 8) {
+    return Status::InvalidArgument(Field("cut_cell_samples") + " = " +
+                                   std::to_string(cut_cell_samples) + ": must be 1, 2, 4 or 8");
+  }
   for (int a = 0; a < 3; ++a) {
     if (std::isinf(node_plane[a])) {
       return Status::InvalidArgument(Field("node_plane") + "[" + std::to_string(a) + "] = " +
@@ -145,6 +204,13 @@ double SignedDistanceField::Interpolate(const Eigen::Vector3d& p) const {
   return value;
 }
 
+std::span<const double> SignedDistanceField::CellLattice(int cell) const {
+  if (cut_cell_samples <= 1 || cut_cell_lattice.empty() || cut_cell_lattice[cell] < 0) return {};
+  const size_t size =
+      static_cast<size_t>(cut_cell_samples + 1) * (cut_cell_samples + 1) * (cut_cell_samples + 1);
+  return {cut_cell_phi.data() + cut_cell_lattice[cell] * size, size};
+}
+
 Result<SignedDistanceField> ComputeSignedDistanceField(const TriangleMesh& mesh,
                                                        const SignedDistanceOptions& options) {
   SOFTID_RETURN_IF_ERROR(options.Validate());
@@ -159,6 +225,9 @@ Result<SignedDistanceField> ComputeSignedDistanceField(const TriangleMesh& mesh,
   SOFTID_ASSIGN_OR_RETURN(const MeshDistance distance, MeshDistance::Create(mesh));
   const WindingNumber winding(mesh);
   FillSignedDistances(distance, winding, options.num_threads, &field);
+  if (options.cut_cell_samples > 1) {
+    FillCutCellLattices(distance, winding, options.cut_cell_samples, options.num_threads, &field);
+  }
   return field;
 }
 

@@ -4,6 +4,7 @@
 
 #include <Eigen/Core>
 #include <limits>
+#include <span>
 #include <vector>
 
 #include "core/common/status.h"
@@ -23,6 +24,11 @@ struct SignedDistanceOptions {
   // side, so that moving the nodes by up to a cell keeps padding_cells. Used to put nodes on a
   // clamp's face, which otherwise falls between nodes wherever the grid puts them.
   Eigen::Vector3d node_plane = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+  // Samples per cell edge in cut cells (corners of mixed sign) [-]: 1, 2, 4 or 8. Above 1 the
+  // distance is also sampled on a lattice of spacing h / n inside each cut cell, so that the
+  // cell's inside region (cut_cell_weights.h) follows sharp features to h / n instead of rounding
+  // them at the scale of h.
+  int cut_cell_samples = 1;
   // InvalidArgument naming the field and value, e.g.
   // "SignedDistanceOptions.padding_cells = 0: must be >= 1".
   Status Validate() const;
@@ -31,6 +37,14 @@ struct SignedDistanceOptions {
 struct SignedDistanceField {
   RegularGrid grid;
   std::vector<double> phi;  // per grid node [m]; negative inside
+  // SignedDistanceOptions::cut_cell_samples n; above 1, every cut cell's lattice of (n + 1)^3
+  // values at the cell's first node + h (i, j, k) / n, index i + (n + 1) (j + (n + 1) k), whose
+  // corners are phi's values at the cell's nodes.
+  int cut_cell_samples = 1;
+  std::vector<int> cut_cell_lattice;  // per grid cell: its lattice's index, -1 when not cut
+  std::vector<double> cut_cell_phi;   // the lattices, one after another [m]
+  // The cell's lattice; empty when the cell is not cut or cut_cell_samples is 1.
+  std::span<const double> CellLattice(int cell) const;
   // Trilinear interpolation of phi [m]; p outside the grid clamps to the nearest boundary point.
   double Interpolate(const Eigen::Vector3d& p) const;
 };

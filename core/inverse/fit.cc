@@ -660,6 +660,7 @@ Status ChooseGrid(const capture::Capture& capture, const geometry::TriangleMesh&
                   const std::atomic<bool>* cancel, fem::SimulationOptions* simulation,
                   FitResult* result) {
   result->element = config.solver.element;
+  result->cut_cell_samples = config.solver.cut_cell_samples;
   RecordGridAxes(capture, mesh, config, *simulation, result);
   const double length = geometry::BoundsInGrid(mesh, result->mesh_from_grid).sizes().maxCoeff();
   if (config.solver.cell_size_m > 0.0) {
@@ -761,6 +762,7 @@ Status TakeDiscretisation(const FitCheckpoint& checkpoint, const JobConfig& conf
   result->cells = checkpoint.cells;
   result->cell_size_m = checkpoint.cell_size_m;
   result->element = config.solver.element;
+  result->cut_cell_samples = config.solver.cut_cell_samples;
   result->grid_selection = checkpoint.grid_selection;
   result->substeps = checkpoint.substeps;
   result->substep_selection = checkpoint.substep_selection;
@@ -1217,6 +1219,7 @@ nlohmann::json ToJson(const FitResult& result) {
   out["grid"] = {{"cells", result.cells},
                  {"cell_size_m", result.cell_size_m},
                  {"element", fem::ToString(result.element)},
+                 {"cut_cell_samples", result.cut_cell_samples},
                  {"orientation", fem::ToString(result.grid_orientation)},
                  {"turned_deg", GridTurnDegrees(result.mesh_from_grid)}};
   if (result.grid_selection) out["grid"]["selection"] = ToJson(*result.grid_selection);

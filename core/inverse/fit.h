@@ -164,6 +164,7 @@ struct FitResult {
   fem::ElementFormulation element = fem::ElementFormulation::kIncompatibleModes;  // the config's
   // The config's grid orientation, and the grid's axes it gave (fem::ChooseGridAxes).
   fem::GridOrientation grid_orientation = fem::GridOrientation::kWorld;
+  int cut_cell_samples = 1;  // the config's: distance samples per cut cell's edge
   Eigen::Matrix3d mesh_from_grid = Eigen::Matrix3d::Identity();
   // How the frames' costs added up (SolverOptions::cost.frame_loss, its scale from the depth
   // noise of frame 0, depth_noise_m [m]; 0 when least squares did not need it).

@@ -13,6 +13,7 @@ fem::SimulationOptions SimulationOptionsFor(const SolverOptions& solver) {
     simulation.UseGeneralizedAlpha(solver.rho_infinity);
   simulation.element = solver.element;
   simulation.grid_orientation = solver.grid_orientation;
+  simulation.cut_cell_samples = solver.cut_cell_samples;
   // The band must fit in the padding, and the cost must be truncated where the grid cuts it off.
   simulation.padding_cells = std::max(
       {simulation.padding_cells, static_cast<int>(std::ceil(solver.cost.truncation_cells)) + 1,

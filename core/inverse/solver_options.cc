@@ -21,6 +21,10 @@ constexpr const char* kPositiveRequirement = "must be a finite number > 0";
 constexpr const char* kGradientRequirement = "must be \"adjoint\" or \"finite_difference\"";
 constexpr const char* kElementRequirement = "must be \"trilinear\" or \"incompatible_modes\"";
 constexpr const char* kGridOrientationRequirement = "must be \"world\" or \"body\"";
+constexpr const char* kCutCellSamplesRequirement = "must be 1, 2, 4 or 8";
+bool IsCutCellSampling(int n) {
+  return n == 1 || n == 2 || n == 4 || n == 8;
+}
 constexpr const char* kRestSdfRequirement = "must be \"surface_fitted\", \"exact\" or \"sampled\"";
 constexpr const char* kFrameLossRequirement = "must be \"squared\" or \"cauchy\"";
 constexpr auto kCostKeys = std::to_array<std::string_view>(
@@ -149,6 +153,13 @@ Status ParseDiscretisation(const Json& j, SolverOptions* options) {
   if (j.contains("grid_orientation")) {
     SOFTID_ASSIGN_OR_RETURN(options->grid_orientation, ParseGridOrientation(j["grid_orientation"]));
   }
+  if (j.contains("cut_cell_samples")) {
+    const Json& value = j["cut_cell_samples"];
+    if (!value.is_number_integer() || !IsCutCellSampling(value.get<int>())) {
+      return json::Invalid("cut_cell_samples", value, kCutCellSamplesRequirement);
+    }
+    options->cut_cell_samples = value.get<int>();
+  }
   return Status::Ok();
 }
 
@@ -263,6 +274,9 @@ Status SolverOptions::Validate() const {
     return json::Invalid("grid_orientation", static_cast<int>(grid_orientation),
                          kGridOrientationRequirement);
   }
+  if (!IsCutCellSampling(cut_cell_samples)) {
+    return json::Invalid("cut_cell_samples", cut_cell_samples, kCutCellSamplesRequirement);
+  }
   if (starts < 1) return json::Invalid("starts", starts, AtLeast(1));
   if (threads < 0) return json::Invalid("threads", threads, AtLeast(0));
   if (max_iterations < 1) return json::Invalid("max_iterations", max_iterations, AtLeast(1));
@@ -301,6 +315,7 @@ void WriteJson(const SolverOptions& options, Json* job_config) {
   j["substeps"] = options.substeps == kAutoSubsteps ? Json("auto") : Json(options.substeps);
   j["element"] = fem::ToString(options.element);
   j["grid_orientation"] = fem::ToString(options.grid_orientation);
+  j["cut_cell_samples"] = options.cut_cell_samples;
   j["starts"] = options.starts;
   j["threads"] = options.threads;
   j["seed"] = options.seed;

@@ -90,6 +90,9 @@ struct SolverOptions {
   // the CalculiX blocks and cubes resting at 10-25 degrees to the world's axes it moved Young's
   // modulus from -2.0, -2.0, +9.0 % to -0.9, -0.9, +2.6 % of the reference (docs/benchmarks.md).
   fem::GridOrientation grid_orientation = fem::GridOrientation::kBody;
+  // Distance samples per cell edge shaping the cut cells (fem::SimulationOptions::
+  // cut_cell_samples): 1, 2, 4 or 8.
+  int cut_cell_samples = fem::SimulationOptions().cut_cell_samples;
 
   // Independent optimisations from random starts (drawn from the initial ranges); the best result
   // wins. Contact-rich fits have local minima, so one start is rarely enough.
@@ -169,6 +172,7 @@ inline constexpr auto kSolverOptionKeys = std::to_array<std::string_view>({
     "rho_infinity",
     "element",
     "grid_orientation",
+    "cut_cell_samples",
     "starts",
     "threads",
     "seed",

@@ -65,6 +65,10 @@ void SceneFlags::Register(CLI::App* app) {
                   "the grid's element: trilinear or incompatible_modes (docs/job-config.md)")
       ->check(CLI::IsMember({"trilinear", "incompatible_modes"}))
       ->capture_default_str();
+  app->add_option("--cut-cell-samples", cut_cell_samples,
+                  "distance samples per cell edge shaping cut cells: 1, 2, 4 or 8")
+      ->check(CLI::IsMember({1, 2, 4, 8}))
+      ->capture_default_str();
   app->add_option("--fps", fps, "frames per second")->capture_default_str();
   app->add_option("--duration", duration, "seconds to simulate (default: the scene's)");
 }
@@ -141,6 +145,7 @@ Result<scenes::Scene> SceneFlags::BuildScene() const {
 scenes::RunOptions SceneFlags::BuildRunOptions() const {
   scenes::RunOptions run;
   run.simulation.cells_along_longest_side = cells;
+  run.simulation.cut_cell_samples = cut_cell_samples;
   run.simulation.cell_size = cell_size;
   if (rho_infinity >= 0.0) run.simulation.UseGeneralizedAlpha(rho_infinity);
   run.simulation.element = element == fem::ToString(fem::ElementFormulation::kIncompatibleModes)

@@ -32,6 +32,7 @@ struct SceneFlags {
   double cell_size = 0.0;
   double rho_infinity = -1.0;         // < 0: Newmark; else generalized-alpha (SimulationOptions)
   std::string element = "trilinear";  // fem::ElementFormulation's name
+  int cut_cell_samples = fem::SimulationOptions().cut_cell_samples;
   int substeps = 4;
   double fps = 60.0;
   std::optional<double> duration;

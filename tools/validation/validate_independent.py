@@ -50,6 +50,8 @@ def parse_args(argv):
                         default="trilinear", help="the job config's \"element\"")
     parser.add_argument("--grid-orientation", choices=["world", "body"], default="world",
                         help="the job config's \"grid_orientation\"")
+    parser.add_argument("--cut-cell-samples", type=int, choices=[1, 2, 4, 8],
+                        help="the job config's \"cut_cell_samples\" (default: the job's default)")
     parser.add_argument("--frame-loss", choices=["squared", "cauchy"], default="squared",
                         help="the job config's \"cost\": {\"frame_loss\"} (docs/job-config.md)")
     parser.add_argument("--diagnose", action="store_true",
@@ -106,6 +108,8 @@ def job_config(truth, args):
               "element": args.element, "grid_orientation": args.grid_orientation,
               "diagnose": args.diagnose,
               "cost": {"frame_loss": args.frame_loss}}
+    if args.cut_cell_samples is not None:
+        config["cut_cell_samples"] = args.cut_cell_samples
     last = reference_last_frame(truth) if args.reference_frames else None
     if last is not None:
         config["frames"] = {"first": 0, "last": last}

@@ -3,10 +3,12 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <numbers>
 #include <stdexcept>
+#include <vector>
 
 namespace softid::geometry {
 namespace {
@@ -211,6 +213,74 @@ TEST(CutCellWeights, FiniteForCornersOnTheSurface) {
       EXPECT_TRUE(std::isfinite(w.octant_volume[c]));
     }
   }
+}
+
+}  // namespace
+}  // namespace softid::geometry
+
+namespace softid::geometry {
+namespace {
+
+// Phi of `f` on the (n + 1)^3 lattice of the unit-less cell [0, h]^3.
+std::vector<double> Lattice(const std::function<double(const Eigen::Vector3d&)>& f, int n,
+                            double h) {
+  std::vector<double> values;
+  for (int k = 0; k <= n; ++k) {
+    for (int j = 0; j <= n; ++j) {
+      for (int i = 0; i <= n; ++i) values.push_back(f(h / n * Eigen::Vector3d(i, j, k)));
+    }
+  }
+  return values;
+}
+
+// Where phi is linear the lattice adds nothing: every n gives the corners' weights.
+TEST(CutCellWeights, ALatticeOfAPlaneGivesTheCornersWeights) {
+  const double h = 0.02;
+  const Eigen::Vector3d normal = Eigen::Vector3d(0.3, -0.5, 0.8).normalized();
+  const auto plane = [&](const Eigen::Vector3d& x) { return normal.dot(x) - 0.004; };
+  const CutCellWeights corners = ComputeCutCellWeights(Lattice(plane, 1, h), 1, h);
+  ASSERT_GT(corners.volume, 0.1 * h * h * h);
+  ASSERT_LT(corners.volume, 0.9 * h * h * h);
+  for (int n : {2, 4, 8}) {
+    const CutCellWeights w = ComputeCutCellWeights(Lattice(plane, n, h), n, h);
+    EXPECT_NEAR(w.volume, corners.volume, 1e-12 * h * h * h) << n;
+    for (int c = 0; c < 8; ++c) {
+      EXPECT_NEAR(w.node_volume[c], corners.node_volume[c], 1e-12 * h * h * h) << n;
+      EXPECT_NEAR(w.octant_volume[c], corners.octant_volume[c], 1e-12 * h * h * h) << n;
+    }
+  }
+}
+
+// A box's corner inside the cell ({x, y, z < 0.82 h}: 0.551 of it) is rounded at the scale of the
+// lattice: the corners alone give about 0.2 of the cell, a lattice of h / 8 within 1 % of 0.551.
+TEST(CutCellWeights, ALatticeFollowsABoxCorner) {
+  const double h = 0.01, a = 0.82 * h;
+  const auto box_corner = [&](const Eigen::Vector3d& x) {
+    const Eigen::Vector3d q = x - Eigen::Vector3d::Constant(a);
+    return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
+  };
+  const double exact = a * a * a;
+  double previous_error = exact;
+  for (int n : {1, 2, 4, 8}) {
+    const CutCellWeights w = ComputeCutCellWeights(Lattice(box_corner, n, h), n, h);
+    ExpectConsistentSums(w, 1e-15);
+    const double error = exact - w.volume;
+    EXPECT_GT(error, 0.0) << n << ": the rounding only removes";
+    // Each halving of the lattice's spacing at least halves the rounding, down to the planar
+    // leaves' own error at h / 8.
+    if (n > 1 && n < 8) EXPECT_LT(error, 0.5 * previous_error) << n;
+    previous_error = error;
+  }
+  EXPECT_LT(previous_error, 0.01 * exact);
+  EXPECT_LT(ComputeCutCellWeights(Lattice(box_corner, 1, h), 1, h).volume, 0.45 * exact);
+}
+
+TEST(CutCellWeights, ALatticeOfTheWrongSizeOrSpacingIsRejected) {
+  const std::vector<double> lattice(27, -1.0);
+  EXPECT_DOUBLE_EQ(ComputeCutCellWeights(lattice, 2, 0.01).volume, 1e-6);
+  EXPECT_THROW(ComputeCutCellWeights(lattice, 3, 0.01), std::invalid_argument);
+  EXPECT_THROW(ComputeCutCellWeights(lattice, 4, 0.01), std::invalid_argument);
+  EXPECT_THROW(ComputeCutCellWeights(lattice, 2, 0.0), std::invalid_argument);
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <limits>
 #include <numbers>
+#include <span>
 
 #include "core/geometry/cut_cell_weights.h"
 #include "core/geometry/mesh_distance.h"
@@ -209,6 +210,55 @@ TEST(SignedDistanceField, CutCellVolumeOfSphereAndTorus) {
   // The hole of the torus is outside.
   EXPECT_GT(torus->Interpolate(Eigen::Vector3d::Zero()), 0.03);
   EXPECT_LT(torus->Interpolate(Eigen::Vector3d(R, 0, 0)), -0.8 * a);
+}
+
+// With cut_cell_samples, every cut cell (and only those) carries a lattice of the same distance
+// as the nodes, whose corners are the nodes' values; the cut cells then describe a box's edges
+// and corners closely: its volume comes out within 0.3 %, where the corners alone lose over 1 %.
+TEST(SignedDistanceField, CutCellLatticesSampleTheDistanceAndKeepABoxsEdges) {
+  const Eigen::Vector3d half(0.1, 0.05, 0.04);
+  SignedDistanceOptions options = Cells(13);
+  options.cut_cell_samples = 4;
+  const auto field = ComputeSignedDistanceField(MakeBox(2.0 * half, 0.03), options);
+  ASSERT_TRUE(field.ok());
+  const auto exact = [&](const Eigen::Vector3d& p) {
+    const Eigen::Vector3d q = p.cwiseAbs() - half;
+    return q.cwiseMax(0.0).norm() + std::min(q.maxCoeff(), 0.0);
+  };
+  const double h = field->grid.cell_size;
+  int cut = 0;
+  double lattice_volume = 0.0;
+  for (int cell = 0; cell < field->grid.NumCells(); ++cell) {
+    const std::array<int, 8> nodes = field->grid.CellNodes(cell);
+    int negative = 0;
+    for (int node : nodes) negative += field->phi[node] < 0.0;
+    const std::span<const double> lattice = field->CellLattice(cell);
+    if (negative == 0 || negative == 8) {
+      ASSERT_TRUE(lattice.empty()) << cell;
+      if (negative == 8) lattice_volume += h * h * h;
+      continue;
+    }
+    ++cut;
+    ASSERT_EQ(lattice.size(), 125u);
+    for (int c = 0; c < 8; ++c) {
+      ASSERT_EQ(lattice[4 * (c & 1) + 20 * ((c >> 1) & 1) + 100 * ((c >> 2) & 1)],
+                field->phi[nodes[c]]);
+    }
+    const Eigen::Vector3d origin = field->grid.NodePosition(nodes[0]);
+    for (int index : {31, 62, 93}) {
+      const Eigen::Vector3d p =
+          origin + h / 4 * Eigen::Vector3d(index % 5, index / 5 % 5, index / 25);
+      ASSERT_NEAR(lattice[index], exact(p), 1e-12) << p.transpose();
+    }
+    lattice_volume += ComputeCutCellWeights(lattice, 4, h).volume;
+  }
+  EXPECT_GT(cut, 100);
+  const double box = 8.0 * half.prod();
+  EXPECT_NEAR(lattice_volume, box, 3e-3 * box);
+  EXPECT_LT(CutCellVolume(*field), (1.0 - 1e-2) * box) << CutCellVolume(*field) / box;
+  options.cut_cell_samples = 3;
+  EXPECT_EQ(options.Validate().message(),
+            "SignedDistanceOptions.cut_cell_samples = 3: must be 1, 2, 4 or 8");
 }
 
 // A sphere with a hole still has its inside; an inward-oriented sphere gets the same field.

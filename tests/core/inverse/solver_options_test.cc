@@ -44,6 +44,8 @@ TEST(SolverOptions, ValidateNamesEveryFieldOutOfRange) {
        "element = 5: ", "\"trilinear\" or \"incompatible_modes\""},
       {[](SolverOptions& o) { o.grid_orientation = static_cast<fem::GridOrientation>(4); },
        "grid_orientation = 4: ", "\"world\" or \"body\""},
+      {[](SolverOptions& o) { o.cut_cell_samples = 3; }, "cut_cell_samples = 3: ",
+       "1, 2, 4 or 8"},
       {[](SolverOptions& o) { o.starts = 0; }, "starts = 0: ", "integer >= 1"},
       {[](SolverOptions& o) { o.threads = -1; }, "threads = -1: ", "integer >= 0"},
       {[](SolverOptions& o) { o.max_iterations = 0; }, "max_iterations = 0: ", "integer >= 1"},
@@ -85,6 +87,7 @@ TEST(SolverOptions, JsonRoundTripKeepsEveryField) {
   options.rho_infinity = 0.8;
   options.element = fem::ElementFormulation::kIncompatibleModes;
   options.grid_orientation = fem::GridOrientation::kWorld;
+  options.cut_cell_samples = 8;
   options.starts = 3;
   options.threads = 2;
   options.seed = 12345678901234ULL;
@@ -130,6 +133,18 @@ TEST(SolverOptions, AnUnknownGridOrientationIsRejectedByName) {
   ASSERT_FALSE(read.ok());
   EXPECT_EQ(read.status().message().rfind("grid_orientation = \"diagonal\": ", 0), 0u)
       << read.status().message();
+}
+
+TEST(SolverOptions, ACutCellSamplingOtherThanAPowerOfTwoUpToEightIsRejectedByName) {
+  for (const json& value : {json(3), json(16), json(0), json(2.5), json("4")}) {
+    const Result<SolverOptions> read = SolverOptionsFromJson(json{{"cut_cell_samples", value}});
+    ASSERT_FALSE(read.ok()) << value;
+    EXPECT_EQ(read.status().message().rfind("cut_cell_samples = " + value.dump() + ": ", 0), 0u)
+        << read.status().message();
+  }
+  const Result<SolverOptions> four = SolverOptionsFromJson(json{{"cut_cell_samples", 4}});
+  ASSERT_TRUE(four.ok()) << four.status().ToString();
+  EXPECT_EQ(four->cut_cell_samples, 4);
 }
 
 TEST(SolverOptions, AnUnknownFrameLossIsRejectedByName) {
