@@ -177,6 +177,9 @@ void Simulator::BuildGrid(const geometry::TriangleMesh& rest_mesh,
   ThrowIfError(sdf.status());
   sdf_ = std::move(sdf).value();
   mesh_ = BuildHexMesh(sdf_, options_.min_cell_volume_fraction);
+  // The cut cells' lattices have shaped the elements; nothing reads them again.
+  sdf_.cut_cell_phi = {};
+  sdf_.cut_cell_lattice = {};
   Eigen::AlignedBox3d rest_box;
   for (const Eigen::Vector3d& x : mesh_.rest_positions) rest_box.extend(x);
   rest_extent_ = rest_box.isEmpty() ? 0.0 : rest_box.diagonal().norm();
