@@ -5,6 +5,7 @@
 
 #include "core/common/check.h"
 #include "core/common/json_fields.h"
+#include "core/geometry/cut_cell_weights.h"
 
 namespace softid::fem {
 
@@ -34,8 +35,7 @@ Status SimulationOptions::Validate() const {
   if (!(min_force_volume_fraction >= 0.0 && min_force_volume_fraction <= 1.0)) {
     return Invalid("min_force_volume_fraction", min_force_volume_fraction, "must lie in [0, 1]");
   }
-  if (cut_cell_samples != 1 && cut_cell_samples != 2 && cut_cell_samples != 4 &&
-      cut_cell_samples != 8) {
+  if (!geometry::IsCutCellSampling(cut_cell_samples)) {
     return Invalid("cut_cell_samples", cut_cell_samples, "must be 1, 2, 4 or 8");
   }
   if (!(max_force_clamp_cells >= 0.0)) {

@@ -289,9 +289,8 @@ CutCellWeights ComputeCutCellWeights(const std::array<double, 8>& corner_phi, do
 CutCellWeights ComputeCutCellWeights(std::span<const double> lattice_phi, int samples_per_side,
                                      double cell_size) {
   const int n = samples_per_side;
-  SOFTID_THROW_UNLESS(
-      n == 1 || n == 2 || n == 4 || n == 8,
-      "ComputeCutCellWeights: samples_per_side = " + std::to_string(n) + ": must be 1, 2, 4 or 8");
+  SOFTID_THROW_UNLESS(IsCutCellSampling(n), "ComputeCutCellWeights: samples_per_side = " +
+                                                std::to_string(n) + ": must be 1, 2, 4 or 8");
   const int side = n + 1;
   SOFTID_THROW_UNLESS(static_cast<int>(lattice_phi.size()) == side * side * side,
                       "ComputeCutCellWeights: lattice of " + std::to_string(lattice_phi.size()) +

@@ -20,6 +20,12 @@ struct CutCellWeights {
 // Leaves of the adaptive integration have edge h / 2^kCutCellMaxDepth.
 inline constexpr int kCutCellMaxDepth = 3;
 
+// The cut-cell samplings supported: distance samples per cell edge n, a power of two up to
+// 2^kCutCellMaxDepth so that a lattice's sub-cubes are the integration's own sub-cubes.
+inline constexpr bool IsCutCellSampling(int n) {
+  return n == 1 || n == 2 || n == 4 || n == 8;
+}
+
 // corner_phi [m] in corner order c = dx + 2dy + 4dz; cell_size h [m] > 0 (else
 // std::invalid_argument). All corners negative -> exactly h^3/8 for every entry without sampling;
 // all >= 0 -> zeros. Cut cells: octree subdivision (starting from the 8 octants) of the sub-cubes

@@ -6,6 +6,7 @@
 #include <string>
 #include <thread>
 
+#include "core/geometry/cut_cell_weights.h"
 #include "core/geometry/mesh_distance.h"
 #include "core/geometry/winding_number.h"
 
@@ -16,6 +17,9 @@ constexpr long long kMaxNodes = 1LL << 27;
 // Extents within this fraction of a cell above a whole number of cells count as that number [-].
 constexpr double kWholeCellTolerance = 1e-3;
 constexpr int kNodesPerTask = 512;
+// A cut cell's lattice costs (n + 1)^3 distance queries; a few cells per task keep the counter
+// cold.
+constexpr int kCutCellsPerTask = 4;
 constexpr double kCoarseDecisionMargin = 0.1;
 
 std::string Field(const char* name) {
@@ -73,6 +77,27 @@ Status LayOutGrid(const Eigen::AlignedBox3d& bounds, const Eigen::Vector3d& exte
   return Status::Ok();
 }
 
+// Calls task(begin, end) on consecutive ranges of [0, count) of at most chunk indices, handed out
+// to num_threads threads (0 = hardware concurrency; never more than there are chunks), the
+// calling thread included.
+template <typename Task>
+void ParallelForChunks(int count, int chunk, int num_threads, const Task& task) {
+  std::atomic<int> next{0};
+  auto work = [&]() {
+    for (int begin = next.fetch_add(chunk); begin < count; begin = next.fetch_add(chunk)) {
+      task(begin, std::min(count, begin + chunk));
+    }
+  };
+  const int hardware = static_cast<int>(std::thread::hardware_concurrency());
+  const int chunks = (count + chunk - 1) / chunk;
+  const int threads = std::clamp(num_threads > 0 ? num_threads : hardware, 1, std::max(1, chunks));
+  std::vector<std::thread> workers;
+  workers.reserve(threads - 1);
+  for (int t = 1; t < threads; ++t) workers.emplace_back(work);
+  work();
+  for (std::thread& worker : workers) worker.join();
+}
+
 // The distance to the mesh, negative where the winding number says inside.
 double SignedDistanceAt(const MeshDistance& distance, const WindingNumber& winding,
                         const Eigen::Vector3d& p) {
@@ -90,30 +115,38 @@ void FillSignedDistances(const MeshDistance& distance, const WindingNumber& wind
                          int num_threads, SignedDistanceField* field) {
   const int n = field->grid.NumNodes();
   field->phi.assign(n, 0.0);
-  std::atomic<int> next_task{0};
-  auto work = [&]() {
-    while (true) {
-      const int begin = next_task.fetch_add(kNodesPerTask);
-      if (begin >= n) return;
-      const int end = std::min(n, begin + kNodesPerTask);
-      for (int node = begin; node < end; ++node) {
-        field->phi[node] = SignedDistanceAt(distance, winding, field->grid.NodePosition(node));
-      }
+  ParallelForChunks(n, kNodesPerTask, num_threads, [&](int begin, int end) {
+    for (int node = begin; node < end; ++node) {
+      field->phi[node] = SignedDistanceAt(distance, winding, field->grid.NodePosition(node));
     }
-  };
-  int threads =
-      num_threads > 0 ? num_threads : static_cast<int>(std::thread::hardware_concurrency());
-  threads = std::clamp(threads, 1, std::max(1, n / kNodesPerTask));
-  std::vector<std::thread> workers;
-  workers.reserve(threads - 1);
-  for (int t = 1; t < threads; ++t) workers.emplace_back(work);
-  work();
-  for (std::thread& worker : workers) worker.join();
+  });
 }
 
-// The cells whose corners differ in sign: each gets a lattice of n + 1 samples per edge, its
-// corners copied from phi (so that both descriptions agree where they meet) and the rest measured
-// like the nodes. Cells are handed out one at a time to num_threads threads.
+// One cut cell's lattice of n + 1 samples per edge: its corners copied from phi (so that both
+// descriptions agree where they meet), the rest measured like the nodes.
+void FillCutCellLattice(const MeshDistance& distance, const WindingNumber& winding,
+                        const RegularGrid& grid, const std::vector<double>& phi, int cell, int n,
+                        double* lattice) {
+  const int side = n + 1;
+  const std::array<int, 8> nodes = grid.CellNodes(cell);
+  const Eigen::Vector3d origin = grid.NodePosition(nodes[0]);
+  for (int k = 0; k <= n; ++k) {
+    for (int j = 0; j <= n; ++j) {
+      for (int i = 0; i <= n; ++i) {
+        double& value = lattice[i + side * (j + side * k)];
+        if ((i == 0 || i == n) && (j == 0 || j == n) && (k == 0 || k == n)) {
+          value = phi[nodes[(i == n) + 2 * (j == n) + 4 * (k == n)]];
+          continue;
+        }
+        value = SignedDistanceAt(distance, winding,
+                                 origin + grid.cell_size / n * Eigen::Vector3d(i, j, k));
+      }
+    }
+  }
+}
+
+// The cells whose corners differ in sign each get a lattice (FillCutCellLattice), on num_threads
+// threads.
 void FillCutCellLattices(const MeshDistance& distance, const WindingNumber& winding, int n,
                          int num_threads, SignedDistanceField* field) {
   const RegularGrid& grid = field->grid;
@@ -130,34 +163,13 @@ void FillCutCellLattices(const MeshDistance& distance, const WindingNumber& wind
   const int side = n + 1;
   const int lattice_size = side * side * side;
   field->cut_cell_phi.assign(cut_cells.size() * lattice_size, 0.0);
-  std::atomic<int> next{0};
-  auto work = [&]() {
-    for (int t = next.fetch_add(1); t < static_cast<int>(cut_cells.size()); t = next.fetch_add(1)) {
-      const std::array<int, 8> nodes = grid.CellNodes(cut_cells[t]);
-      const Eigen::Vector3d origin = grid.NodePosition(nodes[0]);
-      double* lattice = field->cut_cell_phi.data() + static_cast<size_t>(t) * lattice_size;
-      for (int k = 0; k <= n; ++k) {
-        for (int j = 0; j <= n; ++j) {
-          for (int i = 0; i <= n; ++i) {
-            double& value = lattice[i + side * (j + side * k)];
-            if ((i == 0 || i == n) && (j == 0 || j == n) && (k == 0 || k == n)) {
-              value = field->phi[nodes[(i == n) + 2 * (j == n) + 4 * (k == n)]];
-              continue;
-            }
-            const Eigen::Vector3d p = origin + grid.cell_size / n * Eigen::Vector3d(i, j, k);
-            value = SignedDistanceAt(distance, winding, p);
-          }
+  ParallelForChunks(
+      static_cast<int>(cut_cells.size()), kCutCellsPerTask, num_threads, [&](int begin, int end) {
+        for (int t = begin; t < end; ++t) {
+          FillCutCellLattice(distance, winding, grid, field->phi, cut_cells[t], n,
+                             field->cut_cell_phi.data() + static_cast<size_t>(t) * lattice_size);
         }
-      }
-    }
-  };
-  const int threads = std::clamp(
-      num_threads > 0 ? num_threads : static_cast<int>(std::thread::hardware_concurrency()), 1,
-      std::max(1, static_cast<int>(cut_cells.size()) / 16));
-  std::vector<std::thread> workers;
-  for (int t = 1; t < threads; ++t) workers.emplace_back(work);
-  work();
-  for (std::thread& worker : workers) worker.join();
+      });
 }
 
 }  // namespace
@@ -179,8 +191,7 @@ Status SignedDistanceOptions::Validate() const {
     return Status::InvalidArgument(Field("num_threads") + " = " + std::to_string(num_threads) +
                                    ": must be >= 0 (0 = hardware concurrency)");
   }
-  if (cut_cell_samples != 1 && cut_cell_samples != 2 && cut_cell_samples != 4 &&
-      cut_cell_samples != 8) {
+  if (!IsCutCellSampling(cut_cell_samples)) {
     return Status::InvalidArgument(Field("cut_cell_samples") + " = " +
                                    std::to_string(cut_cell_samples) + ": must be 1, 2, 4 or 8");
   }

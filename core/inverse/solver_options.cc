@@ -7,6 +7,7 @@
 #include <utility>
 
 #include "core/common/json_fields.h"
+#include "core/geometry/cut_cell_weights.h"
 
 namespace softid::inverse {
 namespace {
@@ -22,9 +23,6 @@ constexpr const char* kGradientRequirement = "must be \"adjoint\" or \"finite_di
 constexpr const char* kElementRequirement = "must be \"trilinear\" or \"incompatible_modes\"";
 constexpr const char* kGridOrientationRequirement = "must be \"world\" or \"body\"";
 constexpr const char* kCutCellSamplesRequirement = "must be 1, 2, 4 or 8";
-bool IsCutCellSampling(int n) {
-  return n == 1 || n == 2 || n == 4 || n == 8;
-}
 constexpr const char* kRestSdfRequirement = "must be \"surface_fitted\", \"exact\" or \"sampled\"";
 constexpr const char* kFrameLossRequirement = "must be \"squared\" or \"cauchy\"";
 constexpr auto kCostKeys = std::to_array<std::string_view>(
@@ -155,7 +153,7 @@ Status ParseDiscretisation(const Json& j, SolverOptions* options) {
   }
   if (j.contains("cut_cell_samples")) {
     const Json& value = j["cut_cell_samples"];
-    if (!value.is_number_integer() || !IsCutCellSampling(value.get<int>())) {
+    if (!value.is_number_integer() || !geometry::IsCutCellSampling(value.get<int>())) {
       return json::Invalid("cut_cell_samples", value, kCutCellSamplesRequirement);
     }
     options->cut_cell_samples = value.get<int>();
@@ -274,7 +272,7 @@ Status SolverOptions::Validate() const {
     return json::Invalid("grid_orientation", static_cast<int>(grid_orientation),
                          kGridOrientationRequirement);
   }
-  if (!IsCutCellSampling(cut_cell_samples)) {
+  if (!geometry::IsCutCellSampling(cut_cell_samples)) {
     return json::Invalid("cut_cell_samples", cut_cell_samples, kCutCellSamplesRequirement);
   }
   if (starts < 1) return json::Invalid("starts", starts, AtLeast(1));
