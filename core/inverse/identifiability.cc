@@ -372,25 +372,28 @@ Result<Curvature> CurvatureByGradientDifferences(const ObjectiveFactory& make_ob
   return out;
 }
 
-// H ~ J^T J with J e_j ~ (r(x* + s e_j) - r(x*)) / s for the residuals r of
-// TrajectoryObjective::EvaluateResiduals (C = |r|^2 / 2): 1 + p forward runs, no adjoint. Exact
+// H ~ J^T J with J e_j ~ (r(x* + s e_j) - r(x* - s e_j)) / (2 s) for the residuals r of
+// TrajectoryObjective::EvaluateResiduals (C = |r|^2 / 2): 1 + 2p forward runs, no adjoint. Exact
 // to first order at a fit whose residuals are at the noise (the second-order term averages out).
 Result<Curvature> CurvatureByGaussNewton(const ObjectiveFactory& make_objective,
                                          const Stencil& stencil,
                                          const IdentifiabilityOptions& options) {
   const int p = stencil.p;
   const double s = stencil.s;
-  const int num_tasks = 1 + p;  // the centre, then x0 + s e_j
+  const int num_tasks = 1 + 2 * p;  // the centre, then x0 -+ s e_j
   std::vector<Eigen::VectorXd> residuals(num_tasks);
   std::vector<int> frame_sizes;
   Curvature out;
   SOFTID_RETURN_IF_ERROR(RunOnObjectives(
       make_objective, num_tasks, Threads(options), [&](TrajectoryObjective& objective, int task) {
+        const int variable = task > 0 ? (task - 1) / 2 : -1;
+        const double offset = task % 2 == 1 ? -s : s;
         std::vector<double> x;
-        SOFTID_ASSIGN_OR_RETURN(const fem::PhysicalParameters at, stencil.Point(task - 1, s, &x));
+        SOFTID_ASSIGN_OR_RETURN(const fem::PhysicalParameters at,
+                                stencil.Point(variable, offset, &x));
         SOFTID_ASSIGN_OR_RETURN(ObjectiveEvaluation evaluation,
                                 objective.EvaluateResiduals(at, &residuals[task]));
-        if (evaluation.diverged) return stencil.Diverged(task - 1, " + ");
+        if (evaluation.diverged) return stencil.Diverged(variable, offset < 0 ? " - " : " + ");
         if (task == 0) {
           out.cost = evaluation.reweighted_cost;
           out.num_points = PointsInFittedFrames(objective);
@@ -399,7 +402,8 @@ Result<Curvature> CurvatureByGaussNewton(const ObjectiveFactory& make_objective,
         return Status::Ok();
       }));
   Eigen::MatrixXd jacobian(residuals[0].size(), p);
-  for (int j = 0; j < p; ++j) jacobian.col(j) = (residuals[1 + j] - residuals[0]) / s;
+  for (int j = 0; j < p; ++j)
+    jacobian.col(j) = (residuals[2 + 2 * j] - residuals[1 + 2 * j]) / (2.0 * s);
   out.evaluations = num_tasks;
   out.hessian = jacobian.transpose() * jacobian;
   out.gradient = jacobian.transpose() * residuals[0];
