@@ -324,8 +324,9 @@ TEST(Diagnose, ControlWithoutEffectGivesNone) {
 // parameters free it also finishes the base fit. The null refitted from such a refit's values
 // (extension at its null) is as good, so no physics is reported; nothing explains the first
 // base's misfit, so the diagnosis restarts from that better base and finds nothing missing.
-// (From 3 %, since the box's grid lost its float-made half-cell layer, the stiffness split
-// refits to a ratio of 0.93 and is rejected as uniform before its null is refitted.)
+// Two refits: the stiffness split (screened first) mostly refits to a near-uniform body from
+// such a base (ratios 0.84-1.11 from 1, 2 and 5 % of the truth) and is then rejected as uniform
+// before its null is refitted; the contact law, refitted second, has no such gate.
 TEST(Diagnose, AnExtensionThatOnlyFinishesAPoorBaseFitIsNotPhysics) {
   RampCapture ramp(0.0);
   inverse::JobConfig config = ramp.BaseConfig();
@@ -336,7 +337,9 @@ TEST(Diagnose, AnExtensionThatOnlyFinishesAPoorBaseFitIsNotPhysics) {
   poor.solver.continuation = false;
   Result<inverse::FitResult> base = inverse::Fit(ramp.capture, poor);
   ASSERT_TRUE(base.ok()) << base.status().ToString();
-  Result<DiagnosisReport> report = Diagnose(ramp.capture, config, SmallOptions(), &*base);
+  DiagnoseOptions options = SmallOptions();
+  options.decision.max_refits = 2;
+  Result<DiagnosisReport> report = Diagnose(ramp.capture, config, options, &*base);
   ASSERT_TRUE(report.ok()) << report.status().ToString();
   EXPECT_EQ(report->decision, "none") << ToText(*report);
   ASSERT_EQ(report->base_restarts.size(), 1u) << ToText(*report);

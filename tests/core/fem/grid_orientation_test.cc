@@ -98,7 +98,10 @@ TEST(GridOrientation, ATurnedBodyMovesAsTheUnturnedOneTurned) {
   Simulator body(turned.mesh, turned.parameters, Options(GridOrientation::kBody));
   EXPECT_LT(Eigen::AngleAxisd(body.mesh_from_grid().transpose() * turn).angle(), 1e-5);
   EXPECT_EQ(body.hex_mesh().NumElements(), along.hex_mesh().NumElements());
-  EXPECT_LT(LargestDeparture(expected, SurfaceAfter(body, kSteps), turn), 2e-6);
+  // The grid's axes are found to 5.6e-7 rad, which moves the distance samples by up to 3e-8 m,
+  // and the frictional landing amplifies that: measured 2.7e-8 m after one step and 3.3e-7 m
+  // after all with one distance sample per cut cell's edge, 2.0e-7 and 3.9e-6 m with four.
+  EXPECT_LT(LargestDeparture(expected, SurfaceAfter(body, kSteps), turn), 1e-5);
   const double body_centre_departure = (body.CentreOfMass() - expected_centre).norm();
 
   Simulator world(turned.mesh, turned.parameters, Options(GridOrientation::kWorld));
