@@ -30,8 +30,8 @@ SynthesisOptions SmallOptions() {
 }
 
 // A synthesised capture is accepted by the capture reader unchanged, with one frame per 1/fps per
-// camera showing the object, truth.json holding the scene's parameters under the public names,
-// and mass_kg = density x mesh volume.
+// camera showing the object, truth.json holding the scene's parameters under the public names
+// and the generator's grid, and mass_kg = density x mesh volume.
 TEST(Synthesize, WritesACaptureTheReaderAccepts) {
   Result<Scene> scene = MakeBuiltinScene("ball-bounce");
   ASSERT_TRUE(scene.ok());
@@ -61,6 +61,11 @@ TEST(Synthesize, WritesACaptureTheReaderAccepts) {
   const auto parameters = fem::PhysicalParametersFromJson(truth["parameters"]);
   ASSERT_TRUE(parameters.ok()) << parameters.status().ToString();
   EXPECT_EQ(fem::ToJson(*parameters), fem::ToJson(scene->parameters));
+  // The generator's discretisation, to tell a fit's grid error from its own.
+  const SynthesisOptions options = SmallOptions();
+  EXPECT_EQ(truth["generator"]["cells_along_longest_side"],
+            options.run.simulation.cells_along_longest_side);
+  EXPECT_EQ(truth["generator"]["cut_cell_samples"], options.run.simulation.cut_cell_samples);
   EXPECT_TRUE(std::filesystem::exists(dir / kPreviewFileName));
   std::filesystem::remove_all(dir);
 }
