@@ -15,8 +15,12 @@
 namespace softid::server {
 
 // `scratch_root` is a folder of the data directory; the layout is removed before returning.
+// `count_grid_nodes`: also count the nodes of the grids "auto" cells may simulate
+// (CaptureExtent::candidate_grid_nodes; a signed-distance field per candidate, a fraction of a
+// second each on a scanned mesh), which only a job that leaves its grid to "auto" needs.
 ServiceResult<inverse::CaptureExtent> ReadCaptureExtent(const store::Capture& capture,
                                                         const store::BlobStore& blobs,
-                                                        const std::filesystem::path& scratch_root);
+                                                        const std::filesystem::path& scratch_root,
+                                                        bool count_grid_nodes);
 
 }  // namespace softid::server

@@ -302,8 +302,10 @@ ServiceStatus JobService::CheckJobFitsCapture(const Caller& caller,
   if (!caller.Sees(capture->owner)) {
     return ServiceStatus(ServiceCode::kNotFound, "capture " + capture_id + " not found");
   }
+  const bool auto_cells =
+      config.solver.cell_size_m <= 0.0 && config.solver.cells == inverse::kAutoCells;
   ServiceResult<inverse::CaptureExtent> extent =
-      ReadCaptureExtent(*capture, *blobs_, options_.scratch_root);
+      ReadCaptureExtent(*capture, *blobs_, options_.scratch_root, auto_cells);
   if (!extent.ok()) return extent.status();
   Result<inverse::JobResourceEstimate> estimate =
       inverse::EstimateJobResources(config, *extent, options_.job_limits);

@@ -7,6 +7,9 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "core/fem/hex_mesh.h"
+#include "core/fem/simulator.h"
+#include "core/geometry/signed_distance_field.h"
 #include "core/inverse/surface_trajectory.h"
 
 namespace softid::inverse {
@@ -74,20 +77,18 @@ Status RefineGridUntilConverged(const geometry::TriangleMesh& rest_mesh,
                                      WithCells(simulation, cells), fps, last_frame,
                                      options.substeps, options.cancel);
   };
-  const Eigen::Vector3d size = rest_mesh.Bounds().sizes();
-  auto affordable = [&](int cells) {
-    return GridNodeEstimate(size, cells) <= options.max_grid_nodes;
-  };
+  SOFTID_ASSIGN_OR_RETURN(
+      const std::vector<int> nodes,
+      CandidateGridNodes(rest_mesh, simulation, fixed_region.has_value(), options));
   const auto begin = Clock::now();
   auto started = begin;
   selection->cells = options.candidates.front();
   SurfaceRun coarse = run(selection->cells);
   double last_run_s = coarse.seconds;
-  for (size_t i = 1; i < options.candidates.size() && affordable(options.candidates[i]); ++i) {
+  for (size_t i = 1; i < nodes.size() && nodes[i] <= options.max_grid_nodes; ++i) {
     const int finer_cells = options.candidates[i];
     // A run's time grows with the grid's nodes: the next one's is the last one's, scaled.
-    const double next_run_s = last_run_s * GridNodeEstimate(size, finer_cells) /
-                              GridNodeEstimate(size, options.candidates[i - 1]);
+    const double next_run_s = last_run_s * nodes[i] / std::max(1, nodes[i - 1]);
     if (options.max_seconds > 0.0 && SecondsSince(begin) + next_run_s > options.max_seconds) {
       selection->stopped_at_time_limit = true;
       break;
@@ -179,6 +180,33 @@ Result<GridSelection> SelectGrid(const geometry::TriangleMesh& rest_mesh,
         options.candidates.back(), options.max_grid_nodes);
   }
   return selection;
+}
+
+Result<int> CountGridNodes(const geometry::TriangleMesh& rest_mesh,
+                           const fem::SimulationOptions& simulation, bool clamped, int cells) {
+  const Eigen::Matrix3d mesh_from_grid = fem::ChooseGridAxes(rest_mesh, simulation, clamped);
+  geometry::TriangleMesh turned = rest_mesh;
+  for (Eigen::Vector3d& x : turned.vertices) x = mesh_from_grid.transpose() * x;
+  geometry::SignedDistanceOptions options;
+  options.cells_along_longest_side = cells;
+  options.padding_cells = simulation.padding_cells;
+  options.cut_cell_samples = simulation.cut_cell_samples;
+  SOFTID_ASSIGN_OR_RETURN(const geometry::SignedDistanceField sdf,
+                          geometry::ComputeSignedDistanceField(turned, options));
+  return fem::BuildHexMesh(sdf, simulation.min_cell_volume_fraction).NumNodes();
+}
+
+Result<std::vector<int>> CandidateGridNodes(const geometry::TriangleMesh& rest_mesh,
+                                            const fem::SimulationOptions& simulation, bool clamped,
+                                            const GridSelectionOptions& options) {
+  SOFTID_RETURN_IF_ERROR(options.Validate());
+  std::vector<int> nodes;
+  for (const int cells : options.candidates) {
+    SOFTID_ASSIGN_OR_RETURN(const int count, CountGridNodes(rest_mesh, simulation, clamped, cells));
+    nodes.push_back(count);
+    if (count > options.max_grid_nodes) break;
+  }
+  return nodes;
 }
 
 double GridNodeEstimate(const Eigen::Vector3d& size, int cells) {

@@ -36,10 +36,11 @@ struct GridSelectionOptions {
   // Floor of the accepted difference, as a fraction of the mesh's longest side [-], >= 0, for
   // noise-free captures whose sigma is the depth quantum.
   double min_tolerance_fraction = 1e-3;
-  // Candidates whose grid would have more nodes (GridNodeEstimate) are not simulated [-], >= 1:
-  // a fit's time grows a little faster than its node count (docs/benchmarks.md). 6000 admits 16
-  // cells for the torus-drop benchmark (2023; 24 cells would be 6250), the default before grids
-  // were chosen, 16 for a cube (4913) and 24 for slimmer bodies.
+  // Candidates whose grid keeps more nodes (CountGridNodes: the cells the body cuts, not its
+  // bounding box) are not simulated [-], >= 1: a fit's time grows a little faster than its node
+  // count (docs/benchmarks.md). A slim body keeps a small share of its box (the scanned bunny:
+  // 4539 of 12500 at 24 cells), and its thin parts are what need the finer grid. 6000 admits 16
+  // cells for a cube (4913), 24 for the torus (3592) and the bunny, 32 for the dragon (4117).
   int max_grid_nodes = 6000;
   // Steps per camera frame of the comparison runs [-], >= 1: fine enough that the time step does
   // not hide the grid's error.
@@ -100,9 +101,22 @@ Result<GridSelection> SelectGrid(const geometry::TriangleMesh& rest_mesh,
 
 nlohmann::json ToJson(const GridSelection& selection);
 
+// The nodes fem::Simulator keeps (the cells the body cuts) on the grid of `cells` along the
+// longest side of `rest_mesh`, with `simulation`'s grid options and axes (fem::ChooseGridAxes;
+// a clamped body's grid is not shifted onto the clamp's faces here): one signed-distance field, no
+// simulation. InvalidArgument as geometry::ComputeSignedDistanceField.
+Result<int> CountGridNodes(const geometry::TriangleMesh& rest_mesh,
+                           const fem::SimulationOptions& simulation, bool clamped, int cells);
+
 // The nodes of a grid with `cells` along the longest side over a body's bounding box of `size`
-// [m], computed without building the grid: a measure of its cost (the simulation keeps the cells
-// the body cuts, which for a box is about this many nodes).
+// [m], computed without building the grid: an upper bound of the nodes the simulation keeps (a
+// box's count; a slim body keeps far fewer, see CountGridNodes).
 double GridNodeEstimate(const Eigen::Vector3d& size, int cells);
+
+// CountGridNodes at options.candidates, ascending, up to and including the first above
+// options.max_grid_nodes: the grids "auto" cells may simulate, and what they cost.
+Result<std::vector<int>> CandidateGridNodes(const geometry::TriangleMesh& rest_mesh,
+                                            const fem::SimulationOptions& simulation, bool clamped,
+                                            const GridSelectionOptions& options = {});
 
 }  // namespace softid::inverse

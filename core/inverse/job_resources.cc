@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <utility>
 
 #include "core/inverse/grid_selection.h"
 #include "core/inverse/time_step_selection.h"
@@ -66,13 +67,19 @@ double BoxNodes(const Eigen::Vector3d& size, double h) {
   return nodes;
 }
 
-// "auto" cells: the finest candidate the grid selection may simulate within its node budget.
-int FinestAffordableCandidate(const Eigen::Vector3d& size) {
+// "auto" cells: the finest candidate the grid selection may simulate within its node budget, and
+// its nodes.
+std::pair<int, double> FinestAffordableCandidate(const CaptureExtent& extent) {
   const GridSelectionOptions selection;
-  for (auto it = selection.candidates.rbegin(); it != selection.candidates.rend(); ++it) {
-    if (GridNodeEstimate(size, *it) <= selection.max_grid_nodes) return *it;
-  }
-  return selection.candidates.front();
+  const Eigen::Vector3d size = extent.mesh_bounds.sizes();
+  auto nodes = [&](size_t i) {
+    return i < extent.candidate_grid_nodes.size() ? extent.candidate_grid_nodes[i]
+                                                  : GridNodeEstimate(size, selection.candidates[i]);
+  };
+  size_t chosen = 0;
+  for (size_t i = 1; i < selection.candidates.size() && nodes(i) <= selection.max_grid_nodes; ++i)
+    chosen = i;
+  return {selection.candidates[chosen], nodes(chosen)};
 }
 
 // The capture's extent must be non-empty and hold the frames the config selects.
@@ -83,6 +90,13 @@ Status CheckCaptureExtent(const JobConfig& config, const CaptureExtent& extent) 
   if (!extent.frame_periods.empty() &&
       extent.frame_periods.size() != static_cast<size_t>(extent.num_frames)) {
     return Status::InvalidArgument("capture: frame_times and frames differ in number");
+  }
+  for (size_t i = 0; i < extent.candidate_grid_nodes.size(); ++i) {
+    if (extent.candidate_grid_nodes[i] < 1) {
+      return Status::InvalidArgument(
+          fmt::format("capture: candidate_grid_nodes[{}] = {}: must be >= 1", i,
+                      extent.candidate_grid_nodes[i]));
+    }
   }
   const int last_frame = extent.num_frames - 1;
   if (config.frames.first > last_frame) {
@@ -117,12 +131,12 @@ RunSize EstimateRunSize(const JobConfig& config, const CaptureExtent& extent,
   const int fitted_last = config.frames.last < 0 ? last_frame : config.frames.last;
   RunSize run;
   const Eigen::Vector3d size = extent.mesh_bounds.sizes();
-  const int cells = config.solver.cell_size_m <= 0.0 && config.solver.cells == kAutoCells
-                        ? FinestAffordableCandidate(size)
-                        : config.solver.cells;
+  const bool auto_cells = config.solver.cell_size_m <= 0.0 && config.solver.cells == kAutoCells;
+  const auto [auto_choice, auto_nodes] = FinestAffordableCandidate(extent);
+  const int cells = auto_cells ? auto_choice : config.solver.cells;
   estimate->cell_size_m = config.solver.cell_size_m > 0.0 ? config.solver.cell_size_m
                                                           : size.maxCoeff() / std::max(1, cells);
-  run.nodes = BoxNodes(size, estimate->cell_size_m);
+  run.nodes = auto_cells ? auto_nodes : BoxNodes(size, estimate->cell_size_m);
   const int substeps = config.solver.substeps == kAutoSubsteps
                            ? LargestSubstepCandidate(run.nodes, SubstepSelectionOptions{})
                            : config.solver.substeps;

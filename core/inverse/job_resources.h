@@ -21,11 +21,16 @@ struct CaptureExtent {
   // Time of frame k in nominal frame periods (t_k * fps) when the capture has frame_times;
   // empty: evenly spaced (k). Sizes the simulation's steps: dropped frames still cost steps.
   std::vector<double> frame_periods;
+  // The nodes of GridSelectionOptions' candidate grids over the mesh (CandidateGridNodes), what
+  // "auto" cells may simulate; empty: unknown, each grid counted as its bounding box's nodes.
+  std::vector<int> candidate_grid_nodes;
 };
 
 struct JobResourceEstimate {
-  double cell_size_m = 0.0;   // h [m]
-  int64_t grid_nodes = 0;     // nodes of the grid over the mesh's bounds (>= simulated nodes)
+  double cell_size_m = 0.0;  // h [m]
+  // Nodes of the grid: the simulated count for "auto" cells with candidate_grid_nodes, else the
+  // bounding box's (>= simulated nodes).
+  int64_t grid_nodes = 0;
   int64_t steps_per_run = 0;  // simulation steps of one forward run over the fitted frames
   int concurrent_starts = 0;  // starts that run at once
   double memory_bytes = 0.0;  // peak estimate over the concurrent starts [B]
@@ -52,7 +57,8 @@ struct JobResourceLimits {
 //   steps per run); at most 4 GiB is accepted: use fewer cells, substeps or frames
 //   max_iterations = 5000: the job could run for about 31 h (...); at most 24 h is accepted
 // "auto" substeps count as their largest candidate on that grid (LargestSubstepCandidate), "auto"
-// cells as the finest grid candidate within GridSelectionOptions::max_grid_nodes.
+// cells as the finest grid candidate within GridSelectionOptions::max_grid_nodes (counted as
+// extent.candidate_grid_nodes says, else as the bounding box's nodes).
 Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
                                                  const CaptureExtent& extent,
                                                  const JobResourceLimits& limits);

@@ -29,6 +29,7 @@ nlohmann::json ModesReport(const ModesFlags& flags, const fem::Simulator& sim,
                            {"grid_orientation", flags.grid_orientation},
                            {"cell_size_m", sim.hex_mesh().CellSize()},
                            {"elements", sim.hex_mesh().NumElements()},
+                           {"nodes", sim.hex_mesh().NumNodes()},
                            {"degrees_of_freedom", modes.degrees_of_freedom},
                            {"youngs_modulus", sim.parameters().youngs_modulus},
                            {"poisson_ratio", sim.parameters().poisson_ratio},
@@ -67,10 +68,10 @@ int RunModes(const ModesFlags& flags) {
     return modes.status().code() == StatusCode::kInternal ? kExitFailure : kExitInvalidInput;
   }
   const nlohmann::json report = ModesReport(flags, *sim, *modes);
-  std::printf("%s, %s grid, cell %.4g m, %d elements: %d rigid modes (largest %.2g Hz)\n",
+  std::printf("%s, %s grid, cell %.4g m, %d elements, %d nodes: %d rigid modes (largest %.2g Hz)\n",
               flags.scene.element.c_str(), flags.grid_orientation.c_str(),
-              sim->hex_mesh().CellSize(), sim->hex_mesh().NumElements(), modes->rigid_modes,
-              modes->rigid_frequency_hz);
+              sim->hex_mesh().CellSize(), sim->hex_mesh().NumElements(), sim->hex_mesh().NumNodes(),
+              modes->rigid_modes, modes->rigid_frequency_hz);
   for (size_t i = 0; i < modes->frequencies_hz.size(); ++i)
     std::printf("  mode %zu: %.4f Hz\n", i + 1, modes->frequencies_hz[i]);
   if (flags.reference_hz) {

@@ -92,7 +92,8 @@ TEST(SelectGrid, TrialsSayUntilWhichFrameTheGridsAgree) {
 
 TEST_F(SelectGridTest, NeverSimulatesAGridAboveTheNodeBudget) {
   GridSelectionOptions options = SmallGrids();
-  // A budget that admits the 6-cell grid and not the 9-cell one: 9 is never run.
+  // A budget of the 6-cell grid's box admits the 6-cell grid and not the 9-cell one: 9 is never
+  // run.
   const Eigen::Vector3d size = scene->mesh.Bounds().sizes();
   options.max_grid_nodes = static_cast<int>(GridNodeEstimate(size, 6));
   ASSERT_GT(GridNodeEstimate(size, 9), options.max_grid_nodes);
@@ -105,6 +106,40 @@ TEST_F(SelectGridTest, NeverSimulatesAGridAboveTheNodeBudget) {
   EXPECT_EQ(ToJson(*capped)["cells"], 6);
   // A ball's grid keeps fewer nodes than its bounding box has.
   EXPECT_LE(capped->trials[0].grid_nodes, GridNodeEstimate(size, 4));
+}
+
+// The budget counts the nodes the simulation keeps (CountGridNodes, the run's own count), not
+// the bounding box's: a budget the 9-cell box exceeds admits the 9-cell grid of a ball; one node
+// less does not.
+TEST_F(SelectGridTest, TheBudgetCountsTheGridsOwnNodes) {
+  const Result<GridSelection> all = Select(1e-9, SmallGrids());
+  ASSERT_TRUE(all.ok()) << all.status().ToString();
+  ASSERT_EQ(all->trials.size(), 2u);
+  for (const GridTrial& trial : all->trials) {
+    const Result<int> counted = CountGridNodes(scene->mesh, {}, false, trial.cells);
+    ASSERT_TRUE(counted.ok()) << counted.status().ToString();
+    EXPECT_EQ(*counted, trial.grid_nodes) << trial.cells << " cells";
+  }
+  const Result<int> nodes_9 = CountGridNodes(scene->mesh, {}, false, 9);
+  ASSERT_TRUE(nodes_9.ok());
+  ASSERT_LT(*nodes_9, 0.8 * GridNodeEstimate(scene->mesh.Bounds().sizes(), 9));
+
+  GridSelectionOptions options = SmallGrids();
+  options.max_grid_nodes = *nodes_9;
+  const Result<GridSelection> admitted = Select(1e-9, options);
+  ASSERT_TRUE(admitted.ok());
+  EXPECT_EQ(admitted->cells, 9);
+  EXPECT_EQ(admitted->trials.size(), 2u);
+
+  options.max_grid_nodes = *nodes_9 - 1;
+  const Result<GridSelection> capped = Select(1e-9, options);
+  ASSERT_TRUE(capped.ok());
+  EXPECT_EQ(capped->cells, 6);
+  EXPECT_EQ(capped->trials.size(), 1u);
+  const Result<std::vector<int>> candidates = CandidateGridNodes(scene->mesh, {}, false, options);
+  ASSERT_TRUE(candidates.ok());
+  EXPECT_EQ(*candidates,
+            (std::vector<int>{all->trials[0].grid_nodes, all->trials[1].grid_nodes, *nodes_9}));
 }
 
 TEST_F(SelectGridTest, RefusesBadOptionsNamingTheField) {

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <string>
+#include <vector>
 
 #include "core/inverse/grid_selection.h"
 #include "core/inverse/time_step_selection.h"
@@ -43,6 +44,36 @@ TEST(JobResources, DefaultConfigFitsWithRoom) {
   EXPECT_EQ(estimate->steps_per_run, 60 * 64);
   EXPECT_EQ(estimate->concurrent_starts, 2);
   EXPECT_LT(estimate->memory_bytes, 0.5 * limits.max_memory_bytes);
+}
+
+// With the grids' own node counts known (CandidateGridNodes), "auto" cells take the finest grid
+// whose own nodes are within the budget, not its bounding box's: a slim body affords a finer grid.
+TEST(JobResources, AutoCellsCountTheGridsOwnNodesWhenKnown) {
+  JobResourceLimits limits;
+  limits.cores = 2;
+  const GridSelectionOptions selection;
+  ASSERT_EQ(selection.candidates, (std::vector<int>{8, 12, 16, 24, 32, 48}));
+  ASSERT_EQ(selection.max_grid_nodes, 6000);
+  CaptureExtent slim = TorusSized();
+  // A body that keeps a third of its box at every candidate: 32 cells keep 33 x 33 x 13 / 3 =
+  // 4719 nodes, 48 cells 15206.
+  for (const int cells : selection.candidates) {
+    slim.candidate_grid_nodes.push_back(
+        static_cast<int>(GridNodeEstimate(slim.mesh_bounds.sizes(), cells) / 3));
+  }
+  const Result<JobResourceEstimate> estimate = EstimateJobResources({}, slim, limits);
+  ASSERT_TRUE(estimate.ok()) << estimate.status().ToString();
+  EXPECT_DOUBLE_EQ(estimate->cell_size_m, 0.28 / 32);
+  EXPECT_EQ(estimate->grid_nodes, slim.candidate_grid_nodes[4]);
+  // A count over the budget stops the choice before it, as the selection would.
+  slim.candidate_grid_nodes[4] = selection.max_grid_nodes + 1;
+  const Result<JobResourceEstimate> capped = EstimateJobResources({}, slim, limits);
+  ASSERT_TRUE(capped.ok()) << capped.status().ToString();
+  EXPECT_DOUBLE_EQ(capped->cell_size_m, 0.28 / 24);
+  EXPECT_EQ(capped->grid_nodes, slim.candidate_grid_nodes[3]);
+  // A count that no grid can have is refused naming it.
+  slim.candidate_grid_nodes[1] = 0;
+  ExpectRefused(EstimateJobResources({}, slim, limits), "candidate_grid_nodes[1] = 0");
 }
 
 // The configs an attacker or an unlucky user sent: each refused, naming the key.
