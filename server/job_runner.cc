@@ -16,6 +16,7 @@
 #include "core/inverse/fit.h"
 #include "core/inverse/fit_checkpoint.h"
 #include "core/inverse/fit_uncertainty.h"
+#include "core/inverse/grid_refinement.h"
 #include "core/inverse/job_config.h"
 #include "server/fit_progress.h"
 #include "server/job_capture.h"
@@ -208,9 +209,36 @@ struct AttemptResults {
   nlohmann::json report_json;                          // the pictures (core/diagnosis/fit_report.h)
   std::optional<inverse::FitUncertainty> uncertainty;  // "uncertainty": true (the default)
   std::string uncertainty_error;
-  nlohmann::json resumed_json;  // when an earlier attempt's starts were kept
-  Status prepared;              // the capture laid out (a recording ingested)
+  nlohmann::json refinement_json;  // "refine_grid": true only
+  nlohmann::json resumed_json;     // when an earlier attempt's starts were kept
+  Status prepared;                 // the capture laid out (a recording ingested)
 };
+
+// "refine_grid": the refit on a finer grid where the grid moves a fitted value
+// (core/inverse/grid_refinement.h), its iterations in the job's history; the refit and its
+// analysis replace the fit's in `out`, and *config becomes what the refit was computed with.
+void RefineGrid(const JobAttempt& attempt, const capture::Capture& capture,
+                inverse::JobConfig* config, AttemptResults* out) {
+  const store::Job& job = attempt.job;
+  const JobRunnerContext& context = attempt.context;
+  inverse::FitOptions options;
+  options.cancel = &attempt.cancel;
+  options.on_progress = [&](const inverse::FitProgress& p) {
+    const double elapsed =
+        std::chrono::duration<double>(Stopwatch::now() - attempt.started).count();
+    RecordIteration(job, IterationEvent(p, *config, elapsed), context);
+    Result<bool> requested = context.jobs->IsCancelRequested(job.id);
+    if (requested.ok() && *requested) attempt.cancel.store(true);
+  };
+  inverse::ControlledFit controlled = inverse::ControlGrid(
+      capture, *config, std::move(out->fit).value(), std::move(*out->uncertainty), options);
+  RecordNote(job, "grid refinement: " + controlled.refinement.decision.reason, context);
+  out->fit = std::move(controlled.fit);
+  out->uncertainty = std::move(controlled.uncertainty);
+  out->uncertainty_error = controlled.uncertainty_error;
+  out->refinement_json = inverse::ToJson(controlled.refinement);
+  *config = std::move(controlled.config);
+}
 
 // What is derived from a fit that ran to its end: its uncertainty, diagnosis and pictures, as
 // the config asks.
@@ -218,9 +246,10 @@ void DeriveFromFit(const JobAttempt& attempt, const Result<capture::Capture>& ca
                    AttemptResults* out) {
   const store::Job& job = attempt.job;
   const JobRunnerContext& context = attempt.context;
-  const inverse::JobConfig& config = attempt.config;
   std::atomic<bool>& cancel = attempt.cancel;
-  const Result<inverse::FitResult>& result = out->fit;
+  Result<inverse::FitResult>& result = out->fit;
+  // What the fit was computed with: the job's config, on the finer grid after a refinement.
+  inverse::JobConfig config = attempt.config;
   if (result.ok() && !result->cancelled && config.uncertainty) {
     Result<inverse::FitUncertainty> estimated =
         inverse::EstimateFitUncertainty(*capture, config, *result);
@@ -230,6 +259,10 @@ void DeriveFromFit(const JobAttempt& attempt, const Result<capture::Capture>& ca
       out->uncertainty_error = estimated.status().message();
       context.logger->warn("job {}: no uncertainty: {}", job.id, out->uncertainty_error);
     }
+  }
+  if (result.ok() && !result->cancelled && config.refine_grid && out->uncertainty &&
+      !cancel.load()) {
+    RefineGrid(attempt, *capture, &config, out);
   }
   if (result.ok() && !result->cancelled && config.diagnose) {
     out->diagnosis_json = RunDiagnosis(job, *capture, config, *result, attempt.worker_id, cancel,
@@ -316,6 +349,8 @@ JobOutcome RecordSuccess(const JobAttempt& attempt, AttemptResults& results) {
   if (!results.ingest_json.is_null()) result_json["ingest"] = std::move(results.ingest_json);
   if (!results.report_json.is_null()) result_json["report"] = std::move(results.report_json);
   if (!results.resumed_json.is_null()) result_json["resumed"] = std::move(results.resumed_json);
+  if (!results.refinement_json.is_null())
+    result_json["grid_refinement"] = std::move(results.refinement_json);
   KeepReport(job, attempt.report_dir, context, &result_json);
   if (Status completed = context.jobs->CompleteJob(job.id, result_json); !completed.ok()) {
     log->error("job {}: cannot record the result: {}", job.id, completed.message());
@@ -376,10 +411,13 @@ JobOutcome RunClaimedJob(const store::Job& job, const std::string& worker_id,
     return Fail(job, context, results.prepared.message());
   }
   // A fit that ran to its end is recorded whatever was asked meanwhile; only one that stopped
-  // early is a cancel or an interruption.
+  // early (or whose diagnosis or grid refinement did) is a cancel or an interruption: a shutdown
+  // then resumes from the fit's checkpoint.
   const Result<inverse::FitResult>& result = results.fit;
   const bool stopped_early =
-      result.ok() ? result->cancelled || (config->diagnose && cancel.load()) : cancel.load();
+      result.ok()
+          ? result->cancelled || ((config->diagnose || config->refine_grid) && cancel.load())
+          : cancel.load();
   if (stopped_early) {
     return RecordStoppedEarly(job, worker_id, context, results.cancel_requested, shutdown);
   }

@@ -19,8 +19,9 @@ constexpr std::string_view kGroundAlias = "ground";
 constexpr std::string_view kGroundPlane = "ground_plane";
 
 // The top-level keys of the job's specification (kSolverOptionKeys are the others).
-constexpr auto kSpecificationKeys = std::to_array<std::string_view>(
-    {"fit", "initial", "fixed", "frames", "heldout_every", "diagnose", "uncertainty"});
+constexpr auto kSpecificationKeys =
+    std::to_array<std::string_view>({"fit", "initial", "fixed", "frames", "heldout_every",
+                                     "diagnose", "uncertainty", "refine_grid"});
 
 bool IsJobConfigKey(std::string_view key) {
   return std::find(kSpecificationKeys.begin(), kSpecificationKeys.end(), key) !=
@@ -272,6 +273,14 @@ Status ParseSpecification(const Json& j, JobConfig* config) {
   if (j.contains("uncertainty")) {
     SOFTID_ASSIGN_OR_RETURN(config->uncertainty, ParseBool(j["uncertainty"], "uncertainty"));
   }
+  if (j.contains("refine_grid")) {
+    SOFTID_ASSIGN_OR_RETURN(config->refine_grid, ParseBool(j["refine_grid"], "refine_grid"));
+  }
+  if (config->refine_grid && !config->uncertainty) {
+    return json::Invalid("refine_grid", true,
+                         "needs \"uncertainty\": true (the fitted values' discretisation error "
+                         "decides the refinement)");
+  }
   return Status::Ok();
 }
 
@@ -293,6 +302,7 @@ Json SpecificationJson(const JobConfig& config) {
       {"heldout_every", config.heldout_every},
       {"diagnose", config.diagnose},
       {"uncertainty", config.uncertainty},
+      {"refine_grid", config.refine_grid},
   };
 }
 

@@ -37,7 +37,9 @@
 //              "rest_sdf": "surface_fitted",  // or "exact", "sampled"
 //              "frame_loss": "squared",       // or "cauchy" (frame_loss.h)
 //              "frame_loss_noise_multiple": 2.0},
-//     "diagnose": false, "uncertainty": true
+//     "diagnose": false, "uncertainty": true,
+//     "refine_grid": false       // refit on a finer grid where it moves a value
+//     (grid_refinement.h)
 //   }
 // Malformed input is rejected with InvalidArgument "<field path> = <value>: <reason>", e.g.
 //   fit[1] = "youngs_modulo": unknown parameter (known: youngs_modulus, poisson_ratio, ...)
@@ -130,6 +132,9 @@ struct JobConfig {
   // Estimate each fitted value's uncertainty after the fit (fit_uncertainty.h; 2 forward and
   // adjoint runs per fitted variable). Honoured by the callers that write results, like diagnose.
   bool uncertainty = true;
+  // After the analysis, refit on the next finer grid when a fitted value's grid error exceeds
+  // what the data resolve (grid_refinement.h). Needs `uncertainty`. Honoured by the same callers.
+  bool refine_grid = false;
 
   // Whether `fittable_name` (canonical) is in `fit`.
   bool IsFitted(std::string_view fittable_name) const;

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <utility>
 
+#include "core/inverse/grid_refinement.h"
 #include "core/inverse/grid_selection.h"
 #include "core/inverse/time_step_selection.h"
 
@@ -168,6 +169,23 @@ double EstimateWallSeconds(const JobConfig& config, const RunSize& run, int core
          cores_per_start * (config.diagnose ? kDiagnosisFitFactor : 1.0);
 }
 
+// "refine_grid": one more start after the fit, on cells 1.5 x smaller (3.4 x the nodes, no more
+// than the refinement's budget: GridRefinementOptions::max_grid_nodes), with the cores to itself.
+void AddGridRefinement(const JobConfig& config, const RunSize& run, int cores,
+                       JobResourceEstimate* estimate) {
+  constexpr double kFinerNodesFactor = 1.5 * 1.5 * 1.5;
+  RunSize refit = run;
+  refit.nodes = std::min(run.nodes * kFinerNodesFactor,
+                         static_cast<double>(GridRefinementOptions().max_grid_nodes));
+  estimate->memory_bytes =
+      std::max(estimate->memory_bytes,
+               refit.nodes * (kBytesPerNode + kBytesPerNodeStep * (refit.steps + 1.0)));
+  JobConfig one_start = config;
+  one_start.solver.starts = 1;
+  one_start.diagnose = false;
+  estimate->wall_seconds += EstimateWallSeconds(one_start, refit, cores, 1);
+}
+
 // InvalidArgument naming the likely culprit when the estimate exceeds a limit.
 Status CheckWithinLimits(const JobConfig& config, const JobResourceLimits& limits,
                          const RunSize& run, const JobResourceEstimate& estimate) {
@@ -221,6 +239,7 @@ Result<JobResourceEstimate> EstimateJobResources(const JobConfig& config,
   // depends on its content, which a header does not tell.
   estimate.memory_bytes = estimate.concurrent_starts * per_start;
   estimate.wall_seconds = EstimateWallSeconds(config, run, cores, estimate.concurrent_starts);
+  if (config.refine_grid) AddGridRefinement(config, run, cores, &estimate);
   SOFTID_RETURN_IF_ERROR(CheckWithinLimits(config, limits, run, estimate));
   return estimate;
 }

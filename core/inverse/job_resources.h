@@ -35,7 +35,8 @@ struct JobResourceEstimate {
   int concurrent_starts = 0;  // starts that run at once
   double memory_bytes = 0.0;  // peak estimate over the concurrent starts [B]
   // Wall time if every start ran all max_iterations (fits usually converge sooner), "auto"
-  // substeps counted at 16 per frame (an impact may take up to 4x as many) [s].
+  // substeps counted at 16 per frame (an impact may take up to 4x as many) [s]. With
+  // "refine_grid", memory and time include the refit on the finer grid (grid_refinement.h).
   double wall_seconds = 0.0;
 };
 

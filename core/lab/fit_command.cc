@@ -14,6 +14,7 @@
 #include "core/diagnosis/report.h"
 #include "core/inverse/fit.h"
 #include "core/inverse/fit_uncertainty.h"
+#include "core/inverse/grid_refinement.h"
 #include "core/inverse/job_config.h"
 #include "core/lab/commands.h"
 #include "core/lab/diagnosis_runner.h"
@@ -33,15 +34,15 @@ struct FitFlags {
 
 // The fit's pictures (core/diagnosis/fit_report.h) into the report folder, recorded in the
 // result as "report". A report that cannot be drawn is a warning: the fitted values stand.
-void AddFitReport(const FitFlags& flags, const FitInputs& inputs, const inverse::FitResult& fit,
+void AddFitReport(const FitFlags& flags, const capture::Capture& capture,
+                  const inverse::JobConfig& config, const inverse::FitResult& fit,
                   nlohmann::json* json) {
   if (flags.no_report || fit.cancelled) return;
   const std::filesystem::path out(flags.out);
   const std::filesystem::path dir =
       !flags.report.empty() ? std::filesystem::path(flags.report)
                             : (out.has_parent_path() ? out.parent_path() : ".") / "report";
-  Result<diagnosis::FitReport> report =
-      diagnosis::WriteFitReport(inputs.capture, inputs.config, fit, dir);
+  Result<diagnosis::FitReport> report = diagnosis::WriteFitReport(capture, config, fit, dir);
   if (!report.ok()) {
     spdlog::warn("report: {}", report.status().message());
     (*json)["report"] = {{"error", report.status().message()}};
@@ -52,23 +53,44 @@ void AddFitReport(const FitFlags& flags, const FitInputs& inputs, const inverse:
   (*json)["report"] = diagnosis::ToJson(*report);
 }
 
-// result.json, with each value's uncertainty unless the config turns it off; the analysis costs
-// two forward and adjoint runs per fitted variable, logged next to the fit's own time.
-nlohmann::json ResultJsonWithUncertainty(const capture::Capture& capture,
-                                         const inverse::JobConfig& config,
-                                         const inverse::FitResult& fit) {
-  if (!config.uncertainty || fit.cancelled) return inverse::ToJson(fit);
+// The fit with what the config asks after it, and its result.json: each value's uncertainty
+// (two forward and adjoint runs per fitted variable, logged next to the fit's own time) and,
+// with "refine_grid", the refit on a finer grid where the grid moves a value.
+struct AnalysedFit {
+  inverse::FitResult fit;
+  inverse::JobConfig config;  // what `fit` was computed with
+  nlohmann::json json;
+};
+
+AnalysedFit AnalyseFit(const capture::Capture& capture, const inverse::JobConfig& config,
+                       inverse::FitResult fit, const inverse::FitOptions& options) {
+  if (!config.uncertainty || fit.cancelled) {
+    nlohmann::json json = inverse::ToJson(fit);
+    return {std::move(fit), config, std::move(json)};
+  }
   Result<inverse::FitUncertainty> uncertainty =
       inverse::EstimateFitUncertainty(capture, config, fit);
   if (!uncertainty.ok()) {
     spdlog::warn("uncertainty: {}", uncertainty.status().message());
-    return inverse::ToJson(fit, nullptr, uncertainty.status().message());
+    nlohmann::json json = inverse::ToJson(fit, nullptr, uncertainty.status().message());
+    return {std::move(fit), config, std::move(json)};
   }
   spdlog::info("uncertainty: {} evaluations in {:.1f} s ({:.0f} % of the fit's {:.1f} s)",
                uncertainty->report.evaluations, uncertainty->report.seconds,
                100.0 * uncertainty->report.seconds / std::max(1e-9, fit.total_seconds),
                fit.total_seconds);
-  return inverse::ToJson(fit, &*uncertainty);
+  if (!config.refine_grid) {
+    nlohmann::json json = inverse::ToJson(fit, &*uncertainty);
+    return {std::move(fit), config, std::move(json)};
+  }
+  inverse::ControlledFit controlled = inverse::ControlGrid(capture, config, std::move(fit),
+                                                           std::move(uncertainty).value(), options);
+  nlohmann::json json =
+      controlled.uncertainty
+          ? inverse::ToJson(controlled.fit, &*controlled.uncertainty)
+          : inverse::ToJson(controlled.fit, nullptr, controlled.uncertainty_error);
+  json["grid_refinement"] = inverse::ToJson(controlled.refinement);
+  return {std::move(controlled.fit), std::move(controlled.config), std::move(json)};
 }
 
 // One line per optimiser iteration.
@@ -90,14 +112,14 @@ void LogFitProgress(const inverse::FitProgress& p, const std::vector<std::string
 }
 
 // "diagnose": true: look for left-out physics after the fit, report next to the result.
-int DiagnoseAfterFit(const FitFlags& flags, const FitInputs& inputs,
-                     const inverse::FitResult& fit) {
+int DiagnoseAfterFit(const FitFlags& flags, const capture::Capture& capture,
+                     const inverse::JobConfig& config, const inverse::FitResult& fit) {
   const std::filesystem::path out(flags.out);
   const std::filesystem::path dir = out.has_parent_path() ? out.parent_path() : ".";
-  diagnosis::DiagnoseOptions diagnose_options = DiagnoseOptionsForLab(inputs.config);
+  diagnosis::DiagnoseOptions diagnose_options = DiagnoseOptionsForLab(config);
   diagnose_options.plot_directory = dir / "diagnosis_plots";
   Result<diagnosis::DiagnosisReport> report =
-      diagnosis::Diagnose(inputs.capture, inputs.config, diagnose_options, &fit);
+      diagnosis::Diagnose(capture, config, diagnose_options, &fit);
   if (!report.ok()) {
     spdlog::error("diagnosis: {}", report.status().message());
     return kExitFailure;
@@ -130,17 +152,17 @@ int RunFit(const FitFlags& flags) {
     return result.status().code() == StatusCode::kInvalidArgument ? kExitInvalidInput
                                                                   : kExitFailure;
   }
-  nlohmann::json json = ResultJsonWithUncertainty(inputs.capture, config, *result);
-  AddFitReport(flags, inputs, *result, &json);
-  const Status written = WriteJsonFile(flags.out, json);
+  AnalysedFit analysed = AnalyseFit(inputs.capture, config, std::move(result).value(), options);
+  AddFitReport(flags, inputs.capture, analysed.config, analysed.fit, &analysed.json);
+  const Status written = WriteJsonFile(flags.out, analysed.json);
   if (!written.ok()) {
     spdlog::error("{}", written.message());
     return kExitFailure;
   }
-  PrintResultTable(json, std::filesystem::path(flags.capture) / "truth.json");
+  PrintResultTable(analysed.json, std::filesystem::path(flags.capture) / "truth.json");
   std::printf("result written to %s\n", flags.out.c_str());
   if (!config.diagnose) return kExitOk;
-  return DiagnoseAfterFit(flags, inputs, *result);
+  return DiagnoseAfterFit(flags, inputs.capture, analysed.config, analysed.fit);
 }
 
 }  // namespace

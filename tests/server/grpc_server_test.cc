@@ -181,6 +181,40 @@ TEST_F(GrpcServerTest, JobRunsFromUploadToResult) {
   EXPECT_EQ(serving, client::ServingStatus::kServing);
 }
 
+// "refine_grid": the worker decides after the uncertainty analysis, notes why in the job's
+// history, and a refined result is the refit's, on the finer grid, with the first fit beside it.
+TEST_F(GrpcServerTest, GridRefinementIsDecidedAndRecordedByTheWorker) {
+  StartServer(/*num_workers=*/1);
+  const v1::Capture capture = Upload();
+  nlohmann::json config = nlohmann::json::parse(FitConfig(/*max_iterations=*/15));
+  config["cells"] = 4;  // coarse enough for the grid to move E by more than its noise
+  config["refine_grid"] = true;
+  const v1::Job job = CreateJob(capture.id(), config.dump());
+  std::vector<v1::JobEvent> events;
+  ASSERT_TRUE(
+      client_->WatchJob(job.id(), 0, [&](const v1::JobEvent& e) { events.push_back(e); }).ok());
+  ASSERT_FALSE(events.empty());
+  EXPECT_EQ(events.back().state(), v1::SUCCEEDED);
+  int notes = 0;
+  for (const v1::JobEvent& e : events) {
+    if (e.message().rfind("grid refinement: ", 0) == 0) ++notes;
+  }
+  EXPECT_EQ(notes, 1);
+
+  v1::Result result;
+  ASSERT_TRUE(client_->GetResult(job.id(), &result).ok());
+  const nlohmann::json json = nlohmann::json::parse(result.result_json());
+  ASSERT_TRUE(json.contains("grid_refinement")) << json.dump();
+  const nlohmann::json& refinement = json["grid_refinement"];
+  std::printf("%s\n", refinement["reason"].get<std::string>().c_str());
+  EXPECT_EQ(refinement["cells"], 4);
+  ASSERT_TRUE(refinement["refined"].get<bool>());
+  EXPECT_EQ(refinement["finer_cells"], 6);
+  EXPECT_EQ(json["grid"]["cells"], 6);
+  EXPECT_EQ(refinement["first_fit"]["grid"]["cells"], 4);
+  EXPECT_TRUE(json["parameters"]["youngs_modulus"].contains("discretisation_error"));
+}
+
 // A station uploading files the server already holds for it sends only the new ones; another
 // station's copies do not count (it cannot learn what others uploaded), and a file left out that
 // the station does not hold fails the upload naming it.
@@ -605,7 +639,7 @@ TEST_F(GrpcServerTest, UnknownJobResultBeforeDoneAndCancel) {
 TEST_F(GrpcServerTest, RunningJobSurvivesRestart) {
   StartServer(/*num_workers=*/1);
   const v1::Capture capture = Upload();
-  const v1::Job job = CreateJob(capture.id(), FitConfig(/*max_iterations=*/3));
+  const v1::Job job = CreateJob(capture.id(), FitConfig(/*max_iterations=*/15));
 
   // Stop on the first iteration: the fit is running.
   int iterations_before = 0;

@@ -54,6 +54,9 @@ def parse_args(argv):
                         help="the job config's \"cut_cell_samples\" (default: the job's default)")
     parser.add_argument("--frame-loss", choices=["squared", "cauchy"], default="squared",
                         help="the job config's \"cost\": {\"frame_loss\"} (docs/job-config.md)")
+    parser.add_argument("--refine-grid", action="store_true",
+                        help="the job config's \"refine_grid\": refit on the finer grid where the "
+                             "grid moves a value (docs/job-config.md)")
     parser.add_argument("--diagnose", action="store_true",
                         help="leave friction out of the fit and diagnose after it (\"diagnose\": "
                              "true): the diagnosis should name friction and two materials, "
@@ -106,7 +109,7 @@ def job_config(truth, args):
     config = {"fit": fit, "fixed": fixed, "initial": initial, "starts": args.starts,
               "max_iterations": args.max_iterations, "cells": cells, "uncertainty": True,
               "element": args.element, "grid_orientation": args.grid_orientation,
-              "diagnose": args.diagnose,
+              "diagnose": args.diagnose, "refine_grid": args.refine_grid,
               "cost": {"frame_loss": args.frame_loss}}
     if args.cut_cell_samples is not None:
         config["cut_cell_samples"] = args.cut_cell_samples
@@ -190,6 +193,12 @@ def run_case(case, args):
            "truth_in_band": (abs(fitted - e_eff) <= band
                              if math.isfinite(band) and single_truth else None),
            "grid_cells": result["grid"]["cells"], "substeps": result["time_step"]["substeps"],
+           # --refine-grid: the first fit's grid and value when the result is the finer refit.
+           "refined_from_cells": (result["grid_refinement"]["cells"]
+                                  if result.get("grid_refinement", {}).get("refined") else None),
+           "first_fit_youngs_modulus": (
+               result["grid_refinement"]["first_fit"]["parameters"]["youngs_modulus"]["value"]
+               if result.get("grid_refinement", {}).get("refined") else None),
            "grid_agrees_frames": agreeing_frames(result["grid"]),
            "step_agrees_frames": agreeing_frames(result["time_step"]),
            # The frames compared: all, or those before the motion turned chaotic.

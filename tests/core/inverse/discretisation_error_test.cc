@@ -14,19 +14,7 @@ namespace {
 
 // Young's modulus of a ball bouncing once, the rest of the truth fixed, one start at the truth.
 JobConfig BounceConfig(const fem::PhysicalParameters& truth, int cells, int substeps) {
-  JobConfig config;
-  config.fit = {"youngs_modulus"};
-  config.initial["youngs_modulus"] = InitialValue{.value = truth.youngs_modulus, .range = {}};
-  config.fixed = fem::ToJson(truth);
-  config.fixed.erase("youngs_modulus");
-  config.fixed.erase("density");  // from the capture's mass
-  config.solver.cells = cells;
-  config.solver.substeps = substeps;
-  config.solver.starts = 1;
-  config.solver.threads = 2;
-  config.solver.max_iterations = 30;
-  config.solver.function_tolerance = 1e-10;
-  return config;
+  return testing::ModulusAtDiscretisation(truth, cells, substeps);
 }
 
 double FittedLogModulus(const testing::SmallCapture& capture, const JobConfig& config) {

@@ -99,6 +99,19 @@ inline JobConfig YoungsModulusConfig(const fem::PhysicalParameters& truth, int s
   return config;
 }
 
+// Young's modulus from one start at the truth, the rest of the truth fixed, on `cells` and
+// `substeps`, to a tight tolerance: the optimum of that discretisation.
+inline JobConfig ModulusAtDiscretisation(const fem::PhysicalParameters& truth, int cells,
+                                         int substeps) {
+  JobConfig config = YoungsModulusConfig(truth, /*starts=*/1, /*max_iterations=*/30);
+  config.initial["youngs_modulus"] = InitialValue{.value = truth.youngs_modulus, .range = {}};
+  config.solver.cells = cells;
+  config.solver.substeps = substeps;
+  config.solver.threads = 2;
+  config.solver.function_tolerance = 1e-10;
+  return config;
+}
+
 // A result's or report's JSON without its timing ("timing", "seconds", "*_seconds"): what two
 // runs of the same computation must agree on.
 inline nlohmann::json WithoutTiming(nlohmann::json json) {

@@ -88,7 +88,8 @@ json FullConfig() {
     "refine_iterations": 12,
     "max_seconds": 90.5,
     "cost": {"band_cells": 4, "truncation_cells": 1.5, "rest_sdf": "sampled"},
-    "diagnose": true
+    "diagnose": true,
+    "refine_grid": true
   })");
 }
 
@@ -153,6 +154,7 @@ TEST(JobConfig, DefaultsFromEmptyObject) {
   EXPECT_EQ(config->solver.cost.rest_sdf, cost::RestSdf::kSurfaceFitted);
   EXPECT_FALSE(config->diagnose);
   EXPECT_TRUE(config->uncertainty);  // every result says how sure it is unless told not to
+  EXPECT_FALSE(config->refine_grid);
   EXPECT_TRUE(config->Validate().ok());
 
   // The defaults are written out in full, except the absent cell_size.
@@ -206,6 +208,7 @@ TEST(JobConfig, FullConfigRoundTrips) {
   EXPECT_EQ(config->solver.max_seconds, 90.5);
   EXPECT_EQ(config->solver.cost, (CostSettings{4, 1.5, cost::RestSdf::kSampled}));
   EXPECT_TRUE(config->diagnose);
+  EXPECT_TRUE(config->refine_grid);
   EXPECT_TRUE(config->Validate().ok()) << config->Validate().ToString();
 
   // JSON object and text round trips reproduce every field.
@@ -409,6 +412,10 @@ TEST(JobConfigRejects, NumericalSettings) {
   ExpectInvalid(json::parse(R"({"diagnose": "yes"})"),
                 "diagnose = \"yes\": ", "must be true or false");
   ExpectInvalid(json::parse(R"({"uncertainty": 0})"), "uncertainty = 0: ", "must be true or false");
+  ExpectInvalid(json::parse(R"({"refine_grid": "yes"})"),
+                "refine_grid = \"yes\": ", "must be true or false");
+  ExpectInvalid(json::parse(R"({"refine_grid": true, "uncertainty": false})"),
+                "refine_grid = true: ", "needs \"uncertainty\": true");
   ExpectInvalid(json::parse(R"({"continuation": 1})"),
                 "continuation = 1: ", "must be true or false");
   ExpectInvalid(json::parse(R"({"launch_from_flight": "no"})"),

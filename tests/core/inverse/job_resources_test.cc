@@ -132,6 +132,38 @@ TEST(JobResources, WallTimeIsEstimatedAndBounded) {
   EXPECT_FALSE(EstimateJobResources({}, TorusSized(), limits).ok());
 }
 
+// "refine_grid" adds one start on cells 1.5 x smaller after the fit: more time, and the memory of
+// that one start where it exceeds the concurrent starts'.
+TEST(JobResources, GridRefinementAddsTheRefitOnTheFinerGrid) {
+  JobResourceLimits limits;
+  limits.cores = 2;
+  JobConfig config;
+  config.solver.cells = 12;
+  config.solver.substeps = 8;
+  config.solver.starts = 2;
+  const Result<JobResourceEstimate> plain = EstimateJobResources(config, TorusSized(), limits);
+  config.refine_grid = true;
+  const Result<JobResourceEstimate> refined = EstimateJobResources(config, TorusSized(), limits);
+  ASSERT_TRUE(plain.ok()) << plain.status().ToString();
+  ASSERT_TRUE(refined.ok()) << refined.status().ToString();
+  EXPECT_EQ(refined->grid_nodes, plain->grid_nodes);  // the fit's own grid
+  // One start on 3.4 x the nodes (12 cells: 13 x 13 x 6 = 1014 nodes) against two at once.
+  EXPECT_GT(refined->memory_bytes, 1.5 * plain->memory_bytes);
+  EXPECT_GT(refined->wall_seconds, 1.5 * plain->wall_seconds);
+
+  // The refit is held to the refinement's node budget (18000 nodes; 48 cells after 32 would keep
+  // about 47000), so that a fine grid's fit of 4 starts gains less than half its time.
+  config.solver.cells = 32;
+  config.solver.starts = 4;
+  const Result<JobResourceEstimate> large = EstimateJobResources(config, TorusSized(), limits);
+  ASSERT_TRUE(large.ok()) << large.status().ToString();
+  config.refine_grid = false;
+  const Result<JobResourceEstimate> large_plain =
+      EstimateJobResources(config, TorusSized(), limits);
+  ASSERT_TRUE(large_plain.ok());
+  EXPECT_LT(large->wall_seconds, 1.5 * large_plain->wall_seconds);
+}
+
 TEST(JobResources, FramesMustLieInTheCapture) {
   const JobResourceLimits limits;
   JobConfig last;
