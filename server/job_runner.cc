@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <condition_variable>
+#include <functional>
 #include <mutex>
 #include <optional>
 #include <system_error>
@@ -91,6 +92,22 @@ LeaseCalls JobLease(const store::Job& job, const std::string& worker_id,
   return calls;
 }
 
+// A fit's progress into the job's history, each iteration; a cancel request seen between
+// iterations stops the fit at once (and, with a heartbeat, tells it the stop was asked for).
+std::function<void(const inverse::FitProgress&)> ProgressRecorder(
+    const store::Job& job, const inverse::JobConfig& config, Stopwatch::time_point started,
+    const JobRunnerContext& context, std::atomic<bool>& cancel, LeaseHeartbeat* heartbeat) {
+  return [&job, &config, started, &context, &cancel, heartbeat](const inverse::FitProgress& p) {
+    const double elapsed = std::chrono::duration<double>(Stopwatch::now() - started).count();
+    RecordIteration(job, IterationEvent(p, config, elapsed), context);
+    Result<bool> requested = context.jobs->IsCancelRequested(job.id);
+    if (requested.ok() && *requested) {
+      if (heartbeat != nullptr) heartbeat->set_stop_requested();
+      cancel.store(true);
+    }
+  };
+}
+
 // The fit, every start in this worker: progress into the job's history (a cancel request seen
 // between iterations stops it at once), a checkpoint saved after every start, and the starts an
 // earlier attempt finished kept.
@@ -102,16 +119,7 @@ Result<inverse::FitResult> FitHere(const store::Job& job, const capture::Capture
                                    std::atomic<bool>& cancel, LeaseHeartbeat& heartbeat) {
   inverse::FitOptions options;
   options.cancel = &cancel;
-  options.on_progress = [&](const inverse::FitProgress& p) {
-    const double elapsed =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
-    RecordIteration(job, IterationEvent(p, config, elapsed), context);
-    Result<bool> requested = context.jobs->IsCancelRequested(job.id);
-    if (requested.ok() && *requested) {
-      heartbeat.set_stop_requested();
-      cancel.store(true);
-    }
-  };
+  options.on_progress = ProgressRecorder(job, config, started, context, cancel, &heartbeat);
   if (resume_from) options.resume_from = &*resume_from;
   options.on_checkpoint = [&](const inverse::FitCheckpoint& checkpoint) {
     if (Status saved = context.jobs->SaveCheckpoint(job.id, inverse::ToJson(checkpoint));
@@ -223,13 +231,8 @@ void RefineGrid(const JobAttempt& attempt, const capture::Capture& capture,
   const JobRunnerContext& context = attempt.context;
   inverse::FitOptions options;
   options.cancel = &attempt.cancel;
-  options.on_progress = [&](const inverse::FitProgress& p) {
-    const double elapsed =
-        std::chrono::duration<double>(Stopwatch::now() - attempt.started).count();
-    RecordIteration(job, IterationEvent(p, *config, elapsed), context);
-    Result<bool> requested = context.jobs->IsCancelRequested(job.id);
-    if (requested.ok() && *requested) attempt.cancel.store(true);
-  };
+  options.on_progress =
+      ProgressRecorder(job, *config, attempt.started, context, attempt.cancel, nullptr);
   inverse::ControlledFit controlled = inverse::ControlGrid(
       capture, *config, std::move(out->fit).value(), std::move(*out->uncertainty), options);
   RecordNote(job, "grid refinement: " + controlled.refinement.decision.reason, context);
