@@ -73,8 +73,15 @@ grpc::Status GrpcReconstructionService::UploadCapture(
     idled_out.store(true);
     context->TryCancel();
   });
+  // The idle clock runs only while the handler waits for the client.
+  const auto read = [&](v1::UploadCaptureRequest* message) {
+    watch->BeginWait();
+    const bool received = reader->Read(message);
+    watch->EndWait();
+    return received;
+  };
   v1::UploadCaptureRequest request;
-  if (!reader->Read(&request)) {
+  if (!read(&request)) {
     if (idled_out.load()) return IdledOut();
     return Reply("UploadCapture",
                  {ServiceCode::kInvalidArgument, "manifest: the upload stream was empty"});
@@ -86,8 +93,7 @@ grpc::Status GrpcReconstructionService::UploadCapture(
   ServiceResult<std::unique_ptr<CaptureUpload>> upload =
       service_->BeginUpload(*caller, FromProto(request.manifest()));
   if (!upload.ok()) return Reply("UploadCapture", upload.status());
-  while (reader->Read(&request)) {
-    watch->Touch();
+  while (read(&request)) {
     if (!request.has_chunk()) {
       return Reply("UploadCapture", {ServiceCode::kInvalidArgument,
                                      "manifest: sent twice; later messages carry chunks"});

@@ -25,9 +25,16 @@ std::unique_ptr<IdleStreamWatchdog::Watch> IdleStreamWatchdog::Start(std::functi
   return std::unique_ptr<Watch>(new Watch(this, id));
 }
 
-void IdleStreamWatchdog::Watch::Touch() {
+void IdleStreamWatchdog::Watch::BeginWait() {
   std::lock_guard lock(owner_->mutex_);
-  owner_->entries_[id_].last_activity = Clock::now();
+  Entry& entry = owner_->entries_[id_];
+  entry.waiting = true;
+  entry.wait_began = Clock::now();
+}
+
+void IdleStreamWatchdog::Watch::EndWait() {
+  std::lock_guard lock(owner_->mutex_);
+  owner_->entries_[id_].waiting = false;
 }
 
 IdleStreamWatchdog::Watch::~Watch() {
@@ -40,7 +47,7 @@ void IdleStreamWatchdog::Loop() {
   while (!wake_.wait_for(lock, poll_, [this] { return stopping_; })) {
     const Clock::time_point now = Clock::now();
     for (auto& [id, entry] : entries_) {
-      if (entry.cancelled || now - entry.last_activity < idle_timeout_) continue;
+      if (entry.cancelled || !entry.waiting || now - entry.wait_began < idle_timeout_) continue;
       // Under the lock, so the Watch (and the handler's context) cannot go away meanwhile.
       entry.cancelled = true;
       entry.cancel();

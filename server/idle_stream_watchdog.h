@@ -1,8 +1,10 @@
 // Ends client streams that stopped sending. gRPC's synchronous API blocks a thread in Read()
 // for as long as a client keeps a stream open; 200 idle uploads held 217 threads and their
-// staging folders indefinitely. Each watched stream is touched on every message it receives; a
-// background thread cancels any stream idle for longer than the timeout (its Read() then returns
-// false, the handler returns and its staged files are removed).
+// staging folders indefinitely. A handler marks each wait for the client's next message; a
+// background thread cancels any stream that has waited longer than the timeout (its Read() then
+// returns false, the handler returns and its staged files are removed). Only waits count: the
+// server's own work on a message (writing a chunk, storing the finished capture) can be slow on
+// a loaded machine and is never the client's idleness.
 #pragma once
 
 #include <chrono>
@@ -19,13 +21,15 @@ class IdleStreamWatchdog {
  public:
   using Clock = std::chrono::steady_clock;
 
-  // A registered stream; unregisters on destruction. Touch() after every message received.
+  // A registered stream, waiting for the client from Start(); unregisters on destruction.
   class Watch {
    public:
     ~Watch();
     Watch(const Watch&) = delete;
     Watch& operator=(const Watch&) = delete;
-    void Touch();
+    // Around every blocking read: the idle clock runs from BeginWait() until EndWait().
+    void BeginWait();
+    void EndWait();
 
    private:
     friend class IdleStreamWatchdog;
@@ -40,16 +44,18 @@ class IdleStreamWatchdog {
   IdleStreamWatchdog(const IdleStreamWatchdog&) = delete;
   IdleStreamWatchdog& operator=(const IdleStreamWatchdog&) = delete;
 
-  // Starts watching a stream; `cancel` is called once (from the watchdog's thread) if it idles
-  // out, and must be safe to call while the stream's handler runs (ServerContext::TryCancel is).
+  // Starts watching a stream, waiting from now; `cancel` is called once (from the watchdog's
+  // thread) if it idles out, and must be safe to call while the stream's handler runs
+  // (ServerContext::TryCancel is).
   std::unique_ptr<Watch> Start(std::function<void()> cancel);
 
   std::chrono::milliseconds idle_timeout() const { return idle_timeout_; }
 
  private:
   struct Entry {
-    Clock::time_point last_activity;
+    Clock::time_point wait_began;
     std::function<void()> cancel;
+    bool waiting = true;
     bool cancelled = false;
   };
   void Loop();
