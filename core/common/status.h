@@ -87,6 +87,8 @@ class [[nodiscard]] Result {
   T&& value() && { return std::get<T>(std::move(storage_)); }
   const T& operator*() const& { return value(); }
   T& operator*() & { return value(); }
+  // By value: `for (auto& x : *Load())` then iterates a live object, not a destroyed temporary.
+  T operator*() && { return std::move(*this).value(); }
   const T* operator->() const { return &value(); }
   T* operator->() { return &value(); }
 
