@@ -26,7 +26,8 @@ bash deploy/install-deps.sh
 cmake -S . -B "$build_dir" -G Ninja -DCMAKE_BUILD_TYPE=Debug \
   -DCMAKE_C_COMPILER=clang-14 -DCMAKE_CXX_COMPILER=clang++-14 \
   -DCMAKE_C_FLAGS_DEBUG=-O0 -DCMAKE_CXX_FLAGS_DEBUG=-O0 \
-  -DSOFTID_BUILD_FUZZERS=ON -DSOFTID_BUILD_TESTS=OFF -DSOFTID_BUILD_SERVER=ON >/dev/null
+  -DSOFTID_BUILD_FUZZERS=ON -DSOFTID_BUILD_TESTS=OFF -DSOFTID_BUILD_SERVER=ON \
+  -DSOFTID_PRECOMPILE_HEADERS=OFF >/dev/null
 cmake --build "$build_dir" -j "${SOFTID_FUZZ_JOBS:-$(nproc)}" --target "${targets[@]}"
 build_dir=$(cd "$build_dir" && pwd)
 
