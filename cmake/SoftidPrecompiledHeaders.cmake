@@ -11,7 +11,8 @@ set(SOFTID_PCH_THIRD_PARTY <Eigen/Core> <Eigen/Geometry> <fmt/format.h> <nlohman
     <spdlog/spdlog.h>)
 
 # An anchor: an object library of one empty file whose only product is the group's header.
-# `ARGN`: what its files link (for the include paths and definitions the header needs).
+# LIBS: what the group's targets link (the header's include paths and definitions); HEADERS: those
+# beyond the standard library's; DEFINITIONS: the group's targets' own.
 function(softid_add_pch_group anchor)
   cmake_parse_arguments(ARG "" "" "LIBS;HEADERS;DEFINITIONS" ${ARGN})
   if(NOT SOFTID_PRECOMPILE_HEADERS)
