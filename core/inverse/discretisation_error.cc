@@ -9,6 +9,7 @@
 #include <limits>
 #include <memory>
 #include <stdexcept>
+#include <string>
 #include <thread>
 
 #include "core/inverse/objective_settings.h"
@@ -199,23 +200,29 @@ struct ShiftEstimator {
 
   // Fills shift's error factor and variables (or error) from a run with the finer simulation
   // options or substeps; shift->ratio is set.
-  void operator()(DiscretisationShift* shift, const fem::SimulationOptions& finer_simulation,
-                  int finer_substeps) const {
+  // `level` names the level in the progress line ("cells", "substeps").
+  void operator()(const char* level, DiscretisationShift* shift,
+                  const fem::SimulationOptions& finer_simulation, int finer_substeps) const {
     // Richardson: x_h - x_exact ~ (x_h - x_{h/r}) r^p / (r^p - 1).
     const double gain = std::pow(shift->ratio, kOrder);
     shift->error_factor = gain / (gain - 1.0);
+    const auto begin = std::chrono::steady_clock::now();
     Result<FinerLevel> finer = EvaluateFinerLevel(setting, capture, config, finer_simulation,
                                                   finer_substeps, space, optimum);
     if (!finer.ok()) {
       shift->error = std::string(finer.status().message());
-      return;
+    } else {
+      shift->variables = NewtonShift(report, finer->gradient, held);
+      const Status followed = FollowTheFinerCost(*finer, space, optimum, report.hessian, shift);
+      if (!followed.ok()) {
+        shift->error = std::string(followed.message());
+        shift->variables.resize(0);
+      }
     }
-    shift->variables = NewtonShift(report, finer->gradient, held);
-    const Status followed = FollowTheFinerCost(*finer, space, optimum, report.hessian, shift);
-    if (!followed.ok()) {
-      shift->error = std::string(followed.message());
-      shift->variables.resize(0);
-    }
+    spdlog::info("discretisation error: {} {} vs {} done in {:.0f} s{}", level, shift->chosen,
+                 shift->compared,
+                 std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count(),
+                 shift->error.empty() ? "" : " (no estimate: " + shift->error + ")");
   }
 };
 
@@ -297,14 +304,21 @@ Result<DiscretisationError> EstimateDiscretisationError(const capture::Capture& 
   time.chosen = config.solver.substeps;
   time.compared = 2 * config.solver.substeps;
   time.ratio = 2.0;
+  const std::string finer_grid_name =
+      grid.chosen > 0 ? fmt::format("{} cells (chosen {})", grid.compared, grid.chosen)
+                      : fmt::format("cells of {:.3g} mm (chosen {:.3g} mm)",
+                                    1e3 * finer_grid.cell_size, 1e3 * config.solver.cell_size_m);
+  spdlog::info(
+      "discretisation error: the optimum's cost and gradient on {} and at {} substeps (chosen {})",
+      finer_grid_name, time.compared, time.chosen);
   {
     std::jthread time_worker;
     if (cores >= 2) {
-      time_worker = std::jthread([&] { estimate(&time, simulation, time.compared); });
+      time_worker = std::jthread([&] { estimate("substeps", &time, simulation, time.compared); });
     } else {
-      estimate(&time, simulation, time.compared);
+      estimate("substeps", &time, simulation, time.compared);
     }
-    estimate(&grid, finer_grid, config.solver.substeps);
+    estimate("cells", &grid, finer_grid, config.solver.substeps);
   }
 
   out.parameters = ParameterErrors(fit.fitted, space, optimum, grid, time);

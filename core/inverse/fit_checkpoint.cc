@@ -129,6 +129,8 @@ GridSelection ReadGridSelection(const Json& j) {
   selection.tolerance_m = j.at("tolerance_m").get<double>();
   selection.within_tolerance = j.at("within_tolerance").get<bool>();
   selection.stopped_at_time_limit = j.value("stopped_at_time_limit", false);  // older: absent
+  selection.untried_cells = j.value("untried_cells", 0);
+  selection.untried_grid_nodes = j.value("untried_grid_nodes", 0);
   for (const Json& t : j.at("trials")) {
     GridTrial trial;
     trial.cells = t.at("cells").get<int>();

@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <stdexcept>
+#include <string>
 
 #include "core/fem/hex_mesh.h"
 #include "core/fem/simulator.h"
@@ -85,8 +86,13 @@ Status RefineGridUntilConverged(const geometry::TriangleMesh& rest_mesh,
   selection->cells = options.candidates.front();
   SurfaceRun coarse = run(selection->cells);
   double last_run_s = coarse.seconds;
-  for (size_t i = 1; i < nodes.size() && nodes[i] <= options.max_grid_nodes; ++i) {
+  for (size_t i = 1; i < nodes.size(); ++i) {
     const int finer_cells = options.candidates[i];
+    if (nodes[i] > options.max_grid_nodes) {
+      selection->untried_cells = finer_cells;
+      selection->untried_grid_nodes = nodes[i];
+      break;
+    }
     // A run's time grows with the grid's nodes: the next one's is the last one's, scaled.
     const double next_run_s = last_run_s * nodes[i] / std::max(1, nodes[i - 1]);
     if (options.max_seconds > 0.0 && SecondsSince(begin) + next_run_s > options.max_seconds) {
@@ -168,16 +174,20 @@ Result<GridSelection> SelectGrid(const geometry::TriangleMesh& rest_mesh,
         "choice compare; it was not shown to be within tolerance of a finer grid",
         selection.cells, options.max_seconds);
   } else if (!selection.within_tolerance) {
+    const std::string why_not_finer =
+        selection.untried_cells > 0
+            ? fmt::format(
+                  "the next candidate, {} cells, keeps {} grid nodes, above the budget of {}",
+                  selection.untried_cells, selection.untried_grid_nodes, options.max_grid_nodes)
+            : fmt::format("it is the finest candidate ({} cells)", options.candidates.back());
     spdlog::warn(
         "grid: {} cells along the longest side leave the surface {:.3g} mm from the next finer "
-        "grid from frame {} on (tolerance {:.3g} mm: {} x the depth noise {:.3g} mm), and no finer "
-        "candidate is tried (up to {} cells, at most {} nodes); the fit may be biased by the "
-        "grid: see the result's discretisation_error",
+        "grid from frame {} on (tolerance {:.3g} mm: {} x the depth noise {:.3g} mm), and {}; the "
+        "fit may be biased by the grid: see the result's discretisation_error",
         selection.cells,
         selection.trials.empty() ? 0.0 : 1e3 * selection.trials.back().difference_m,
         selection.trials.empty() ? 0 : selection.trials.back().frames_within_tolerance,
-        1e3 * selection.tolerance_m, options.noise_fraction, 1e3 * depth_noise_m,
-        options.candidates.back(), options.max_grid_nodes);
+        1e3 * selection.tolerance_m, options.noise_fraction, 1e3 * depth_noise_m, why_not_finer);
   }
   return selection;
 }
@@ -234,6 +244,8 @@ nlohmann::json ToJson(const GridSelection& selection) {
           {"tolerance_m", selection.tolerance_m},
           {"within_tolerance", selection.within_tolerance},
           {"stopped_at_time_limit", selection.stopped_at_time_limit},
+          {"untried_cells", selection.untried_cells},
+          {"untried_grid_nodes", selection.untried_grid_nodes},
           {"trials", trials}};
 }
 

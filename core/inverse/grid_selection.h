@@ -83,6 +83,10 @@ struct GridSelection {
   // cells' fit to the surface changes with the grid; a block rocking chaotically: 22.5 then
   // 9.8 mm.)
   std::vector<GridTrial> trials;
+  // The next finer candidate when the refinement stopped short of it because its grid keeps more
+  // than GridSelectionOptions::max_grid_nodes (0: there was none, or it was not the reason).
+  int untried_cells = 0;
+  int untried_grid_nodes = 0;
   // The chosen grid's run's wall time per time step (at GridSelectionOptions::substeps) [s],
   // measured (0: unknown, e.g. read back from a checkpoint): a fit under a time limit scales its
   // evaluations' cost from it.

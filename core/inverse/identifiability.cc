@@ -1,5 +1,7 @@
 #include "core/inverse/identifiability.h"
 
+#include <spdlog/spdlog.h>
+
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <algorithm>
@@ -30,6 +32,32 @@ constexpr double kSingularEigenvalue = 1e-10;
 double SecondsSince(std::chrono::steady_clock::time_point start) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
 }
+
+// Says how many of the curvature's simulations are done, every kSecondsBetweenLines at most and
+// only once that long has passed: the analysis of a quick fit is silent, that of a slow one (fine
+// grid, many substeps: minutes) is not.
+class CurvatureProgress {
+ public:
+  explicit CurvatureProgress(int total) : total_(total) {}
+  void OneDone() {
+    const int done = ++done_;
+    std::lock_guard lock(mutex_);
+    const double now = SecondsSince(begin_);
+    if (now - last_line_ < kSecondsBetweenLines) return;
+    last_line_ = now;
+    spdlog::info(
+        "uncertainty: {}/{} simulations at and around the optimum, {:.0f} s, ~{:.0f} s left", done,
+        total_, now, now * (total_ - done) / std::max(1, done));
+  }
+
+ private:
+  static constexpr double kSecondsBetweenLines = 20.0;
+  const int total_;
+  const std::chrono::steady_clock::time_point begin_ = std::chrono::steady_clock::now();
+  std::atomic<int> done_{0};
+  std::mutex mutex_;
+  double last_line_ = 0.0;
+};
 
 // The fitted parameter a variable belongs to: "gravity[2]" -> "gravity".
 std::string ParameterOf(const std::string& variable) {
@@ -344,6 +372,7 @@ Result<Curvature> CurvatureByGradientDifferences(const ObjectiveFactory& make_ob
   const int num_tasks = 1 + 2 * p;
   std::vector<Evaluation> results(num_tasks);
   Curvature out;
+  CurvatureProgress progress(num_tasks);
   SOFTID_RETURN_IF_ERROR(RunOnObjectives(
       make_objective, num_tasks, Threads(options), [&](TrajectoryObjective& objective, int task) {
         const int variable = task > 0 ? (task - 1) / 2 : -1;
@@ -358,6 +387,7 @@ Result<Curvature> CurvatureByGradientDifferences(const ObjectiveFactory& make_ob
         result.gradient.resize(p);
         stencil.space.ChainGradient(evaluation.gradient, x.data(), result.gradient.data());
         if (task == 0) out.num_points = PointsInFittedFrames(objective);
+        progress.OneDone();
         return Status::Ok();
       }));
   out.evaluations = num_tasks;
@@ -384,6 +414,7 @@ Result<Curvature> CurvatureByGaussNewton(const ObjectiveFactory& make_objective,
   std::vector<Eigen::VectorXd> residuals(num_tasks);
   std::vector<int> frame_sizes;
   Curvature out;
+  CurvatureProgress progress(num_tasks);
   SOFTID_RETURN_IF_ERROR(RunOnObjectives(
       make_objective, num_tasks, Threads(options), [&](TrajectoryObjective& objective, int task) {
         const int variable = task > 0 ? (task - 1) / 2 : -1;
@@ -399,6 +430,7 @@ Result<Curvature> CurvatureByGaussNewton(const ObjectiveFactory& make_objective,
           out.num_points = PointsInFittedFrames(objective);
           frame_sizes = ResidualsPerFrame(objective);
         }
+        progress.OneDone();
         return Status::Ok();
       }));
   Eigen::MatrixXd jacobian(residuals[0].size(), p);

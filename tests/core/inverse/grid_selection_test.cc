@@ -39,6 +39,7 @@ TEST_F(SelectGridTest, RefinesUntilTheSurfaceMovesLessThanTheNoise) {
   ASSERT_EQ(all->trials.size(), 2u);  // 4 vs 6, 6 vs 9
   EXPECT_FALSE(all->within_tolerance);
   EXPECT_EQ(all->cells, 9);
+  EXPECT_EQ(all->untried_cells, 0);  // 9 is the finest candidate: nothing was left out
   for (const GridTrial& trial : all->trials) {
     EXPECT_FALSE(trial.diverged);
     EXPECT_GT(trial.difference_m, 0.0);
@@ -104,6 +105,13 @@ TEST_F(SelectGridTest, NeverSimulatesAGridAboveTheNodeBudget) {
   ASSERT_EQ(capped->trials.size(), 1u);
   EXPECT_EQ(capped->trials[0].finer_cells, 6);
   EXPECT_EQ(ToJson(*capped)["cells"], 6);
+  // The result names the grid the budget left out and what it would have kept.
+  EXPECT_EQ(capped->untried_cells, 9);
+  const Result<int> untried_nodes = CountGridNodes(scene->mesh, {}, false, 9);
+  ASSERT_TRUE(untried_nodes.ok());
+  EXPECT_EQ(capped->untried_grid_nodes, *untried_nodes);
+  EXPECT_GT(capped->untried_grid_nodes, options.max_grid_nodes);
+  EXPECT_EQ(ToJson(*capped)["untried_cells"], 9);
   // A ball's grid keeps fewer nodes than its bounding box has.
   EXPECT_LE(capped->trials[0].grid_nodes, GridNodeEstimate(size, 4));
 }
