@@ -48,8 +48,9 @@ def parse_args(argv):
     parser.add_argument("--cells", default="auto", help='"auto" (default) or a number')
     parser.add_argument("--element", choices=["trilinear", "incompatible_modes"],
                         default="trilinear", help="the job config's \"element\"")
-    parser.add_argument("--grid-orientation", choices=["world", "body"], default="world",
-                        help="the job config's \"grid_orientation\"")
+    parser.add_argument("--grid-orientation", choices=["world", "body"],
+                        help="the job config's \"grid_orientation\" (default: the job's "
+                             "default, \"body\")")
     parser.add_argument("--cut-cell-samples", type=int, choices=[1, 2, 4, 8],
                         help="the job config's \"cut_cell_samples\" (default: the job's default)")
     parser.add_argument("--frame-loss", choices=["squared", "cauchy"], default="squared",
@@ -108,9 +109,11 @@ def job_config(truth, args):
     cells = args.cells if args.cells == "auto" else int(args.cells)
     config = {"fit": fit, "fixed": fixed, "initial": initial, "starts": args.starts,
               "max_iterations": args.max_iterations, "cells": cells, "uncertainty": True,
-              "element": args.element, "grid_orientation": args.grid_orientation,
+              "element": args.element,
               "diagnose": args.diagnose, "refine_grid": args.refine_grid,
               "cost": {"frame_loss": args.frame_loss}}
+    if args.grid_orientation is not None:
+        config["grid_orientation"] = args.grid_orientation
     if args.cut_cell_samples is not None:
         config["cut_cell_samples"] = args.cut_cell_samples
     last = reference_last_frame(truth) if args.reference_frames else None
